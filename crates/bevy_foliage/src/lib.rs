@@ -1,0 +1,41 @@
+//! # bevy_foliage
+//!
+//! Trees and grass for Bevy, from the vegetation level-of-detail research collected in the
+//! `bevy_nature` suite (Gumbau 2011, Boulanger 2008 and others):
+//!
+//! - **GPU view-dependent stochastic pruning of leaves** (Gumbau, ch. 3): each tree's leaves are
+//!   grouped in cells with baked per-view visibility; every frame a compute pass keeps, per cell, a
+//!   prefix of a stochastically ordered leaf list sized by distance and visibility, and the kept
+//!   leaves are enlarged so the crown keeps its area.
+//! - an urgency-ranked forest LoD manager under a frame budget, LoD caches with borrowing, grass
+//!   with geometry/slice LoD, tree lighting and impostors (each in its own module as it lands).
+//!
+//! Add [`FoliagePlugin`]; tune [`FoliagePruningSettings`] (a reflected resource, so inspectors can
+//! edit it live).
+
+use bevy::prelude::*;
+
+pub mod settings;
+
+pub use settings::{FoliagePruningSettings, ViewWeighting};
+
+/// The foliage plugin: registers the settings and keeps them valid.
+#[derive(Default)]
+pub struct FoliagePlugin;
+
+impl Plugin for FoliagePlugin {
+    fn build(&self, app: &mut App) {
+        app.register_type::<FoliagePruningSettings>()
+            .init_resource::<FoliagePruningSettings>()
+            .add_systems(
+                PreUpdate,
+                settings::sanitize_pruning_settings
+                    .run_if(resource_changed::<FoliagePruningSettings>),
+            );
+    }
+}
+
+/// Everything a game usually imports.
+pub mod prelude {
+    pub use crate::{FoliagePlugin, FoliagePruningSettings, ViewWeighting};
+}

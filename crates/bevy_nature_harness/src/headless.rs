@@ -1,0 +1,551 @@
+//! [`RenderHarness`]: a windowless Bevy app that renders into an offscreen image and reads it back.
+//!
+//! How a frame is known to have truly rendered: Bevy compiles pipelines asynchronously and
+//! specialises new ones when meshes first become visible, so the first frames draw nothing or
+//! only part of the scene. The harness steps the app until the render world's
+//! [`PipelineCache`] has had no waiting pipelines, and an unchanged pipeline count, for a few
+//! consecutive frames (plus any extra condition the test gives, such as "the glTF is loaded"),
+//! and only then captures a screenshot of the target image. A pipeline that fails to compile is
+//! an error with the shader message, not a black image.
+//!
+//! The app is not pipelined (the render world runs inside `App::update`), so the wall time of
+//! one update is the time of a whole frame, CPU and GPU, and readbacks see the frame just drawn.
+//!
+//! Every camera spawned in the harness that targets a window is redirected to the harness'
+//! target image, so example scenes run unchanged with and without a window.
+
+use crate::adapter::{AdapterSummary, probe_adapter, require_adapter};
+use crate::compare::RgbaImage;
+use crate::stats::{FrameStats, RunStats, collect_diagnostics};
+use bevy::app::PluginsState;
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::RenderTarget;
+use bevy::diagnostic::DiagnosticsStore;
+use bevy::prelude::*;
+use bevy::render::gpu_readback::{Readback, ReadbackComplete};
+use bevy::render::pipelined_rendering::PipelinedRenderingPlugin;
+use bevy::render::render_resource::{
+    Buffer, BufferDescriptor, BufferUsages, CachedPipelineState, CommandEncoderDescriptor,
+    PipelineCache, TextureFormat, TextureUsages,
+};
+use bevy::render::renderer::{RenderDevice, RenderQueue};
+use bevy::render::storage::ShaderBuffer;
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
+use bevy::render::{RenderApp, RenderPlugin};
+use bevy::shader::ShaderCacheError;
+use bevy::window::ExitCondition;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// Why the harness could not produce what was asked.
+#[derive(Debug)]
+pub enum HarnessError {
+    /// No GPU adapter (see [`crate::adapter`]).
+    NoAdapter,
+    /// A render pipeline failed to compile; the shader errors are listed.
+    Pipeline(Vec<String>),
+    /// Pipelines were still compiling (or the extra readiness condition was false) after the
+    /// given number of frames.
+    NotReady {
+        /// Frames stepped.
+        frames: u32,
+        /// Pipelines still waiting.
+        waiting: usize,
+    },
+    /// A readback did not complete within the given number of frames.
+    ReadbackTimeout(u32),
+    /// The read-back data could not be interpreted.
+    Readback(String),
+}
+
+impl std::fmt::Display for HarnessError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::NoAdapter => write!(f, "no GPU adapter found"),
+            Self::Pipeline(errors) => {
+                write!(f, "{} pipeline(s) failed to compile:", errors.len())?;
+                for e in errors {
+                    write!(f, "\n  {e}")?;
+                }
+                Ok(())
+            }
+            Self::NotReady { frames, waiting } => write!(
+                f,
+                "scene not ready after {frames} frames ({waiting} pipelines still compiling)"
+            ),
+            Self::ReadbackTimeout(frames) => {
+                write!(f, "readback did not complete within {frames} frames")
+            }
+            Self::Readback(msg) => write!(f, "readback failed: {msg}"),
+        }
+    }
+}
+
+impl std::error::Error for HarnessError {}
+
+/// How the harness app is built.
+#[derive(Clone, Debug)]
+pub struct HarnessConfig {
+    /// Size of the offscreen target in pixels.
+    pub size: UVec2,
+    /// Record GPU pass times with Bevy's `RenderDiagnosticsPlugin` (timestamp queries, where
+    /// the adapter supports them; CPU span times otherwise).
+    pub gpu_timing: bool,
+    /// Keep Bevy's `LogPlugin` (warnings and errors only unless `RUST_LOG` says otherwise).
+    pub log: bool,
+    /// Give up waiting for pipelines after this many frames.
+    pub max_warmup_frames: u32,
+    /// Consecutive frames with no pipeline waiting before the scene counts as ready.
+    pub stable_frames: u32,
+    /// Compile pipelines on the render thread as they are queued instead of asynchronously.
+    pub synchronous_pipeline_compilation: bool,
+}
+
+impl Default for HarnessConfig {
+    fn default() -> Self {
+        Self {
+            size: UVec2::new(160, 120),
+            gpu_timing: true,
+            log: true,
+            max_warmup_frames: 600,
+            stable_frames: 3,
+            synchronous_pipeline_compilation: false,
+        }
+    }
+}
+
+impl HarnessConfig {
+    /// The default configuration with a target of `width × height`.
+    pub fn sized(width: u32, height: u32) -> Self {
+        Self {
+            size: UVec2::new(width, height),
+            ..default()
+        }
+    }
+}
+
+/// The offscreen image every window-targeting camera of the harness renders into.
+#[derive(Resource, Clone, Debug)]
+pub struct HeadlessTarget(pub Handle<Image>);
+
+/// Creates the RGBA8 sRGB offscreen target image: renderable, copyable (screenshots and
+/// readbacks) and sampleable.
+pub fn create_target_image(images: &mut Assets<Image>, size: UVec2) -> Handle<Image> {
+    let mut image = Image::new_target_texture(size.x, size.y, TextureFormat::Rgba8UnormSrgb, None);
+    image.texture_descriptor.usage = TextureUsages::RENDER_ATTACHMENT
+        | TextureUsages::COPY_SRC
+        | TextureUsages::COPY_DST
+        | TextureUsages::TEXTURE_BINDING;
+    image.asset_usage = RenderAssetUsages::RENDER_WORLD;
+    images.add(image)
+}
+
+/// Redirects cameras that target a window to the headless target image.
+fn redirect_window_cameras(
+    add: On<Add, Camera>,
+    target: Res<HeadlessTarget>,
+    targets: Query<&RenderTarget>,
+    mut commands: Commands,
+) {
+    let redirect = match targets.get(add.entity) {
+        Ok(RenderTarget::Window(_)) | Err(_) => true,
+        Ok(_) => false,
+    };
+    if redirect {
+        commands
+            .entity(add.entity)
+            .insert(RenderTarget::Image(target.0.clone().into()));
+    }
+}
+
+/// Adds Bevy's default plugins configured for offscreen rendering: no window, no winit, the
+/// render world run inside `App::update`.
+pub fn add_headless_plugins(app: &mut App, config: &HarnessConfig) {
+    let mut plugins = DefaultPlugins
+        .build()
+        .set(WindowPlugin {
+            primary_window: None,
+            exit_condition: ExitCondition::DontExit,
+            close_when_requested: false,
+            ..default()
+        })
+        .set(RenderPlugin {
+            synchronous_pipeline_compilation: config.synchronous_pipeline_compilation,
+            ..default()
+        });
+    if plugins.contains::<PipelinedRenderingPlugin>() {
+        plugins = plugins.disable::<PipelinedRenderingPlugin>();
+    }
+    #[cfg(feature = "windowed")]
+    if plugins.contains::<bevy::winit::WinitPlugin>() {
+        plugins = plugins.disable::<bevy::winit::WinitPlugin>();
+    }
+    if config.log {
+        plugins = plugins.set(bevy::log::LogPlugin {
+            filter: "warn,wgpu_hal=error,wgpu_core=error,naga=warn".into(),
+            ..default()
+        });
+    } else {
+        plugins = plugins.disable::<bevy::log::LogPlugin>();
+    }
+    app.add_plugins(plugins);
+    if config.gpu_timing {
+        app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
+    }
+}
+
+/// A windowless Bevy app rendering into an offscreen image. See the module docs.
+pub struct RenderHarness {
+    app: App,
+    config: HarnessConfig,
+    target: Handle<Image>,
+    adapter: Option<AdapterSummary>,
+    frame_times: Vec<Duration>,
+    warmup_frames: u32,
+    ready: bool,
+}
+
+impl RenderHarness {
+    /// For render tests: a harness of `width × height`, or `None` when there is no adapter and
+    /// the test should skip (never under `CI=true`: see [`require_adapter`]).
+    pub fn for_test(test: &str, width: u32, height: u32) -> Option<Self> {
+        require_adapter(test)?;
+        Some(
+            Self::new(HarnessConfig {
+                log: true,
+                ..HarnessConfig::sized(width, height)
+            })
+            .unwrap_or_else(|e| panic!("{test}: {e}")),
+        )
+    }
+
+    /// A harness with a fresh app built from `config`.
+    pub fn new(config: HarnessConfig) -> Result<Self, HarnessError> {
+        let mut app = App::new();
+        add_headless_plugins(&mut app, &config);
+        Self::from_app(app, config)
+    }
+
+    /// Wraps an app that already has its plugins (e.g. from [`add_headless_plugins`] plus the
+    /// crate under test). Creates the target image and the camera redirection.
+    pub fn from_app(mut app: App, config: HarnessConfig) -> Result<Self, HarnessError> {
+        let adapter = probe_adapter();
+        if adapter.is_none() {
+            return Err(HarnessError::NoAdapter);
+        }
+        let target = {
+            let mut images = app.world_mut().resource_mut::<Assets<Image>>();
+            create_target_image(&mut images, config.size)
+        };
+        app.insert_resource(HeadlessTarget(target.clone()));
+        app.add_observer(redirect_window_cameras);
+        Ok(Self {
+            app,
+            config,
+            target,
+            adapter,
+            frame_times: Vec::new(),
+            warmup_frames: 0,
+            ready: false,
+        })
+    }
+
+    /// The app, to add plugins, systems and entities before the first frame.
+    pub fn app_mut(&mut self) -> &mut App {
+        &mut self.app
+    }
+
+    /// The app, to read state.
+    pub fn app(&self) -> &App {
+        &self.app
+    }
+
+    /// The main world.
+    pub fn world_mut(&mut self) -> &mut World {
+        self.app.world_mut()
+    }
+
+    /// The offscreen target image.
+    pub fn target(&self) -> Handle<Image> {
+        self.target.clone()
+    }
+
+    /// Target size in pixels.
+    pub fn size(&self) -> UVec2 {
+        self.config.size
+    }
+
+    /// The adapter in use.
+    pub fn adapter(&self) -> Option<&AdapterSummary> {
+        self.adapter.as_ref()
+    }
+
+    /// Finishes plugin setup the way `App::run` would (waiting for the renderer to initialise).
+    fn finish_setup(&mut self) {
+        if self.app.plugins_state() == PluginsState::Cleaned {
+            return;
+        }
+        while self.app.plugins_state() == PluginsState::Adding {
+            bevy::tasks::tick_global_task_pools_on_main_thread();
+            std::thread::yield_now();
+        }
+        self.app.finish();
+        self.app.cleanup();
+    }
+
+    /// Runs one frame and returns its wall time.
+    pub fn step(&mut self) -> Duration {
+        self.finish_setup();
+        let start = Instant::now();
+        self.app.update();
+        start.elapsed()
+    }
+
+    /// Pipelines still compiling, total pipelines, and the errors of failed ones.
+    fn pipeline_status(&self) -> (usize, usize, Vec<String>) {
+        let Some(render_app) = self.app.get_sub_app(RenderApp) else {
+            return (0, 0, Vec::new());
+        };
+        let Some(cache) = render_app.world().get_resource::<PipelineCache>() else {
+            return (0, 0, Vec::new());
+        };
+        let mut waiting = cache.waiting_pipelines().count();
+        let mut total = 0;
+        let mut errors = Vec::new();
+        for pipeline in cache.pipelines() {
+            total += 1;
+            if let CachedPipelineState::Err(err) = &pipeline.state {
+                // Shaders still loading: Bevy retries these, they are not failures.
+                if matches!(
+                    err,
+                    ShaderCacheError::ShaderNotLoaded(_)
+                        | ShaderCacheError::ShaderImportNotYetAvailable
+                ) {
+                    waiting += 1;
+                    continue;
+                }
+                let label = match &pipeline.descriptor {
+                    bevy::render::render_resource::PipelineDescriptor::RenderPipelineDescriptor(d) => {
+                        d.label.clone()
+                    }
+                    bevy::render::render_resource::PipelineDescriptor::ComputePipelineDescriptor(d) => {
+                        d.label.clone()
+                    }
+                };
+                errors.push(format!(
+                    "{}: {err}",
+                    label.as_deref().unwrap_or("<unnamed>")
+                ));
+            }
+        }
+        (waiting, total, errors)
+    }
+
+    /// Steps frames until no pipeline is compiling for [`HarnessConfig::stable_frames`]
+    /// consecutive frames. Returns the number of frames stepped.
+    pub fn wait_until_ready(&mut self) -> Result<u32, HarnessError> {
+        self.wait_until(|_| true)
+    }
+
+    /// Like [`wait_until_ready`](Self::wait_until_ready), with an extra condition on the main
+    /// world (e.g. an asset finished loading, a bake completed).
+    pub fn wait_until(
+        &mut self,
+        mut condition: impl FnMut(&mut World) -> bool,
+    ) -> Result<u32, HarnessError> {
+        let mut stable = 0;
+        let mut last_total = usize::MAX;
+        for frame in 1..=self.config.max_warmup_frames {
+            self.step();
+            self.warmup_frames += 1;
+            let (waiting, total, errors) = self.pipeline_status();
+            if !errors.is_empty() {
+                return Err(HarnessError::Pipeline(errors));
+            }
+            let settled = waiting == 0 && total == last_total && condition(self.app.world_mut());
+            last_total = total;
+            stable = if settled { stable + 1 } else { 0 };
+            if stable >= self.config.stable_frames {
+                self.ready = true;
+                return Ok(frame);
+            }
+        }
+        let (waiting, _, _) = self.pipeline_status();
+        Err(HarnessError::NotReady {
+            frames: self.config.max_warmup_frames,
+            waiting,
+        })
+    }
+
+    fn ensure_ready(&mut self) -> Result<(), HarnessError> {
+        if !self.ready {
+            self.wait_until_ready()?;
+        }
+        Ok(())
+    }
+
+    /// Runs `frames` measured frames (after the scene is ready), recording each frame's time.
+    pub fn run_frames(&mut self, frames: u32) -> Result<(), HarnessError> {
+        self.ensure_ready()?;
+        for _ in 0..frames {
+            let dt = self.step();
+            self.frame_times.push(dt);
+        }
+        Ok(())
+    }
+
+    /// Forgets the measured frame times (e.g. between two configurations measured in one run).
+    pub fn reset_timing(&mut self) {
+        self.frame_times.clear();
+        if let Some(mut store) = self.app.world_mut().get_resource_mut::<DiagnosticsStore>() {
+            for diagnostic in store.iter_mut() {
+                diagnostic.clear_history();
+            }
+        }
+    }
+
+    /// Statistics of the measured frames.
+    pub fn frame_stats(&self) -> FrameStats {
+        FrameStats::from_durations(&self.frame_times)
+    }
+
+    /// A full report: frame time, GPU pass times, every published diagnostic.
+    pub fn run_stats(&self, name: &str) -> RunStats {
+        let (gpu_pass_ms, diagnostics) = self
+            .app
+            .world()
+            .get_resource::<DiagnosticsStore>()
+            .map(collect_diagnostics)
+            .unwrap_or_default();
+        RunStats {
+            name: name.to_string(),
+            size: [self.config.size.x, self.config.size.y],
+            mode: "headless".into(),
+            adapter: self.adapter.clone(),
+            warmup_frames: self.warmup_frames,
+            frame_time: self.frame_stats(),
+            gpu_pass_ms,
+            diagnostics,
+        }
+    }
+
+    /// Median GPU (or, without timestamp queries, CPU span) time in ms of a named render pass,
+    /// e.g. `"main_opaque_pass_3d"`, over the frames since the last [`reset_timing`](Self::reset_timing).
+    pub fn pass_time_ms(&self, pass: &str) -> Option<f64> {
+        let store = self.app.world().get_resource::<DiagnosticsStore>()?;
+        let (gpu, other) = collect_diagnostics(store);
+        gpu.get(pass)
+            .copied()
+            .or_else(|| other.get(&format!("render/{pass}/elapsed_cpu")).copied())
+    }
+
+    /// Steps frames until `slot` is filled, at most `max_frames`.
+    fn step_until<T>(
+        &mut self,
+        slot: &Arc<Mutex<Option<T>>>,
+        max_frames: u32,
+    ) -> Result<T, HarnessError> {
+        for _ in 0..max_frames {
+            self.step();
+            if let Some(value) = slot.lock().unwrap().take() {
+                return Ok(value);
+            }
+        }
+        Err(HarnessError::ReadbackTimeout(max_frames))
+    }
+
+    /// Waits until the scene is ready, renders a frame and returns its pixels.
+    pub fn render(&mut self) -> Result<RgbaImage, HarnessError> {
+        self.ensure_ready()?;
+        let slot: Arc<Mutex<Option<Image>>> = Arc::default();
+        let sink = slot.clone();
+        self.app
+            .world_mut()
+            .spawn(Screenshot::image(self.target.clone()))
+            .observe(move |captured: On<ScreenshotCaptured>| {
+                *sink.lock().unwrap() = Some(captured.image.clone());
+            });
+        let image = self.step_until(&slot, 30)?;
+        RgbaImage::from_bevy(image).map_err(HarnessError::Readback)
+    }
+
+    /// Reads back the contents of a [`ShaderBuffer`] asset after the next frame.
+    pub fn read_shader_buffer(
+        &mut self,
+        buffer: Handle<ShaderBuffer>,
+    ) -> Result<Vec<u8>, HarnessError> {
+        self.finish_setup();
+        let slot: Arc<Mutex<Option<Vec<u8>>>> = Arc::default();
+        let sink = slot.clone();
+        let entity = self
+            .app
+            .world_mut()
+            .spawn(Readback::buffer(buffer))
+            .observe(move |done: On<ReadbackComplete>| {
+                *sink.lock().unwrap() = Some(done.data.clone());
+            })
+            .id();
+        let result = self.step_until(&slot, 30);
+        self.app.world_mut().despawn(entity);
+        result
+    }
+
+    /// Reads back a buffer that lives in the render world (e.g. one a render system created).
+    /// `find` picks the buffer from the render world; `None` means "not created yet" and the
+    /// harness steps another frame. Copies it into a mappable staging buffer and waits.
+    pub fn read_render_buffer(
+        &mut self,
+        mut find: impl FnMut(&World) -> Option<Buffer>,
+    ) -> Result<Vec<u8>, HarnessError> {
+        self.finish_setup();
+        for _ in 0..30 {
+            let render_world = self
+                .app
+                .get_sub_app(RenderApp)
+                .ok_or(HarnessError::NoAdapter)?
+                .world();
+            if let Some(buffer) = find(render_world) {
+                let device = render_world.resource::<RenderDevice>();
+                let queue = render_world.resource::<RenderQueue>();
+                return read_buffer_now(device, queue, &buffer);
+            }
+            self.step();
+        }
+        Err(HarnessError::ReadbackTimeout(30))
+    }
+}
+
+/// Copies `buffer` into a staging buffer, submits, and blocks until it is mapped.
+pub fn read_buffer_now(
+    device: &RenderDevice,
+    queue: &RenderQueue,
+    buffer: &Buffer,
+) -> Result<Vec<u8>, HarnessError> {
+    let size = buffer.size();
+    let staging = device.create_buffer(&BufferDescriptor {
+        label: Some("harness_readback_staging"),
+        size,
+        usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor {
+        label: Some("harness_readback"),
+    });
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+    queue.submit([encoder.finish()]);
+    let (tx, rx) = std::sync::mpsc::channel();
+    staging
+        .slice(..)
+        .map_async(bevy::render::render_resource::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| HarnessError::Readback(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| HarnessError::Readback(e.to_string()))?
+        .map_err(|e| HarnessError::Readback(e.to_string()))?;
+    let data = staging.slice(..).get_mapped_range().to_vec();
+    staging.unmap();
+    Ok(data)
+}

@@ -1,0 +1,335 @@
+//! [`ExampleRunner`]: the one way every example starts.
+//!
+//! ```text
+//! cargo run --example nature                       # a window with a statistics panel
+//! cargo run --example nature -- --headless --frames 120 --size 640x360 \
+//!     --screenshot target/nature.png --stats target/nature.json
+//! ```
+//!
+//! Flags:
+//! - `--headless`: render offscreen (no window), then exit.
+//! - `--frames N`: measured frames to run (headless default 60); windowed runs exit after N.
+//! - `--size WxH`: render size (default 1280x720 windowed, 640x360 headless).
+//! - `--screenshot PATH`: save the last frame as PNG.
+//! - `--stats PATH`: write one JSON object (frame time median and p95, GPU pass times where
+//!   supported, and every counter the plugins publish as Bevy diagnostics). Headless runs also
+//!   print it on stdout.
+//!
+//! With no display (`DISPLAY` and `WAYLAND_DISPLAY` unset) an example says so and runs
+//! headless instead of failing to open a window.
+
+use crate::headless::{HarnessConfig, RenderHarness};
+use bevy::prelude::*;
+use std::path::PathBuf;
+
+/// Parsed command-line flags of an example.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExampleArgs {
+    /// Render offscreen.
+    pub headless: bool,
+    /// Frames to run (measured frames when headless).
+    pub frames: Option<u32>,
+    /// Render size; `None` means the mode's default.
+    pub size: Option<UVec2>,
+    /// Where to save the last frame.
+    pub screenshot: Option<PathBuf>,
+    /// Where to write the JSON statistics.
+    pub stats: Option<PathBuf>,
+}
+
+/// Usage text printed for `--help` and bad flags.
+pub const USAGE: &str =
+    "flags: [--headless] [--frames N] [--size WxH] [--screenshot PATH] [--stats PATH]";
+
+impl ExampleArgs {
+    /// Parses flags (without the program name).
+    pub fn parse_from<I, S>(args: I) -> Result<Self, String>
+    where
+        I: IntoIterator<Item = S>,
+        S: Into<String>,
+    {
+        let mut parsed = Self {
+            headless: false,
+            frames: None,
+            size: None,
+            screenshot: None,
+            stats: None,
+        };
+        let mut args = args.into_iter().map(Into::into);
+        while let Some(arg) = args.next() {
+            let (flag, inline) = match arg.split_once('=') {
+                Some((f, v)) => (f.to_string(), Some(v.to_string())),
+                None => (arg.clone(), None),
+            };
+            let mut value = |name: &str| {
+                inline
+                    .clone()
+                    .or_else(|| args.next())
+                    .ok_or_else(|| format!("{name} needs a value; {USAGE}"))
+            };
+            match flag.as_str() {
+                "--headless" => parsed.headless = true,
+                "--frames" => {
+                    let v = value("--frames")?;
+                    let n: u32 = v
+                        .parse()
+                        .map_err(|_| format!("--frames: '{v}' is not a whole number"))?;
+                    if n == 0 {
+                        return Err("--frames must be at least 1".into());
+                    }
+                    parsed.frames = Some(n);
+                }
+                "--size" => parsed.size = Some(parse_size(&value("--size")?)?),
+                "--screenshot" => parsed.screenshot = Some(value("--screenshot")?.into()),
+                "--stats" => parsed.stats = Some(value("--stats")?.into()),
+                "--help" | "-h" => return Err(USAGE.into()),
+                other => return Err(format!("unknown flag '{other}'; {USAGE}")),
+            }
+        }
+        Ok(parsed)
+    }
+
+    /// Parses the process arguments; prints the problem and exits with status 2 on bad flags.
+    pub fn from_env() -> Self {
+        match Self::parse_from(std::env::args().skip(1)) {
+            Ok(args) => args,
+            Err(message) => {
+                eprintln!("{message}");
+                std::process::exit(2);
+            }
+        }
+    }
+}
+
+/// Parses `WxH` (e.g. `640x360`).
+pub fn parse_size(text: &str) -> Result<UVec2, String> {
+    let (w, h) = text
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("--size: '{text}' is not WxH"))?;
+    let parse = |s: &str| {
+        s.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|v| (1..=16384).contains(v))
+            .ok_or_else(|| format!("--size: '{text}' needs two whole numbers in 1..=16384"))
+    };
+    Ok(UVec2::new(parse(w)?, parse(h)?))
+}
+
+/// Whether a window could be opened: an X11 or Wayland display is named in the environment.
+pub fn display_available() -> bool {
+    ["DISPLAY", "WAYLAND_DISPLAY"]
+        .iter()
+        .any(|var| std::env::var(var).is_ok_and(|v| !v.is_empty()))
+}
+
+/// Runs an example scene windowed or headless. See the module docs.
+pub struct ExampleRunner {
+    name: String,
+    args: ExampleArgs,
+    #[cfg_attr(not(feature = "windowed"), allow(dead_code))]
+    inspected: Vec<fn(&mut App)>,
+}
+
+impl ExampleRunner {
+    /// A runner for the example `name`, with flags from the command line.
+    pub fn new(name: impl Into<String>) -> Self {
+        Self::with_args(name, ExampleArgs::from_env())
+    }
+
+    /// A runner with explicit flags (tests use this).
+    pub fn with_args(name: impl Into<String>, args: ExampleArgs) -> Self {
+        Self {
+            name: name.into(),
+            args,
+            inspected: Vec::new(),
+        }
+    }
+
+    /// The parsed flags.
+    pub fn args(&self) -> &ExampleArgs {
+        &self.args
+    }
+
+    /// Shows and edits the reflected resource `R` (a plugin's settings) in the windowed panel.
+    pub fn inspect_resource<R>(mut self) -> Self
+    where
+        R: Resource + Component<Mutability = bevy::ecs::component::Mutable> + Reflect,
+    {
+        #[cfg(feature = "windowed")]
+        self.inspected.push(crate::panel::inspect_resource::<R>);
+        #[cfg(not(feature = "windowed"))]
+        let _ = &mut self;
+        self
+    }
+
+    /// Shows and edits the reflected component `C` (e.g. a light's shadow settings) on every
+    /// entity that has it, in the windowed panel.
+    pub fn inspect_component<C>(mut self) -> Self
+    where
+        C: Component<Mutability = bevy::ecs::component::Mutable> + Reflect,
+    {
+        #[cfg(feature = "windowed")]
+        self.inspected.push(crate::panel::inspect_component::<C>);
+        #[cfg(not(feature = "windowed"))]
+        let _ = &mut self;
+        self
+    }
+
+    /// Whether this run will be headless (asked for, or no display, or no windowed support).
+    pub fn is_headless(&self) -> bool {
+        if self.args.headless {
+            return true;
+        }
+        if !cfg!(feature = "windowed") {
+            eprintln!(
+                "{}: built without the `windowed` feature: running headless",
+                self.name
+            );
+            return true;
+        }
+        if !display_available() {
+            eprintln!(
+                "{}: no display available (DISPLAY and WAYLAND_DISPLAY are unset): running headless",
+                self.name
+            );
+            return true;
+        }
+        false
+    }
+
+    /// Builds the app with `scene` (which adds the plugins and spawns the scene, camera
+    /// included) and runs it.
+    pub fn run(self, scene: impl FnOnce(&mut App)) -> AppExit {
+        if self.is_headless() {
+            let name = self.name.clone();
+            match self.run_headless(scene) {
+                Ok(()) => AppExit::Success,
+                Err(message) => {
+                    eprintln!("{name}: {message}");
+                    AppExit::error()
+                }
+            }
+        } else {
+            self.run_windowed(scene)
+        }
+    }
+
+    fn run_headless(self, scene: impl FnOnce(&mut App)) -> Result<(), String> {
+        let size = self.args.size.unwrap_or(UVec2::new(640, 360));
+        let frames = self.args.frames.unwrap_or(60);
+        crate::adapter::require_adapter(&self.name).ok_or("no GPU adapter")?;
+        let mut harness =
+            RenderHarness::new(HarnessConfig::sized(size.x, size.y)).map_err(|e| e.to_string())?;
+        scene(harness.app_mut());
+        let warmup = harness.wait_until_ready().map_err(|e| e.to_string())?;
+        eprintln!(
+            "{}: scene ready after {warmup} frames; measuring {frames} frames",
+            self.name
+        );
+        harness.reset_timing();
+        harness.run_frames(frames).map_err(|e| e.to_string())?;
+        let stats = harness.run_stats(&self.name);
+        if let Some(path) = &self.args.screenshot {
+            let image = harness.render().map_err(|e| e.to_string())?;
+            image.save_png(path)?;
+            eprintln!("{}: screenshot written to {}", self.name, path.display());
+        }
+        let json = stats.to_json();
+        println!("{json}");
+        if let Some(path) = &self.args.stats {
+            write_atomically(path, &json)?;
+            eprintln!("{}: stats written to {}", self.name, path.display());
+        }
+        Ok(())
+    }
+
+    #[cfg(not(feature = "windowed"))]
+    fn run_windowed(self, _scene: impl FnOnce(&mut App)) -> AppExit {
+        unreachable!("is_headless() is always true without the windowed feature")
+    }
+
+    #[cfg(feature = "windowed")]
+    fn run_windowed(self, scene: impl FnOnce(&mut App)) -> AppExit {
+        let size = self.args.size.unwrap_or(UVec2::new(1280, 720));
+        let mut app = App::new();
+        app.add_plugins(DefaultPlugins.set(WindowPlugin {
+            primary_window: Some(Window {
+                title: format!("bevy_nature — {}", self.name),
+                resolution: bevy::window::WindowResolution::new(size.x, size.y),
+                ..default()
+            }),
+            ..default()
+        }));
+        app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
+        crate::panel::add_panel(
+            &mut app,
+            crate::panel::PanelRun {
+                name: self.name.clone(),
+                frames: self.args.frames,
+                screenshot: self.args.screenshot.clone(),
+                stats: self.args.stats.clone(),
+                size,
+            },
+        );
+        for inspect in &self.inspected {
+            inspect(&mut app);
+        }
+        scene(&mut app);
+        app.run()
+    }
+}
+
+/// Writes `text` to `path` through a temporary file and a rename.
+pub fn write_atomically(path: &std::path::Path, text: &str) -> Result<(), String> {
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
+    }
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, text).map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("cannot rename to {}: {e}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_all_flags() {
+        let args = ExampleArgs::parse_from([
+            "--headless",
+            "--frames",
+            "12",
+            "--size=320x200",
+            "--screenshot",
+            "a.png",
+            "--stats",
+            "s.json",
+        ])
+        .unwrap();
+        assert!(args.headless);
+        assert_eq!(args.frames, Some(12));
+        assert_eq!(args.size, Some(UVec2::new(320, 200)));
+        assert_eq!(args.screenshot, Some(PathBuf::from("a.png")));
+        assert_eq!(args.stats, Some(PathBuf::from("s.json")));
+    }
+
+    #[test]
+    fn defaults_are_windowed_and_unset() {
+        let args = ExampleArgs::parse_from(Vec::<String>::new()).unwrap();
+        assert!(!args.headless);
+        assert_eq!(args.frames, None);
+        assert_eq!(args.size, None);
+    }
+
+    #[test]
+    fn rejects_bad_flags() {
+        assert!(ExampleArgs::parse_from(["--size", "640"]).is_err());
+        assert!(ExampleArgs::parse_from(["--size", "0x10"]).is_err());
+        assert!(ExampleArgs::parse_from(["--frames", "-3"]).is_err());
+        assert!(ExampleArgs::parse_from(["--frames", "0"]).is_err());
+        assert!(ExampleArgs::parse_from(["--frames"]).is_err());
+        assert!(ExampleArgs::parse_from(["--fast"]).is_err());
+    }
+}

@@ -1,0 +1,36 @@
+//! # bevy_terrain_clip
+//!
+//! Terrain textures far larger than GPU memory, for Bevy. Following the clipmap-style virtual
+//! texture of Seoane et al. (WSCG 2007, paper 1 of the proceedings collected in the suite), the
+//! full mip pyramid stays on disk as a tile pyramid; a RAM tile cache and a GPU *clip stack* — the
+//! base level with its mips plus c × c windows of the finer levels around the viewer — hold what
+//! the camera needs, refreshed by toroidal subtile updates under a per-frame budget so a flight
+//! never stalls.
+//!
+//! Add [`TerrainClipPlugin`]; tune [`ClipmapSettings`] (a reflected resource).
+
+use bevy::prelude::*;
+
+pub mod settings;
+
+pub use settings::{ClipmapSettings, UpdateBudget};
+
+/// The terrain clipmap plugin: registers the settings and keeps them valid.
+#[derive(Default)]
+pub struct TerrainClipPlugin;
+
+impl Plugin for TerrainClipPlugin {
+    fn build(&self, app: &mut App) {
+        app.register_type::<ClipmapSettings>()
+            .init_resource::<ClipmapSettings>()
+            .add_systems(
+                PreUpdate,
+                settings::sanitize_clipmap_settings.run_if(resource_changed::<ClipmapSettings>),
+            );
+    }
+}
+
+/// Everything a game usually imports.
+pub mod prelude {
+    pub use crate::{ClipmapSettings, TerrainClipPlugin, UpdateBudget};
+}

@@ -1,0 +1,50 @@
+//! # bevy_nature
+//!
+//! Nature rendering for Bevy 0.19, in one dependency and one plugin group:
+//!
+//! - [`foliage`] ([`bevy_foliage`]): GPU view-dependent stochastic pruning of leaves, forest LoD
+//!   management under a frame budget, grass, tree lighting, impostors.
+//! - [`terrain_clip`] ([`bevy_terrain_clip`]): clipmap virtual textures streamed from tile pyramids
+//!   on disk, terrain geometry LoD.
+//! - [`soft_shadows`] ([`bevy_soft_shadows`]): screen-space soft shadows, filtered shadow maps,
+//!   foliage shadows.
+//!
+//! ```no_run
+//! use bevy::prelude::*;
+//! use bevy_nature::prelude::*;
+//!
+//! App::new()
+//!     .add_plugins((DefaultPlugins, NaturePlugins))
+//!     .run();
+//! ```
+//!
+//! [`showcase`] holds the main example scene (`cargo run --example nature`), shared with the tests.
+
+use bevy::app::{PluginGroup, PluginGroupBuilder};
+
+pub use bevy_foliage as foliage;
+pub use bevy_soft_shadows as soft_shadows;
+pub use bevy_terrain_clip as terrain_clip;
+
+pub mod showcase;
+
+/// All the suite's plugins. Each can be disabled or configured like any Bevy plugin group:
+/// `NaturePlugins.build().disable::<bevy_nature::foliage::FoliagePlugin>()`.
+pub struct NaturePlugins;
+
+impl PluginGroup for NaturePlugins {
+    fn build(self) -> PluginGroupBuilder {
+        PluginGroupBuilder::start::<Self>()
+            .add(foliage::FoliagePlugin)
+            .add(terrain_clip::TerrainClipPlugin)
+            .add(soft_shadows::SoftShadowsPlugin)
+    }
+}
+
+/// Everything a game usually imports.
+pub mod prelude {
+    pub use crate::NaturePlugins;
+    pub use bevy_foliage::prelude::*;
+    pub use bevy_soft_shadows::prelude::*;
+    pub use bevy_terrain_clip::prelude::*;
+}

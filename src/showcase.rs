@@ -1,0 +1,108 @@
+//! The main example scene (`cargo run --example nature`), shared with the tests so that what a
+//! new user sees first is also what CI renders.
+//!
+//! So far: a lit ground plane with a box casting a shadow under a directional light, with
+//! [`NaturePlugins`](crate::NaturePlugins) added. Each feature of the suite adds itself here as
+//! it lands.
+
+use bevy::prelude::*;
+
+/// Where the showcase puts things, so tests can find them on screen.
+pub mod layout {
+    use bevy::math::Vec3;
+
+    /// Centre of the box; it stands on the ground (`y = 0`).
+    pub const BOX_CENTER: Vec3 = Vec3::new(0.0, 0.5, 0.0);
+    /// Edge length of the box.
+    pub const BOX_SIZE: f32 = 1.0;
+    /// Direction the sunlight travels (from the sun into the scene).
+    pub const SUN_DIRECTION: Vec3 = Vec3::new(1.0, -1.0, 0.0);
+    /// Camera position; it looks at the origin.
+    pub const CAMERA_POSITION: Vec3 = Vec3::new(0.0, 4.0, 6.0);
+    /// Edge length of the square ground plane.
+    pub const GROUND_SIZE: f32 = 20.0;
+}
+
+/// Options of the showcase scene.
+#[derive(Resource, Clone, Debug, Reflect)]
+#[reflect(Resource)]
+pub struct ShowcaseOptions {
+    /// Colour of the box.
+    pub box_color: Color,
+    /// Offset added to the box position (tests use it to make a different scene).
+    pub box_offset: Vec3,
+    /// Multisampling of the camera (tests turn it off: the software rasteriser pays for it).
+    pub msaa: bool,
+}
+
+impl Default for ShowcaseOptions {
+    fn default() -> Self {
+        Self {
+            box_color: Color::srgb(0.8, 0.25, 0.2),
+            box_offset: Vec3::ZERO,
+            msaa: true,
+        }
+    }
+}
+
+/// Adds the suite's plugins and the showcase scene to an app that already has Bevy's default
+/// plugins (windowed or headless).
+pub fn build_showcase(app: &mut App, options: ShowcaseOptions) {
+    app.add_plugins(crate::NaturePlugins)
+        .insert_resource(options)
+        .insert_resource(ClearColor(Color::srgb(0.55, 0.7, 0.9)))
+        .add_systems(Startup, spawn_showcase);
+}
+
+/// Marks the showcase camera.
+#[derive(Component)]
+pub struct ShowcaseCamera;
+
+fn spawn_showcase(
+    mut commands: Commands,
+    options: Res<ShowcaseOptions>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+) {
+    use layout::*;
+    commands.spawn((
+        Name::new("ground"),
+        Mesh3d(meshes.add(Plane3d::default().mesh().size(GROUND_SIZE, GROUND_SIZE))),
+        MeshMaterial3d(materials.add(StandardMaterial {
+            base_color: Color::srgb(0.6, 0.6, 0.55),
+            perceptual_roughness: 0.9,
+            ..default()
+        })),
+    ));
+    commands.spawn((
+        Name::new("box"),
+        Mesh3d(meshes.add(Cuboid::from_length(BOX_SIZE))),
+        MeshMaterial3d(materials.add(StandardMaterial {
+            base_color: options.box_color,
+            ..default()
+        })),
+        Transform::from_translation(BOX_CENTER + options.box_offset),
+    ));
+    commands.spawn((
+        Name::new("sun"),
+        DirectionalLight {
+            illuminance: 10_000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::default().looking_to(SUN_DIRECTION, Vec3::Y),
+    ));
+    commands.insert_resource(GlobalAmbientLight {
+        brightness: 300.0,
+        ..default()
+    });
+    let mut camera = commands.spawn((
+        Name::new("camera"),
+        ShowcaseCamera,
+        Camera3d::default(),
+        Transform::from_translation(CAMERA_POSITION).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    if !options.msaa {
+        camera.insert(Msaa::Off);
+    }
+}
