@@ -15,6 +15,8 @@
 
 use bevy::prelude::*;
 
+pub mod pruning;
+pub mod rng;
 pub mod settings;
 
 pub use settings::{FoliagePruningSettings, ViewWeighting};
@@ -32,6 +34,10 @@ impl Plugin for FoliagePlugin {
                 settings::sanitize_pruning_settings
                     .run_if(resource_changed::<FoliagePruningSettings>),
             );
+        // The rendering side needs Bevy's asset and render plugins (absent in pure logic tests).
+        if app.world().contains_resource::<AssetServer>() {
+            pruning::gpu::build(app);
+        }
     }
 }
 

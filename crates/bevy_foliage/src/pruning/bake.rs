@@ -1,0 +1,422 @@
+//! The bake (Gumbau 2011, §3.3, F1 steps 1–4): leaf set in, [`BakedFoliage`] out.
+//!
+//! 1. Cell cloud: OBB tree over the leaves ([`super::cells`]).
+//! 2. Cell visibility from evenly spread viewpoints ([`super::visibility`]), in parallel.
+//! 3. Stochastic order: each cell's leaves shuffled with a seeded RNG (Cook & Halstead 2007), so
+//!    any prefix of a cell's list is an unbiased sample of the cell.
+//! 4. Per-vertex centroid offsets `e_i` (eq. 3.10) for area-preserving scaling.
+//!
+//! Leaves that are malformed, non-finite or degenerate are skipped and counted; a leaf set with
+//! no usable leaf is an error.
+
+use super::cells::{Obb, build_cells};
+use super::extract::quantize_visibility;
+use super::leaves::{LeafSet, SkippedLeaves};
+use super::visibility::{VisibilityInput, cell_visibility, fibonacci_directions};
+use crate::rng::SplitMix64;
+use bevy::asset::Asset;
+use bevy::math::{Vec2, Vec3};
+use bevy::reflect::TypePath;
+use std::time::{Duration, Instant};
+
+/// Parameters of the bake.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BakeSettings {
+    /// OBB tree depth: `2^depth` cells (9 → 512, the thesis' value).
+    pub cell_depth: u32,
+    /// Number of viewpoints (16 in the thesis).
+    pub views: usize,
+    /// Raster resolution of each visibility view, pixels per side.
+    pub resolution: u32,
+    /// Seed of the stochastic order.
+    pub seed: u64,
+    /// Worker threads for the visibility pass (0 = all cores).
+    pub threads: usize,
+}
+
+impl Default for BakeSettings {
+    fn default() -> Self {
+        Self {
+            cell_depth: 9,
+            views: 16,
+            resolution: 256,
+            seed: 0x5EED,
+            threads: 0,
+        }
+    }
+}
+
+/// Progress of a running bake.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BakeProgress {
+    /// Current stage.
+    pub stage: BakeStage,
+    /// Units done in this stage.
+    pub done: usize,
+    /// Units in this stage.
+    pub total: usize,
+}
+
+/// Stages of the bake.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BakeStage {
+    /// Building the OBB tree.
+    Cells,
+    /// Rasterising visibility views.
+    Visibility,
+    /// Shuffling and writing the buffers.
+    Order,
+}
+
+/// Why a bake failed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum BakeError {
+    /// No usable leaf (after skipping bad ones).
+    NoLeaves {
+        /// What was skipped.
+        skipped: SkippedLeaves,
+    },
+    /// Settings out of range.
+    Settings(String),
+}
+
+impl std::fmt::Display for BakeError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::NoLeaves { skipped } => write!(
+                f,
+                "no usable leaves to bake ({} skipped: {} non-finite, {} degenerate, {} malformed)",
+                skipped.total(),
+                skipped.non_finite,
+                skipped.degenerate,
+                skipped.malformed
+            ),
+            Self::Settings(s) => write!(f, "invalid bake settings: {s}"),
+        }
+    }
+}
+
+impl std::error::Error for BakeError {}
+
+/// Timing of a bake, per stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BakeTimings {
+    /// OBB tree.
+    pub cells: Duration,
+    /// Visibility views.
+    pub visibility: Duration,
+    /// Shuffle and buffers.
+    pub order: Duration,
+}
+
+impl BakeTimings {
+    /// Total bake time.
+    pub fn total(&self) -> Duration {
+        self.cells + self.visibility + self.order
+    }
+}
+
+/// The baked pruning data of one tree type: everything the GPU pass and the leaf material read.
+/// A Bevy asset (`*.foliage` files load into it).
+#[derive(Asset, TypePath, Clone, Debug, PartialEq)]
+pub struct BakedFoliage {
+    /// Viewpoint directions (tree → viewer, model space).
+    pub view_directions: Vec<Vec3>,
+    /// `cells + 1` entries: cell `c` holds stored leaves `cell_first_leaf[c]..cell_first_leaf[c + 1]`.
+    pub cell_first_leaf: Vec<u32>,
+    /// Box of each cell.
+    pub cell_boxes: Vec<Obb>,
+    /// `vis[cell * views + view]`, quantised to `u16` (eq. 3.1).
+    pub visibility: Vec<u16>,
+    /// `leaves + 1` entries: stored leaf `l` owns `indices[leaf_index_start[l]..leaf_index_start[l + 1]]`.
+    pub leaf_index_start: Vec<u32>,
+    /// Leaf triangles in stored order: cell by cell, stochastic within a cell.
+    pub indices: Vec<u32>,
+    /// Vertex positions (model space), in first-use order of the stored leaves.
+    pub positions: Vec<Vec3>,
+    /// Vertex normals.
+    pub normals: Vec<Vec3>,
+    /// Vertex texture coordinates.
+    pub uvs: Vec<Vec2>,
+    /// Per-vertex offset from its leaf's centroid, `e_i` (eq. 3.10).
+    pub centroid_offsets: Vec<Vec3>,
+    /// Leaves skipped as unusable.
+    pub skipped: SkippedLeaves,
+}
+
+impl BakedFoliage {
+    /// Number of cells.
+    pub fn cell_count(&self) -> usize {
+        self.cell_first_leaf.len().saturating_sub(1)
+    }
+
+    /// Number of leaves.
+    pub fn leaf_count(&self) -> usize {
+        self.leaf_index_start.len().saturating_sub(1)
+    }
+
+    /// Number of viewpoints.
+    pub fn view_count(&self) -> usize {
+        self.view_directions.len()
+    }
+
+    /// Input of the CPU reference extraction ([`super::extract::extract_indices`]).
+    pub fn pruning_input(&self) -> super::extract::PruningInput<'_> {
+        super::extract::PruningInput {
+            cell_first_leaf: &self.cell_first_leaf,
+            leaf_index_start: &self.leaf_index_start,
+            indices: &self.indices,
+            visibility: &self.visibility,
+            views: self.view_count(),
+        }
+    }
+
+    /// Bytes the GPU holds for this tree type: vertex data (position, normal, uv, offset),
+    /// the stored index list, per-leaf index starts, per-cell leaf starts and visibility.
+    pub fn gpu_bytes(&self) -> usize {
+        self.positions.len() * (12 + 12 + 8 + 12)
+            + self.indices.len() * 4
+            + self.leaf_index_start.len() * 4
+            + self.cell_first_leaf.len() * 4
+            + self.visibility.len() * 2
+    }
+}
+
+/// Bakes `leaves`. `progress` is called as work completes (from worker threads too).
+pub fn bake(
+    leaves: &LeafSet,
+    settings: &BakeSettings,
+    progress: &(dyn Fn(BakeProgress) + Sync),
+) -> Result<(BakedFoliage, BakeTimings), BakeError> {
+    if settings.cell_depth > 16 {
+        return Err(BakeError::Settings(format!(
+            "cell_depth {} > 16",
+            settings.cell_depth
+        )));
+    }
+    if settings.views == 0 || settings.views > 256 {
+        return Err(BakeError::Settings(format!(
+            "views {} not in 1..=256",
+            settings.views
+        )));
+    }
+    if !(8..=4096).contains(&settings.resolution) {
+        return Err(BakeError::Settings(format!(
+            "resolution {} not in 8..=4096",
+            settings.resolution
+        )));
+    }
+    let (leaves, skipped) = leaves.sanitized();
+    if leaves.is_empty() {
+        return Err(BakeError::NoLeaves { skipped });
+    }
+    let mut timings = BakeTimings::default();
+
+    // 1. Cell cloud.
+    let t = Instant::now();
+    progress(BakeProgress {
+        stage: BakeStage::Cells,
+        done: 0,
+        total: 1,
+    });
+    let centroids: Vec<Vec3> = (0..leaves.len()).map(|i| leaves.centroid(i)).collect();
+    let cells = build_cells(&centroids, settings.cell_depth, |i| {
+        leaves
+            .leaf_vertices(i as usize)
+            .into_iter()
+            .map(|v| leaves.positions[v as usize])
+    });
+    if let Some(big) = cells.iter().find(|c| c.leaves.len() >= 1 << 16) {
+        return Err(BakeError::Settings(format!(
+            "a cell holds {} leaves (at most 65535): raise cell_depth",
+            big.leaves.len()
+        )));
+    }
+    progress(BakeProgress {
+        stage: BakeStage::Cells,
+        done: 1,
+        total: 1,
+    });
+    timings.cells = t.elapsed();
+
+    // 3. Stochastic order (before visibility so triangles are gathered once per cell).
+    let t = Instant::now();
+    let mut stored_leaves: Vec<u32> = Vec::with_capacity(leaves.len());
+    let mut cell_first_leaf = Vec::with_capacity(cells.len() + 1);
+    for (c, cell) in cells.iter().enumerate() {
+        cell_first_leaf.push(stored_leaves.len() as u32);
+        let mut order = cell.leaves.clone();
+        SplitMix64::new(settings.seed ^ (c as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+            .shuffle(&mut order);
+        stored_leaves.extend(order);
+    }
+    cell_first_leaf.push(stored_leaves.len() as u32);
+
+    // Vertex arrays in first-use order of the stored leaves; indices remapped.
+    let offsets_all = leaves.centroid_offsets();
+    let mut remap = vec![u32::MAX; leaves.positions.len()];
+    let mut baked = BakedFoliage {
+        view_directions: fibonacci_directions(settings.views),
+        cell_first_leaf,
+        cell_boxes: cells.iter().map(|c| c.obb).collect(),
+        visibility: Vec::new(),
+        leaf_index_start: Vec::with_capacity(leaves.len() + 1),
+        indices: Vec::with_capacity(leaves.indices.len()),
+        positions: Vec::new(),
+        normals: Vec::new(),
+        uvs: Vec::new(),
+        centroid_offsets: Vec::new(),
+        skipped,
+    };
+    for &leaf in &stored_leaves {
+        baked.leaf_index_start.push(baked.indices.len() as u32);
+        let range = leaves.leaves[leaf as usize].clone();
+        for &v in &leaves.indices[range.start as usize..range.end as usize] {
+            let v = v as usize;
+            if remap[v] == u32::MAX {
+                remap[v] = baked.positions.len() as u32;
+                baked.positions.push(leaves.positions[v]);
+                baked
+                    .normals
+                    .push(leaves.normals.get(v).copied().unwrap_or(Vec3::Y));
+                baked
+                    .uvs
+                    .push(leaves.uvs.get(v).copied().unwrap_or(Vec2::ZERO));
+                baked.centroid_offsets.push(offsets_all[v]);
+            }
+            baked.indices.push(remap[v]);
+        }
+    }
+    baked.leaf_index_start.push(baked.indices.len() as u32);
+    timings.order = t.elapsed();
+    progress(BakeProgress {
+        stage: BakeStage::Order,
+        done: 1,
+        total: 1,
+    });
+
+    // 2. Visibility.
+    let t = Instant::now();
+    let cell_triangles: Vec<Vec<[Vec3; 3]>> = cells
+        .iter()
+        .map(|cell| {
+            cell.leaves
+                .iter()
+                .flat_map(|&l| leaves.triangles(l as usize))
+                .collect()
+        })
+        .collect();
+    let (lo, hi) = leaves
+        .positions
+        .iter()
+        .zip(0..)
+        .filter(|(_, i)| remap[*i] != u32::MAX)
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), (p, _)| {
+            (lo.min(*p), hi.max(*p))
+        });
+    let center = (lo + hi) * 0.5;
+    let radius = ((hi - lo) * 0.5).length().max(1e-4) * 1.01;
+    let threads = if settings.threads == 0 {
+        std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+    } else {
+        settings.threads
+    };
+    let views = baked.view_directions.clone();
+    let vis = cell_visibility(
+        &VisibilityInput {
+            cell_triangles: &cell_triangles,
+            center,
+            radius,
+            resolution: settings.resolution,
+        },
+        &views,
+        threads,
+        &|done| {
+            progress(BakeProgress {
+                stage: BakeStage::Visibility,
+                done,
+                total: views.len(),
+            })
+        },
+    );
+    baked.visibility = vis.into_iter().map(quantize_visibility).collect();
+    timings.visibility = t.elapsed();
+    Ok((baked, timings))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pruning::procedural::{TreeSpecies, generate};
+
+    fn small_bake() -> BakedFoliage {
+        let tree = generate(&TreeSpecies::olea().with_leaf_count(2000));
+        let settings = BakeSettings {
+            cell_depth: 6,
+            resolution: 96,
+            ..default()
+        };
+        bake(&tree.leaves, &settings, &|_| {}).unwrap().0
+    }
+
+    use bevy::prelude::default;
+
+    #[test]
+    fn bake_is_consistent() {
+        let b = small_bake();
+        assert_eq!(b.cell_count(), 64);
+        assert_eq!(b.leaf_count(), 2000);
+        assert_eq!(b.view_count(), 16);
+        assert_eq!(b.visibility.len(), 64 * 16);
+        assert_eq!(
+            *b.leaf_index_start.last().unwrap() as usize,
+            b.indices.len()
+        );
+        assert_eq!(b.indices.len(), 2000 * 6);
+        assert_eq!(b.positions.len(), 2000 * 4);
+        assert!(b.indices.iter().all(|&i| (i as usize) < b.positions.len()));
+        // Offsets are centred per leaf: the four of a quad sum to zero.
+        for l in 0..b.leaf_count() {
+            let s = b.leaf_index_start[l] as usize;
+            let mut vs: Vec<u32> = b.indices[s..s + 6].to_vec();
+            vs.sort();
+            vs.dedup();
+            let sum: Vec3 = vs.iter().map(|&v| b.centroid_offsets[v as usize]).sum();
+            assert!(sum.length() < 1e-4);
+        }
+        // Deterministic.
+        assert_eq!(b, small_bake());
+    }
+
+    #[test]
+    fn inner_cells_are_less_visible_than_outer_cells() {
+        let b = small_bake();
+        let centre = TreeSpecies::olea().crown_center();
+        let mean_vis = |c: usize| {
+            b.visibility[c * 16..(c + 1) * 16]
+                .iter()
+                .map(|&v| v as f32 / 65535.0)
+                .sum::<f32>()
+                / 16.0
+        };
+        let mut by_depth: Vec<(f32, f32)> = (0..b.cell_count())
+            .map(|c| ((b.cell_boxes[c].center - centre).length(), mean_vis(c)))
+            .collect();
+        by_depth.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let inner: f32 = by_depth[..16].iter().map(|x| x.1).sum::<f32>() / 16.0;
+        let outer: f32 = by_depth[48..].iter().map(|x| x.1).sum::<f32>() / 16.0;
+        assert!(inner < outer, "inner {inner} outer {outer}");
+        assert!(by_depth.iter().all(|x| (0.0..=1.0).contains(&x.1)));
+    }
+
+    #[test]
+    fn no_usable_leaves_is_an_error() {
+        let mut set = LeafSet::default();
+        set.push_quad([Vec3::ZERO; 4], Vec3::Y);
+        let err = bake(&set, &BakeSettings::default(), &|_| {}).unwrap_err();
+        assert!(matches!(err, BakeError::NoLeaves { skipped } if skipped.degenerate == 1));
+        assert!(err.to_string().contains("degenerate"));
+    }
+}

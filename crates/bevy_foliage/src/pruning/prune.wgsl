@@ -1,0 +1,125 @@
+// View-dependent stochastic pruning, per frame (Gumbau 2011, §3.4, algorithm 2).
+//
+// Two dispatches per frame over all pruned instances:
+//   `count_and_scan`: one workgroup per instance. Each cell's kept leaves
+//       u_n = round(leaves_n · LoD(cell)), LoD(cell) = dist · Σ_k w_k · vis(cell, k)   (eq. 3.3–3.5)
+//       are turned into kept index counts, and a workgroup-wide exclusive prefix sum gives each
+//       cell's output offset (eq. 3.6). The total goes into the instance's indexed-indirect
+//       draw arguments.
+//   `compact`: one invocation per (cell, instance) copies the first kept indices of the cell's
+//       stochastically ordered list to its offset.
+//
+// All LoD arithmetic is 16-bit fixed point on u32, bit-identical to the CPU reference in
+// `extract.rs` (see there for why).
+
+struct Instance {
+    // The three viewpoints and their weights (fractions of 65536, summing to 65536).
+    views: vec3<u32>,
+    distance_fixed: u32,
+    weights: vec3<u32>,
+    // Where this instance's compacted indices start in `output`.
+    output_base: u32,
+    // The tree type's ranges inside the shared baked buffers.
+    cell_base: u32,        // first entry of this type in `cell_first_leaf`
+    cell_count: u32,
+    view_count: u32,
+    visibility_base: u32,  // first entry of this type in `visibility`
+    leaf_base: u32,        // first entry of this type in `leaf_index_start`
+    index_base: u32,       // first entry of this type in `stored_indices`
+    vertex_base: u32,      // added to every index written (types share one vertex buffer)
+    _pad: u32,
+}
+
+struct DrawIndexedIndirect {
+    index_count: u32,
+    instance_count: u32,
+    first_index: u32,
+    base_vertex: i32,
+    first_instance: u32,
+}
+
+@group(0) @binding(0) var<storage, read> instances: array<Instance>;
+@group(0) @binding(1) var<storage, read> cell_first_leaf: array<u32>;
+@group(0) @binding(2) var<storage, read> visibility: array<u32>;
+@group(0) @binding(3) var<storage, read> leaf_index_start: array<u32>;
+@group(0) @binding(4) var<storage, read> stored_indices: array<u32>;
+// Per (instance, cell): kept index count, then (after the scan) the output offset.
+@group(0) @binding(5) var<storage, read_write> cell_offsets: array<vec2<u32>>;
+@group(0) @binding(6) var<storage, read_write> draws: array<DrawIndexedIndirect>;
+@group(0) @binding(7) var<storage, read_write> output: array<u32>;
+// First `cell_offsets` entry of each instance.
+@group(0) @binding(8) var<storage, read> instance_cell_base: array<u32>;
+
+const WORKGROUP: u32 = 256u;
+var<workgroup> partial: array<u32, WORKGROUP>;
+
+fn kept_index_count(inst: Instance, cell: u32) -> u32 {
+    let first = cell_first_leaf[inst.cell_base + cell];
+    let leaves = cell_first_leaf[inst.cell_base + cell + 1u] - first;
+    let vis = inst.visibility_base + cell * inst.view_count;
+    let view_lod = (inst.weights.x * visibility[vis + inst.views.x]
+        + inst.weights.y * visibility[vis + inst.views.y]
+        + inst.weights.z * visibility[vis + inst.views.z]) >> 16u;
+    let lod = (view_lod * inst.distance_fixed) >> 16u;
+    let kept = (leaves * lod + 32768u) >> 16u;
+    let leaf = inst.leaf_base + first;
+    return leaf_index_start[leaf + kept] - leaf_index_start[leaf];
+}
+
+@compute @workgroup_size(256, 1, 1)
+fn count_and_scan(
+    @builtin(workgroup_id) group: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    let instance = group.x;
+    let inst = instances[instance];
+    let out_base = instance_cell_base[instance];
+    var carry = 0u;
+    // Cells in chunks of WORKGROUP; each chunk is scanned in shared memory and offset by the
+    // running total of the previous chunks.
+    for (var chunk = 0u; chunk < inst.cell_count; chunk += WORKGROUP) {
+        let cell = chunk + local;
+        var count = 0u;
+        if cell < inst.cell_count {
+            count = kept_index_count(inst, cell);
+        }
+        partial[local] = count;
+        workgroupBarrier();
+        // Hillis–Steele inclusive scan.
+        for (var stride = 1u; stride < WORKGROUP; stride <<= 1u) {
+            var add = 0u;
+            if local >= stride {
+                add = partial[local - stride];
+            }
+            workgroupBarrier();
+            partial[local] += add;
+            workgroupBarrier();
+        }
+        if cell < inst.cell_count {
+            // Exclusive offset = inclusive − own count.
+            cell_offsets[out_base + cell] = vec2<u32>(count, carry + partial[local] - count);
+        }
+        carry += partial[WORKGROUP - 1u];
+        workgroupBarrier();
+    }
+    if local == 0u {
+        draws[instance] = DrawIndexedIndirect(carry, 1u, inst.output_base, 0, instance);
+    }
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn compact(@builtin(global_invocation_id) id: vec3<u32>) {
+    let instance = id.y;
+    let inst = instances[instance];
+    let cell = id.x;
+    if cell >= inst.cell_count {
+        return;
+    }
+    let count_offset = cell_offsets[instance_cell_base[instance] + cell];
+    let first = cell_first_leaf[inst.cell_base + cell];
+    let src = inst.index_base + leaf_index_start[inst.leaf_base + first];
+    let dst = inst.output_base + count_offset.y;
+    for (var i = 0u; i < count_offset.x; i++) {
+        output[dst + i] = stored_indices[src + i] + inst.vertex_base;
+    }
+}
