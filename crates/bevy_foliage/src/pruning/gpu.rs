@@ -1,34 +1,41 @@
-//! The per-frame pruning pass on the GPU: thin render-world code around `prune.wgsl`.
+//! The per-frame pruning pass on the GPU: thin ECS and render-world code around `prune.wgsl`.
 //!
-//! Main world: every entity with [`PrunedFoliage`] gets a [`PruningParams`] each frame — the
-//! three nearest baked viewpoints and their weights, and the distance factor — computed on the
-//! CPU from the pruning camera (the thesis' `FindCameras` also runs on the host).
+//! Main world:
+//! - every entity with [`PrunedFoliage`] gets a [`PruningParams`] each frame — the three nearest
+//!   baked viewpoints and their weights, and the distance factor — computed on the CPU from the
+//!   pruning camera (the thesis' `FindCameras` also runs on the host);
+//! - [`FoliageStore`] owns the GPU buffers as [`ShaderBuffer`] assets: the baked data of every
+//!   tree type concatenated (static), and per-instance regions of the output index buffer, per-cell
+//!   offsets and indirect draw arguments (written by the GPU each frame). The leaf material binds
+//!   the same buffers, so the vertex stage reads exactly what the compute pass wrote.
 //!
-//! Render world: the baked data of every tree type lives in shared storage buffers
-//! ([`FoliageTypeBuffers`]); each frame [`PruningFrame`] holds one instance record per tree, and
-//! two dispatches (`count_and_scan`, `compact`) write each tree's kept indices into its region
-//! of the output index buffer and its indexed-indirect draw arguments. The pass runs once per
-//! frame before any camera renders, so shadow views and the main view draw the same pruned set.
+//! Render world: each frame one instance record per tree is uploaded and two dispatches
+//! (`count_and_scan`, `compact`) write each tree's kept indices into its region and its
+//! indexed-indirect draw arguments. The pass runs once per frame before any camera renders, so
+//! shadow views and the main view draw the same pruned set.
 
 use super::bake::BakedFoliage;
 use super::extract::{FIXED_ONE, ViewWeights, distance_factor_fixed, view_weights};
 use crate::settings::FoliagePruningSettings;
-use bevy::asset::{AssetId, embedded_asset, load_embedded_asset};
+use bevy::asset::{AssetId, RenderAssetUsages, embedded_asset, load_embedded_asset};
 use bevy::core_pipeline::schedule::camera_driver;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::render::diagnostic::RecordDiagnostics;
+use bevy::render::render_asset::RenderAssets;
 use bevy::render::render_resource::binding_types::{
     storage_buffer_read_only_sized, storage_buffer_sized,
 };
 use bevy::render::render_resource::{
     BindGroup, BindGroupEntries, BindGroupLayoutDescriptor, BindGroupLayoutEntries, Buffer,
-    BufferDescriptor, BufferInitDescriptor, BufferUsages, CachedComputePipelineId,
-    ComputePassDescriptor, ComputePipelineDescriptor, PipelineCache, ShaderStages,
+    CachedComputePipelineId, ComputePassDescriptor, ComputePipelineDescriptor, PipelineCache,
+    ShaderStages,
 };
-use bevy::render::renderer::{RenderContext, RenderDevice, RenderGraph, RenderGraphSystems};
+use bevy::render::renderer::{
+    RenderContext, RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue,
+};
+use bevy::render::storage::{GpuShaderBuffer, ShaderBuffer};
 use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems};
-use std::sync::Arc;
 
 /// Tags a tree instance whose leaves are pruned every frame. The entity's `GlobalTransform`
 /// places the tree.
@@ -51,6 +58,19 @@ pub struct PruningParams {
     pub weights: ViewWeights,
     /// Distance factor (eq. 3.4), fraction of 65536.
     pub distance_fixed: u32,
+}
+
+/// Where a pruned tree's data lives in the shared buffers this frame (written by the plugin).
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FoliageSlot {
+    /// Instance record index (also the entity's `MeshTag`).
+    pub slot: u32,
+    /// Tree type layout.
+    pub ty: TypeSlot,
+    /// First output index of this instance.
+    pub output_base: u32,
+    /// First per-cell offset entry of this instance.
+    pub cell_offsets_base: u32,
 }
 
 impl BakedFoliage {
@@ -99,7 +119,13 @@ pub fn compute_pruning_params(
                     "PrunedFoliage {entity}: transform is not finite or singular; the tree is not drawn"
                 );
             }
-            PruningParams::default()
+            PruningParams {
+                weights: ViewWeights {
+                    views: [0; 3],
+                    weights: [FIXED_ONE, 0, 0],
+                },
+                distance_fixed: 0,
+            }
         } else {
             let local_camera = affine.inverse().transform_point3(camera_position);
             let direction = local_camera - tree.crown_center();
@@ -122,29 +148,10 @@ pub fn compute_pruning_params(
     }
 }
 
-/// The baked data of every tree type, concatenated in shared GPU buffers.
-#[derive(Resource, Default)]
-pub struct FoliageTypeBuffers {
-    /// Where each type's data starts.
-    pub types: HashMap<AssetId<BakedFoliage>, TypeSlot>,
-    cpu: TypeData,
-    /// Buffers, when at least one type is uploaded.
-    pub gpu: Option<TypeGpu>,
-}
-
-#[derive(Default)]
-struct TypeData {
-    cell_first_leaf: Vec<u32>,
-    visibility: Vec<u32>,
-    leaf_index_start: Vec<u32>,
-    indices: Vec<u32>,
-    vertex_count: u32,
-}
-
 /// Offsets of one tree type in the shared buffers.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TypeSlot {
-    /// First `cell_first_leaf` entry.
+    /// First entry in `cell_first_leaf` (and in `cell_full`).
     pub cell_base: u32,
     /// Cells.
     pub cell_count: u32,
@@ -156,25 +163,241 @@ pub struct TypeSlot {
     pub leaf_base: u32,
     /// First stored index.
     pub index_base: u32,
-    /// Added to every written index.
+    /// Added to every written index (types share one vertex buffer).
     pub vertex_base: u32,
     /// Indices with every leaf kept.
     pub full_index_count: u32,
 }
 
-/// GPU copies of the shared baked buffers.
-pub struct TypeGpu {
-    /// Cell leaf ranges.
-    pub cell_first_leaf: Buffer,
-    /// Visibility, one `u32` per (cell, view).
-    pub visibility: Buffer,
-    /// Leaf index ranges.
-    pub leaf_index_start: Buffer,
-    /// Stored (ordered) leaf indices.
-    pub stored_indices: Buffer,
+/// Words per packed leaf vertex in the `leaf_vertices` buffer:
+/// `position.xyz, cell, offset.xyz, 0, normal.xyz, 0, uv.xy, 0, 0`.
+pub const LEAF_VERTEX_WORDS: usize = 16;
+
+/// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf.wgsl`).
+pub const INSTANCE_WORDS: usize = 16;
+
+/// Handles of the shared pruning buffers.
+#[derive(Clone, Debug, Default)]
+pub struct StoreBuffers {
+    /// Per type, `cells + 1` leaf starts (per-type relative).
+    pub cell_first_leaf: Handle<ShaderBuffer>,
+    /// Per type, `cells × views` visibilities, one `u32` each.
+    pub visibility: Handle<ShaderBuffer>,
+    /// Per type, `leaves + 1` index starts.
+    pub leaf_index_start: Handle<ShaderBuffer>,
+    /// Per type, stored leaf indices.
+    pub stored_indices: Handle<ShaderBuffer>,
+    /// Per type, packed leaf vertices.
+    pub leaf_vertices: Handle<ShaderBuffer>,
+    /// Per type, `cells + 1` entries: full index count of each cell.
+    pub cell_full: Handle<ShaderBuffer>,
+    /// Per-instance records (uploaded each frame).
+    pub instances: Handle<ShaderBuffer>,
+    /// Kept indices, one region per instance (GPU written).
+    pub output: Handle<ShaderBuffer>,
+    /// Per instance and cell: kept index count and output offset (GPU written).
+    pub cell_offsets: Handle<ShaderBuffer>,
+    /// Indexed-indirect draw arguments, five words per instance (GPU written).
+    pub draws: Handle<ShaderBuffer>,
 }
 
-/// Layout of one instance's output for this frame.
+/// The GPU buffers shared by every pruned tree, owned by the main world.
+#[derive(Resource, Default)]
+pub struct FoliageStore {
+    /// Layout of each uploaded tree type.
+    pub types: HashMap<AssetId<BakedFoliage>, TypeSlot>,
+    /// The buffers.
+    pub buffers: StoreBuffers,
+    /// Bumped whenever a buffer is replaced, so materials binding them are refreshed.
+    pub generation: u32,
+    capacity: Capacity,
+    vertex_words: u32,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Capacity {
+    instances: u32,
+    output: u32,
+    cell_offsets: u32,
+}
+
+fn words_buffer(words: &[u32], label: &'static str) -> ShaderBuffer {
+    let data: &[u32] = if words.is_empty() { &[0] } else { words };
+    let mut buffer = ShaderBuffer::new(bytemuck::cast_slice(data), RenderAssetUsages::RENDER_WORLD);
+    buffer.buffer_description.label = Some(label);
+    buffer
+}
+
+fn gpu_only_buffer(words: u32, label: &'static str) -> ShaderBuffer {
+    let mut buffer =
+        ShaderBuffer::with_size(words.max(1) as usize * 4, RenderAssetUsages::RENDER_WORLD);
+    buffer.buffer_description.label = Some(label);
+    buffer
+}
+
+/// Main-world bookkeeping each frame: uploads new tree types, assigns instance slots and regions,
+/// grows the buffers when needed.
+pub fn update_foliage_store(
+    mut commands: Commands,
+    mut store: ResMut<FoliageStore>,
+    mut buffers: ResMut<Assets<ShaderBuffer>>,
+    baked: Res<Assets<BakedFoliage>>,
+    trees: Query<(Entity, &PrunedFoliage, Option<&FoliageSlot>), With<PruningParams>>,
+) {
+    let store = &mut *store;
+    // New tree types.
+    let mut new_types: Vec<AssetId<BakedFoliage>> = Vec::new();
+    for (_, pruned, _) in &trees {
+        let id = pruned.baked.id();
+        if !store.types.contains_key(&id) && !new_types.contains(&id) && baked.contains(id) {
+            new_types.push(id);
+        }
+    }
+    if !new_types.is_empty() {
+        // Re-upload every type in a stable order (types are few; this happens rarely).
+        let mut ids: Vec<AssetId<BakedFoliage>> = store.types.keys().copied().collect();
+        ids.extend(new_types);
+        ids.retain(|id| baked.contains(*id));
+        ids.sort_by_key(|id| {
+            store
+                .types
+                .get(id)
+                .map(|s| s.vertex_base)
+                .unwrap_or(u32::MAX)
+        });
+        let (mut cfl, mut vis, mut lis, mut idx, mut verts, mut full) = (
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+        );
+        store.types.clear();
+        for id in ids {
+            let tree = baked.get(id).unwrap();
+            let slot = TypeSlot {
+                cell_base: cfl.len() as u32,
+                cell_count: tree.cell_count() as u32,
+                view_count: tree.view_count() as u32,
+                visibility_base: vis.len() as u32,
+                leaf_base: lis.len() as u32,
+                index_base: idx.len() as u32,
+                vertex_base: (verts.len() / LEAF_VERTEX_WORDS) as u32,
+                full_index_count: tree.indices.len() as u32,
+            };
+            cfl.extend_from_slice(&tree.cell_first_leaf);
+            vis.extend(tree.visibility.iter().map(|&v| v as u32));
+            lis.extend_from_slice(&tree.leaf_index_start);
+            idx.extend_from_slice(&tree.indices);
+            let mut vertex_cell = vec![0u32; tree.positions.len()];
+            for c in 0..tree.cell_count() {
+                let (a, b) = (tree.cell_first_leaf[c], tree.cell_first_leaf[c + 1]);
+                let (start, end) = (
+                    tree.leaf_index_start[a as usize],
+                    tree.leaf_index_start[b as usize],
+                );
+                for &v in &tree.indices[start as usize..end as usize] {
+                    vertex_cell[v as usize] = c as u32;
+                }
+                full.push(end - start);
+            }
+            full.push(0);
+            for v in 0..tree.positions.len() {
+                let (p, e, n, uv) = (
+                    tree.positions[v],
+                    tree.centroid_offsets[v],
+                    tree.normals[v],
+                    tree.uvs[v],
+                );
+                verts.extend_from_slice(&[
+                    p.x.to_bits(),
+                    p.y.to_bits(),
+                    p.z.to_bits(),
+                    vertex_cell[v],
+                    e.x.to_bits(),
+                    e.y.to_bits(),
+                    e.z.to_bits(),
+                    0,
+                    n.x.to_bits(),
+                    n.y.to_bits(),
+                    n.z.to_bits(),
+                    0,
+                    uv.x.to_bits(),
+                    uv.y.to_bits(),
+                    0,
+                    0,
+                ]);
+            }
+            store.types.insert(id, slot);
+        }
+        let b = &mut store.buffers;
+        b.cell_first_leaf = buffers.add(words_buffer(&cfl, "foliage_cell_first_leaf"));
+        b.visibility = buffers.add(words_buffer(&vis, "foliage_visibility"));
+        b.leaf_index_start = buffers.add(words_buffer(&lis, "foliage_leaf_index_start"));
+        b.stored_indices = buffers.add(words_buffer(&idx, "foliage_stored_indices"));
+        b.leaf_vertices = buffers.add(words_buffer(&verts, "foliage_leaf_vertices"));
+        b.cell_full = buffers.add(words_buffer(&full, "foliage_cell_full"));
+        store.vertex_words = verts.len() as u32;
+        store.generation += 1;
+    }
+
+    // Instance slots in entity order; regions sized for every leaf kept.
+    let mut entities: Vec<(Entity, AssetId<BakedFoliage>, Option<FoliageSlot>)> = trees
+        .iter()
+        .filter(|(_, p, _)| store.types.contains_key(&p.baked.id()))
+        .map(|(e, p, s)| (e, p.baked.id(), s.copied()))
+        .collect();
+    entities.sort_by_key(|(e, _, _)| *e);
+    let mut need = Capacity::default();
+    for (slot, (entity, id, old)) in entities.iter().enumerate() {
+        let ty = store.types[id];
+        let new = FoliageSlot {
+            slot: slot as u32,
+            ty,
+            output_base: need.output,
+            cell_offsets_base: need.cell_offsets,
+        };
+        need.instances += 1;
+        need.output += ty.full_index_count;
+        need.cell_offsets += ty.cell_count;
+        if *old != Some(new) {
+            commands
+                .entity(*entity)
+                .insert((new, bevy::mesh::MeshTag(slot as u32)));
+        }
+    }
+    let cap = store.capacity;
+    if need.instances > cap.instances
+        || need.output > cap.output
+        || need.cell_offsets > cap.cell_offsets
+    {
+        // Grow by half again so that adding trees one by one does not reallocate every frame.
+        let grow = |n: u32, have: u32| if n > have { n + n / 2 } else { have };
+        let cap = Capacity {
+            instances: grow(need.instances, cap.instances),
+            output: grow(need.output, cap.output),
+            cell_offsets: grow(need.cell_offsets, cap.cell_offsets),
+        };
+        let b = &mut store.buffers;
+        b.instances = buffers.add(gpu_only_buffer(
+            cap.instances * INSTANCE_WORDS as u32,
+            "foliage_instances",
+        ));
+        b.output = buffers.add(gpu_only_buffer(cap.output, "foliage_pruned_indices"));
+        b.cell_offsets = buffers.add(gpu_only_buffer(
+            cap.cell_offsets * 2,
+            "foliage_cell_offsets",
+        ));
+        let mut draws = gpu_only_buffer(cap.instances * 5, "foliage_pruned_draws");
+        draws.buffer_description.usage |= bevy::render::render_resource::BufferUsages::INDIRECT;
+        b.draws = buffers.add(draws);
+        store.capacity = cap;
+        store.generation += 1;
+    }
+}
+
+/// Layout of one instance's output for this frame (render world).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct InstanceOutput {
     /// The main-world tree entity.
@@ -183,28 +406,30 @@ pub struct InstanceOutput {
     pub slot: TypeSlot,
     /// First output index of this instance.
     pub output_base: u32,
-    /// Index of its draw arguments in [`PruningFrame::draws`].
+    /// Index of its draw arguments in [`PruningFrame::draws`] (its slot).
     pub draw: u32,
 }
 
-/// This frame's pruning work and its outputs.
+/// This frame's pruning work and its outputs (render world).
 #[derive(Resource, Default)]
 pub struct PruningFrame {
-    /// Instances, in draw order.
+    /// Instances, in slot order.
     pub instances: Vec<InstanceOutput>,
-    /// Kept indices of every instance (`STORAGE | INDEX | COPY_SRC`).
+    /// Kept indices of every instance.
     pub output: Option<Buffer>,
-    /// Indexed-indirect draw arguments, one per instance (`STORAGE | INDIRECT | COPY_SRC`).
+    /// Indexed-indirect draw arguments, five words per slot.
     pub draws: Option<Buffer>,
     bind_group: Option<BindGroup>,
     max_cells: u32,
+    instance_count: u32,
 }
 
 /// Pruning inputs extracted from the main world.
 #[derive(Resource, Default)]
 struct ExtractedPruning {
-    instances: Vec<(Entity, AssetId<BakedFoliage>, PruningParams)>,
-    new_types: Vec<(AssetId<BakedFoliage>, Arc<BakedFoliage>)>,
+    instances: Vec<(Entity, FoliageSlot, PruningParams)>,
+    buffers: StoreBuffers,
+    vertex_words: u32,
 }
 
 #[derive(Resource)]
@@ -217,16 +442,19 @@ struct PruningPipelines {
 /// Registers the pruning pass.
 pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "prune.wgsl");
-    app.init_asset::<BakedFoliage>().add_systems(
-        PostUpdate,
-        compute_pruning_params.after(TransformSystems::Propagate),
-    );
+    app.init_asset::<BakedFoliage>()
+        .init_resource::<FoliageStore>()
+        .add_systems(
+            PostUpdate,
+            (compute_pruning_params, update_foliage_store)
+                .chain()
+                .after(TransformSystems::Propagate),
+        );
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
     render_app
         .init_resource::<ExtractedPruning>()
-        .init_resource::<FoliageTypeBuffers>()
         .init_resource::<PruningFrame>()
         .add_systems(RenderStartup, init_pipelines)
         .add_systems(ExtractSchedule, extract_pruning)
@@ -260,7 +488,6 @@ fn init_pipelines(
                 storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
-                storage_buffer_read_only_sized(false, None),
             ),
         ),
     );
@@ -285,114 +512,70 @@ fn init_pipelines(
 
 fn extract_pruning(
     mut extracted: ResMut<ExtractedPruning>,
-    types: Res<FoliageTypeBuffers>,
-    baked: Extract<Res<Assets<BakedFoliage>>>,
-    trees: Extract<Query<(Entity, &PrunedFoliage, &PruningParams, &InheritedVisibility)>>,
+    store: Extract<Res<FoliageStore>>,
+    trees: Extract<Query<(Entity, &FoliageSlot, &PruningParams)>>,
 ) {
     extracted.instances.clear();
-    extracted.new_types.clear();
-    for (entity, pruned, params, visibility) in &trees {
-        if !visibility.get() {
-            continue;
-        }
-        let id = pruned.baked.id();
-        if !types.types.contains_key(&id) && !extracted.new_types.iter().any(|(t, _)| *t == id) {
-            match baked.get(id) {
-                Some(tree) => extracted.new_types.push((id, Arc::new(tree.clone()))),
-                None => continue,
-            }
-        }
-        extracted.instances.push((entity, id, *params));
-    }
-    extracted.instances.sort_by_key(|(e, _, _)| *e);
-}
-
-fn upload(device: &RenderDevice, label: &str, data: &[u32], usage: BufferUsages) -> Buffer {
-    // Storage bindings may not be empty.
-    let data: &[u32] = if data.is_empty() { &[0] } else { data };
-    device.create_buffer_with_data(&BufferInitDescriptor {
-        label: Some(label),
-        contents: bytemuck::cast_slice(data),
-        usage: usage | BufferUsages::COPY_SRC,
-    })
+    extracted
+        .instances
+        .extend(trees.iter().map(|(e, s, p)| (e, *s, *p)));
+    extracted.instances.sort_by_key(|(_, s, _)| s.slot);
+    extracted.buffers = store.buffers.clone();
+    extracted.vertex_words = store.vertex_words;
 }
 
 fn prepare_pruning(
-    mut extracted: ResMut<ExtractedPruning>,
-    mut types: ResMut<FoliageTypeBuffers>,
+    extracted: Res<ExtractedPruning>,
     mut frame: ResMut<PruningFrame>,
     device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    gpu_buffers: Res<RenderAssets<GpuShaderBuffer>>,
     pipelines: Option<Res<PruningPipelines>>,
     pipeline_cache: Res<PipelineCache>,
 ) {
-    // New tree types: append to the shared buffers and re-upload them (rare).
-    let new_types = std::mem::take(&mut extracted.new_types);
-    if !new_types.is_empty() {
-        for (id, tree) in new_types {
-            let cpu = &mut types.cpu;
-            let slot = TypeSlot {
-                cell_base: cpu.cell_first_leaf.len() as u32,
-                cell_count: tree.cell_count() as u32,
-                view_count: tree.view_count() as u32,
-                visibility_base: cpu.visibility.len() as u32,
-                leaf_base: cpu.leaf_index_start.len() as u32,
-                index_base: cpu.indices.len() as u32,
-                vertex_base: cpu.vertex_count,
-                full_index_count: tree.indices.len() as u32,
-            };
-            cpu.cell_first_leaf.extend_from_slice(&tree.cell_first_leaf);
-            cpu.visibility
-                .extend(tree.visibility.iter().map(|&v| v as u32));
-            cpu.leaf_index_start
-                .extend_from_slice(&tree.leaf_index_start);
-            cpu.indices.extend_from_slice(&tree.indices);
-            cpu.vertex_count += tree.positions.len() as u32;
-            types.types.insert(id, slot);
-        }
-        let cpu = &types.cpu;
-        let gpu = TypeGpu {
-            cell_first_leaf: upload(
-                &device,
-                "foliage_cell_first_leaf",
-                &cpu.cell_first_leaf,
-                BufferUsages::STORAGE,
-            ),
-            visibility: upload(
-                &device,
-                "foliage_visibility",
-                &cpu.visibility,
-                BufferUsages::STORAGE,
-            ),
-            leaf_index_start: upload(
-                &device,
-                "foliage_leaf_index_start",
-                &cpu.leaf_index_start,
-                BufferUsages::STORAGE,
-            ),
-            stored_indices: upload(
-                &device,
-                "foliage_stored_indices",
-                &cpu.indices,
-                BufferUsages::STORAGE,
-            ),
-        };
-        types.gpu = Some(gpu);
-    }
-
     frame.instances.clear();
     frame.bind_group = None;
-    let (Some(gpu), Some(pipelines)) = (&types.gpu, pipelines) else {
+    let Some(pipelines) = pipelines else { return };
+    let b = &extracted.buffers;
+    let get = |h: &Handle<ShaderBuffer>| gpu_buffers.get(h).map(|g| g.buffer.clone());
+    let (
+        Some(instances),
+        Some(cell_first_leaf),
+        Some(visibility),
+        Some(leaf_index_start),
+        Some(stored_indices),
+        Some(cell_offsets),
+        Some(draws),
+        Some(output),
+    ) = (
+        get(&b.instances),
+        get(&b.cell_first_leaf),
+        get(&b.visibility),
+        get(&b.leaf_index_start),
+        get(&b.stored_indices),
+        get(&b.cell_offsets),
+        get(&b.draws),
+        get(&b.output),
+    )
+    else {
         return;
     };
-    let mut records: Vec<u32> = Vec::with_capacity(extracted.instances.len() * 16);
-    let mut cell_bases: Vec<u32> = Vec::with_capacity(extracted.instances.len());
-    let (mut output_len, mut cells_len, mut max_cells) = (0u32, 0u32, 0u32);
-    for (draw, (entity, id, params)) in extracted.instances.iter().enumerate() {
-        let Some(&slot) = types.types.get(id) else {
-            continue;
-        };
+    if extracted.instances.is_empty() {
+        return;
+    }
+    let slots = extracted
+        .instances
+        .last()
+        .map(|(_, s, _)| s.slot + 1)
+        .unwrap_or(0);
+    // Slots without a live instance this frame (e.g. hidden) draw nothing: zero records.
+    let mut records = vec![0u32; slots as usize * INSTANCE_WORDS];
+    let mut max_cells = 0;
+    for (entity, slot, params) in &extracted.instances {
         let w = &params.weights;
-        records.extend_from_slice(&[
+        let ty = &slot.ty;
+        let r = &mut records[slot.slot as usize * INSTANCE_WORDS..][..INSTANCE_WORDS];
+        r.copy_from_slice(&[
             w.views[0],
             w.views[1],
             w.views[2],
@@ -400,81 +583,47 @@ fn prepare_pruning(
             w.weights[0],
             w.weights[1],
             w.weights[2],
-            output_len,
-            slot.cell_base,
-            slot.cell_count,
-            slot.view_count,
-            slot.visibility_base,
-            slot.leaf_base,
-            slot.index_base,
-            slot.vertex_base,
-            0,
+            slot.output_base,
+            ty.cell_base,
+            ty.cell_count,
+            ty.view_count,
+            ty.visibility_base,
+            ty.leaf_base,
+            ty.index_base,
+            ty.vertex_base,
+            slot.cell_offsets_base,
         ]);
-        debug_assert_eq!(w.weights.iter().sum::<u32>(), FIXED_ONE);
-        cell_bases.push(cells_len);
+        max_cells = max_cells.max(ty.cell_count);
         frame.instances.push(InstanceOutput {
             entity: *entity,
-            slot,
-            output_base: output_len,
-            draw: draw as u32,
+            slot: *ty,
+            output_base: slot.output_base,
+            draw: slot.slot,
         });
-        output_len += slot.full_index_count;
-        cells_len += slot.cell_count;
-        max_cells = max_cells.max(slot.cell_count);
     }
-    if frame.instances.is_empty() {
-        return;
+    if (records.len() * 4) as u64 > instances.size() {
+        return; // The store grows next frame.
     }
-    let instances = upload(
-        &device,
-        "foliage_pruning_instances",
-        &records,
-        BufferUsages::STORAGE,
-    );
-    let instance_cell_base = upload(
-        &device,
-        "foliage_instance_cell_base",
-        &cell_bases,
-        BufferUsages::STORAGE,
-    );
-    let sized = |label: &str, words: u32, usage: BufferUsages| {
-        device.create_buffer(&BufferDescriptor {
-            label: Some(label),
-            size: (words.max(1) as u64) * 4,
-            usage: usage | BufferUsages::COPY_SRC | BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        })
-    };
-    let cell_offsets = sized("foliage_cell_offsets", cells_len * 2, BufferUsages::STORAGE);
-    let draws = sized(
-        "foliage_pruned_draws",
-        frame.instances.len() as u32 * 5,
-        BufferUsages::STORAGE | BufferUsages::INDIRECT,
-    );
-    let output = sized(
-        "foliage_pruned_indices",
-        output_len,
-        BufferUsages::STORAGE | BufferUsages::INDEX,
-    );
+    queue.write_buffer(&instances, 0, bytemuck::cast_slice(&records));
     let layout = pipeline_cache.get_bind_group_layout(&pipelines.layout);
     frame.bind_group = Some(device.create_bind_group(
         "foliage_pruning_bind_group",
         &layout,
         &BindGroupEntries::sequential((
             instances.as_entire_binding(),
-            gpu.cell_first_leaf.as_entire_binding(),
-            gpu.visibility.as_entire_binding(),
-            gpu.leaf_index_start.as_entire_binding(),
-            gpu.stored_indices.as_entire_binding(),
+            cell_first_leaf.as_entire_binding(),
+            visibility.as_entire_binding(),
+            leaf_index_start.as_entire_binding(),
+            stored_indices.as_entire_binding(),
             cell_offsets.as_entire_binding(),
             draws.as_entire_binding(),
             output.as_entire_binding(),
-            instance_cell_base.as_entire_binding(),
         )),
     ));
     frame.output = Some(output);
     frame.draws = Some(draws);
     frame.max_cells = max_cells;
+    frame.instance_count = slots;
 }
 
 fn run_pruning(
@@ -492,7 +641,6 @@ fn run_pruning(
     ) else {
         return;
     };
-    let instances = frame.instances.len() as u32;
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let encoder = ctx.command_encoder();
@@ -503,8 +651,8 @@ fn run_pruning(
     let span = diagnostics.pass_span(&mut pass, "foliage_pruning");
     pass.set_bind_group(0, bind_group, &[]);
     pass.set_pipeline(count_and_scan);
-    pass.dispatch_workgroups(instances, 1, 1);
+    pass.dispatch_workgroups(frame.instance_count, 1, 1);
     pass.set_pipeline(compact);
-    pass.dispatch_workgroups(frame.max_cells.div_ceil(64), instances, 1);
+    pass.dispatch_workgroups(frame.max_cells.div_ceil(64), frame.instance_count, 1);
     span.end(&mut pass);
 }

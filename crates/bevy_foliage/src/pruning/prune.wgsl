@@ -27,7 +27,7 @@ struct Instance {
     leaf_base: u32,        // first entry of this type in `leaf_index_start`
     index_base: u32,       // first entry of this type in `stored_indices`
     vertex_base: u32,      // added to every index written (types share one vertex buffer)
-    _pad: u32,
+    cell_offsets_base: u32, // first `cell_offsets` entry of this instance
 }
 
 struct DrawIndexedIndirect {
@@ -47,8 +47,6 @@ struct DrawIndexedIndirect {
 @group(0) @binding(5) var<storage, read_write> cell_offsets: array<vec2<u32>>;
 @group(0) @binding(6) var<storage, read_write> draws: array<DrawIndexedIndirect>;
 @group(0) @binding(7) var<storage, read_write> output: array<u32>;
-// First `cell_offsets` entry of each instance.
-@group(0) @binding(8) var<storage, read> instance_cell_base: array<u32>;
 
 const WORKGROUP: u32 = 256u;
 var<workgroup> partial: array<u32, WORKGROUP>;
@@ -73,7 +71,7 @@ fn count_and_scan(
 ) {
     let instance = group.x;
     let inst = instances[instance];
-    let out_base = instance_cell_base[instance];
+    let out_base = inst.cell_offsets_base;
     var carry = 0u;
     // Cells in chunks of WORKGROUP; each chunk is scanned in shared memory and offset by the
     // running total of the previous chunks.
@@ -115,7 +113,7 @@ fn compact(@builtin(global_invocation_id) id: vec3<u32>) {
     if cell >= inst.cell_count {
         return;
     }
-    let count_offset = cell_offsets[instance_cell_base[instance] + cell];
+    let count_offset = cell_offsets[inst.cell_offsets_base + cell];
     let first = cell_first_leaf[inst.cell_base + cell];
     let src = inst.index_base + leaf_index_start[inst.leaf_base + first];
     let dst = inst.output_base + count_offset.y;
