@@ -37,6 +37,7 @@ impl Plugin for FoliagePlugin {
         // The rendering side needs Bevy's asset and render plugins (absent in pure logic tests).
         if app.world().contains_resource::<AssetServer>() {
             pruning::gpu::build(app);
+            pruning::material::build(app);
         }
     }
 }

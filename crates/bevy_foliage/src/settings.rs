@@ -22,6 +22,8 @@ pub enum ViewWeighting {
 #[derive(Resource, Clone, Debug, PartialEq, Reflect)]
 #[reflect(Resource, Default, Debug, PartialEq)]
 pub struct FoliagePruningSettings {
+    /// Prune at all. Off draws every leaf of every tree (full detail), e.g. to compare.
+    pub enabled: bool,
     /// Distance (m) under which the distance factor is 1.
     pub near: f32,
     /// Distance (m) over which the distance factor is 0. Must exceed `near`.
@@ -37,6 +39,7 @@ pub struct FoliagePruningSettings {
 impl Default for FoliagePruningSettings {
     fn default() -> Self {
         Self {
+            enabled: true,
             near: 10.0,
             far: 250.0,
             view_weighting: ViewWeighting::InverseAngle,

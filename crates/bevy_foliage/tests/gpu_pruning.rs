@@ -9,6 +9,7 @@ use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
 use bevy_foliage::pruning::extract::{FIXED_ONE, extract_indices};
 use bevy_foliage::pruning::gpu::{FoliageCamera, PrunedFoliage, PruningFrame, PruningParams};
+use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 use bevy_foliage::rng::SplitMix64;
 use bevy_foliage::{FoliagePlugin, FoliagePruningSettings};
@@ -70,6 +71,10 @@ fn gpu_compaction_equals_cpu_reference_for_random_cameras_and_instances() {
         let mut assets = harness.world_mut().resource_mut::<Assets<BakedFoliage>>();
         types.iter().map(|t| assets.add(t.clone())).collect()
     };
+    let material = harness
+        .world_mut()
+        .resource_mut::<Assets<LeafMaterial>>()
+        .add(leaf_material(StandardMaterial::default()));
     let mut rng = SplitMix64::new(42);
     let mut trees = Vec::new();
     for i in 0..10 {
@@ -82,6 +87,7 @@ fn gpu_compaction_equals_cpu_reference_for_random_cameras_and_instances() {
             .spawn((
                 PrunedFoliage {
                     baked: handles[kind].clone(),
+                    material: material.clone(),
                 },
                 transform,
             ))
@@ -145,6 +151,34 @@ fn gpu_compaction_equals_cpu_reference_for_random_cameras_and_instances() {
             kept_fractions.push(count as f64 / types[kind].indices.len() as f64);
         }
     }
+    // Pruning off: every leaf of every tree is written.
+    harness
+        .world_mut()
+        .resource_mut::<FoliagePruningSettings>()
+        .enabled = false;
+    harness.step();
+    harness.step();
+    let (instances, output, draws) = read_frame(&mut harness);
+    for inst in &instances {
+        let kind = trees.iter().find(|(e, _)| *e == inst.entity).unwrap().1;
+        let draw = &draws[inst.draw as usize * 5..inst.draw as usize * 5 + 5];
+        assert_eq!(
+            draw[0] as usize,
+            types[kind].indices.len(),
+            "pruning off keeps every index: {draw:?}"
+        );
+        let base = inst.output_base as usize;
+        let gpu: Vec<u32> = output[base..base + draw[0] as usize]
+            .iter()
+            .map(|&i| i - inst.slot.vertex_base)
+            .collect();
+        let reference = extract_indices(
+            &types[kind].pruning_input(),
+            &Default::default(),
+            bevy_foliage::pruning::extract::KEEP_ALL,
+        );
+        assert!(gpu == reference.indices);
+    }
     // The random cameras exercised the whole range: some trees fully pruned, some mostly kept.
     let (min, max) = kept_fractions
         .iter()
@@ -173,9 +207,14 @@ fn triangles_drawn_fall_with_distance_as_eq_3_4_and_3_5_predict() {
         .world_mut()
         .resource_mut::<Assets<BakedFoliage>>()
         .add(tree.clone());
-    harness
-        .world_mut()
-        .spawn((PrunedFoliage { baked: handle }, Transform::IDENTITY));
+    let material = harness_material(&mut harness);
+    harness.world_mut().spawn((
+        PrunedFoliage {
+            baked: handle,
+            material,
+        },
+        Transform::IDENTITY,
+    ));
     let direction = Vec3::new(1.0, 0.3, 0.5).normalize();
     let camera = harness
         .world_mut()
@@ -224,4 +263,11 @@ fn triangles_drawn_fall_with_distance_as_eq_3_4_and_3_5_predict() {
         drawn.windows(2).all(|w| w[1].1 <= w[0].1),
         "monotone in distance"
     );
+}
+
+fn harness_material(harness: &mut RenderHarness) -> Handle<LeafMaterial> {
+    harness
+        .world_mut()
+        .resource_mut::<Assets<LeafMaterial>>()
+        .add(leaf_material(StandardMaterial::default()))
 }

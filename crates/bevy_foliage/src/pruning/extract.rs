@@ -25,6 +25,9 @@ use bevy::math::Vec3;
 /// One in 16-bit fixed point (weights and distance factor are fractions of this).
 pub const FIXED_ONE: u32 = 1 << 16;
 
+/// A distance factor meaning "pruning off": every leaf of every cell is kept (full detail).
+pub const KEEP_ALL: u32 = u32::MAX;
+
 /// The three viewpoints used for a view direction and their fixed-point weights
 /// (summing to [`FIXED_ONE`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -96,6 +99,9 @@ pub fn quantize_visibility(v: f32) -> u16 {
 /// `LoD(cell)` of eq. 3.5 in fixed point (`0..=65535`): `dist · Σ_k w_k · vis(cell, k)`.
 /// `vis` holds the cell's visibility per viewpoint.
 pub fn cell_lod(vis: &[u16], weights: &ViewWeights, distance_fixed: u32) -> u32 {
+    if distance_fixed == KEEP_ALL {
+        return FIXED_ONE - 1;
+    }
     let view_lod: u32 = (0..3)
         .map(|k| weights.weights[k] * vis[weights.views[k] as usize] as u32)
         .sum::<u32>()
@@ -154,6 +160,21 @@ impl Extraction {
     pub fn leaves(&self) -> u32 {
         self.kept_leaves.iter().sum()
     }
+}
+
+/// Total indices kept for one tree (what the GPU writes into the draw arguments), without
+/// building the index list.
+pub fn kept_index_total(input: &PruningInput, weights: &ViewWeights, distance_fixed: u32) -> u32 {
+    let cells = input.cell_first_leaf.len().saturating_sub(1);
+    (0..cells)
+        .map(|c| {
+            let first = input.cell_first_leaf[c];
+            let n = input.cell_first_leaf[c + 1] - first;
+            let vis = &input.visibility[c * input.views..(c + 1) * input.views];
+            let u = kept_leaves(n, cell_lod(vis, weights, distance_fixed));
+            input.leaf_index_start[(first + u) as usize] - input.leaf_index_start[first as usize]
+        })
+        .sum()
 }
 
 /// Runs the whole per-frame pipeline for one tree.
@@ -286,6 +307,11 @@ mod tests {
         let e = extract_indices(&input, &w, FIXED_ONE);
         assert_eq!(e.kept_leaves, vec![0, 1]);
         assert_eq!(e.indices, (118..121).collect::<Vec<_>>());
+        assert_eq!(kept_index_total(&input, &w, FIXED_ONE), 3);
+        // Pruning off keeps everything whatever the visibility.
+        let all = extract_indices(&input, &w, KEEP_ALL);
+        assert_eq!(all.indices, (100..121).collect::<Vec<_>>());
+        assert_eq!(kept_index_total(&input, &w, KEEP_ALL), 21);
         assert_eq!(exclusive_scan(&[3, 0, 2]), (vec![0, 3, 3], 5));
     }
 }

@@ -15,7 +15,7 @@
 //! shadow views and the main view draw the same pruned set.
 
 use super::bake::BakedFoliage;
-use super::extract::{FIXED_ONE, ViewWeights, distance_factor_fixed, view_weights};
+use super::extract::{FIXED_ONE, KEEP_ALL, ViewWeights, distance_factor_fixed, view_weights};
 use crate::settings::FoliagePruningSettings;
 use bevy::asset::{AssetId, RenderAssetUsages, embedded_asset, load_embedded_asset};
 use bevy::core_pipeline::schedule::camera_driver;
@@ -44,6 +44,8 @@ use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderStartup, R
 pub struct PrunedFoliage {
     /// The baked pruning data of the tree type.
     pub baked: Handle<BakedFoliage>,
+    /// How the leaves look (see [`leaf_material`](super::material::leaf_material)).
+    pub material: Handle<super::material::LeafMaterial>,
 }
 
 /// Marks the camera that drives pruning. Without one, the active 3D camera with the lowest
@@ -132,7 +134,11 @@ pub fn compute_pruning_params(
             let distance = camera_position.distance(transform.translation());
             PruningParams {
                 weights: view_weights(direction, &tree.view_directions, settings.view_weighting),
-                distance_fixed: distance_factor_fixed(distance, settings.near, settings.far),
+                distance_fixed: if settings.enabled {
+                    distance_factor_fixed(distance, settings.near, settings.far)
+                } else {
+                    KEEP_ALL
+                },
             }
         };
         match params {

@@ -18,5 +18,6 @@ pub mod extract;
 pub mod format;
 pub mod gpu;
 pub mod leaves;
+pub mod material;
 pub mod procedural;
 pub mod visibility;

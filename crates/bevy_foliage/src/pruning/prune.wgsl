@@ -58,7 +58,11 @@ fn kept_index_count(inst: Instance, cell: u32) -> u32 {
     let view_lod = (inst.weights.x * visibility[vis + inst.views.x]
         + inst.weights.y * visibility[vis + inst.views.y]
         + inst.weights.z * visibility[vis + inst.views.z]) >> 16u;
-    let lod = (view_lod * inst.distance_fixed) >> 16u;
+    var lod = (view_lod * inst.distance_fixed) >> 16u;
+    if inst.distance_fixed == 0xffffffffu {
+        // Pruning off: keep every leaf (matches KEEP_ALL in extract.rs).
+        lod = 65535u;
+    }
     let kept = (leaves * lod + 32768u) >> 16u;
     let leaf = inst.leaf_base + first;
     return leaf_index_start[leaf + kept] - leaf_index_start[leaf];

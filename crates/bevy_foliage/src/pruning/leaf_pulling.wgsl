@@ -1,0 +1,91 @@
+// Vertex pulling for pruned leaves, shared by the forward and prepass vertex shaders.
+//
+// A pruned tree is drawn as a "slot mesh" whose vertex i carries i in position.x. Vertex i of
+// the tree is the i-th index the pruning pass wrote into this instance's region of `output`;
+// vertices past this frame's kept count collapse outside the clip volume (culled before
+// rasterisation). The instance is found through its MeshTag (= its slot).
+//
+// Area preservation (Gumbau 2011, eq. 3.7-3.10): a kept leaf of a cell that keeps the fraction
+// u of its leaves is scaled about its centroid by sqrt(1/u), so the cell's total leaf area, and
+// with it the statistical coverage of the crown (Cook & Halstead 2007), is preserved. u is the
+// fraction actually kept in that cell this frame.
+#define_import_path bevy_foliage::leaf_pulling
+
+#import bevy_pbr::mesh_functions
+
+struct Instance {
+    views: vec3<u32>,
+    distance_fixed: u32,
+    weights: vec3<u32>,
+    output_base: u32,
+    cell_base: u32,
+    cell_count: u32,
+    view_count: u32,
+    visibility_base: u32,
+    leaf_base: u32,
+    index_base: u32,
+    vertex_base: u32,
+    cell_offsets_base: u32,
+}
+
+struct LeafVertex {
+    position: vec3<f32>,
+    cell: u32,
+    offset: vec3<f32>,
+    pad_a: u32,
+    normal: vec3<f32>,
+    pad_b: u32,
+    uv: vec2<f32>,
+    pad_c: vec2<u32>,
+}
+
+struct LeafParams {
+    // 1: enlarge kept leaves to preserve area.
+    area_compensation: u32,
+    pad_x: u32,
+    pad_y: u32,
+    pad_z: u32,
+}
+
+@group(#{MATERIAL_BIND_GROUP}) @binding(100) var<storage, read> instances: array<Instance>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(101) var<storage, read> output: array<u32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(102) var<storage, read> draws: array<u32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(103) var<storage, read> cell_offsets: array<vec2<u32>>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(104) var<storage, read> leaf_vertices: array<LeafVertex>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(105) var<storage, read> cell_full: array<u32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(106) var<uniform> leaf_params: LeafParams;
+
+struct PulledLeafVertex {
+    kept: bool,
+    local_position: vec3<f32>,
+    local_normal: vec3<f32>,
+    uv: vec2<f32>,
+}
+
+fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeafVertex {
+    var out: PulledLeafVertex;
+    let slot = mesh_functions::get_tag(instance_index);
+    let i = u32(slot_position.x);
+    let kept_count = draws[slot * 5u];
+    out.kept = i < kept_count;
+    if !out.kept {
+        return out;
+    }
+    let inst = instances[slot];
+    let v = leaf_vertices[output[inst.output_base + i]];
+    var scale = 1.0;
+    if leaf_params.area_compensation != 0u {
+        let kept = cell_offsets[inst.cell_offsets_base + v.cell].x;
+        let full = cell_full[inst.cell_base + v.cell];
+        // Area scale s = 1/u with u = kept/full (eq. 3.9); linear scale sqrt(s).
+        scale = sqrt(f32(full) / f32(max(kept, 1u)));
+    }
+    let centroid = v.position - v.offset;
+    out.local_position = centroid + v.offset * scale;
+    out.local_normal = v.normal;
+    out.uv = v.uv;
+    return out;
+}
+
+// A clip position outside the view volume: triangles made of it are culled.
+const CULLED: vec4<f32> = vec4<f32>(2.0, 2.0, 2.0, 1.0);

@@ -1,0 +1,245 @@
+//! Drawing pruned leaves with Bevy's PBR material: [`LeafMaterial`] is a `StandardMaterial`
+//! extended with a vertex stage that pulls the kept leaves written by the pruning pass, so leaves
+//! get Bevy's lighting, shadows (cast and received) and prepasses unchanged.
+//!
+//! A pruned tree is drawn with a *slot mesh*: `n` vertices whose positions only carry their
+//! index. The plugin picks, per tree and frame, the smallest slot mesh (a power-of-two bucket)
+//! that holds the tree's kept index count — known exactly on the CPU because the pruning
+//! arithmetic is integer ([`super::extract`]) — so the vertex stage never runs for more than
+//! twice the kept vertices, and the vertices past the kept count are culled.
+
+use super::bake::BakedFoliage;
+use super::extract::kept_index_total;
+use super::gpu::{FoliageSlot, FoliageStore, PrunedFoliage, PruningParams};
+use crate::settings::FoliagePruningSettings;
+use bevy::asset::{RenderAssetUsages, embedded_asset};
+use bevy::camera::visibility::NoFrustumCulling;
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+use bevy::render::render_resource::{AsBindGroup, ShaderType};
+use bevy::render::storage::ShaderBuffer;
+use bevy::shader::ShaderRef;
+use bevy::shader::load_shader_library;
+
+/// The material of pruned leaves: a `StandardMaterial` (colour, texture, alpha mode) whose vertex
+/// stage draws the pruned leaf set. Make one with [`leaf_material`].
+pub type LeafMaterial = ExtendedMaterial<StandardMaterial, LeafExtension>;
+
+/// Per-material switches of the leaf vertex stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ShaderType, Reflect)]
+pub struct LeafParams {
+    /// 1 to enlarge kept leaves so total leaf area is preserved (eq. 3.7–3.9).
+    pub area_compensation: u32,
+    /// Padding.
+    pub pad_x: u32,
+    /// Padding.
+    pub pad_y: u32,
+    /// Padding.
+    pub pad_z: u32,
+}
+
+/// The extension binding the pruning buffers (managed by the plugin: leave them default).
+#[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
+pub struct LeafExtension {
+    /// Instance records.
+    #[storage(100, read_only, visibility(vertex))]
+    pub instances: Handle<ShaderBuffer>,
+    /// Kept indices.
+    #[storage(101, read_only, visibility(vertex))]
+    pub output: Handle<ShaderBuffer>,
+    /// Indirect draw arguments (kept counts).
+    #[storage(102, read_only, visibility(vertex))]
+    pub draws: Handle<ShaderBuffer>,
+    /// Per instance and cell kept counts.
+    #[storage(103, read_only, visibility(vertex))]
+    pub cell_offsets: Handle<ShaderBuffer>,
+    /// Packed leaf vertices.
+    #[storage(104, read_only, visibility(vertex))]
+    pub leaf_vertices: Handle<ShaderBuffer>,
+    /// Full index count per cell.
+    #[storage(105, read_only, visibility(vertex))]
+    pub cell_full: Handle<ShaderBuffer>,
+    /// Switches.
+    #[uniform(106, visibility(vertex))]
+    pub params: LeafParams,
+}
+
+const LEAF_SHADER: &str = "embedded://bevy_foliage/pruning/leaf.wgsl";
+const LEAF_PREPASS_SHADER: &str = "embedded://bevy_foliage/pruning/leaf_prepass.wgsl";
+
+impl MaterialExtension for LeafExtension {
+    fn vertex_shader() -> ShaderRef {
+        ShaderRef::Path(LEAF_SHADER.into())
+    }
+    fn prepass_vertex_shader() -> ShaderRef {
+        ShaderRef::Path(LEAF_PREPASS_SHADER.into())
+    }
+    fn deferred_vertex_shader() -> ShaderRef {
+        ShaderRef::Path(LEAF_PREPASS_SHADER.into())
+    }
+}
+
+/// A leaf material from a `StandardMaterial`; leaves are two-sided.
+pub fn leaf_material(base: StandardMaterial) -> LeafMaterial {
+    LeafMaterial {
+        base: StandardMaterial {
+            double_sided: true,
+            cull_mode: None,
+            ..base
+        },
+        extension: LeafExtension::default(),
+    }
+}
+
+/// Slot meshes by size.
+#[derive(Resource, Default)]
+pub struct SlotMeshes(HashMap<u32, Handle<Mesh>>);
+
+/// The smallest slot-mesh size (vertices) that holds `indices` kept indices: `3 · 2^k`, at least 192.
+pub fn slot_bucket(indices: u32) -> u32 {
+    let triangles = indices.div_ceil(3).max(64);
+    triangles.next_power_of_two() * 3
+}
+
+fn slot_mesh(vertices: u32) -> Mesh {
+    let positions: Vec<[f32; 3]> = (0..vertices).map(|i| [i as f32, 0.0, 0.0]).collect();
+    let mut mesh = Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_UV_0, vec![[0.0f32, 0.0]; vertices as usize]);
+    mesh.insert_indices(Indices::U32((0..vertices).collect()));
+    mesh
+}
+
+/// Gives every pruned tree the slot mesh that fits its kept count, its material and its tag.
+pub fn assign_slot_meshes(
+    mut commands: Commands,
+    mut slot_meshes: ResMut<SlotMeshes>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    baked: Res<Assets<BakedFoliage>>,
+    trees: Query<
+        (
+            Entity,
+            &PrunedFoliage,
+            &PruningParams,
+            Option<&Mesh3d>,
+            Option<&MeshMaterial3d<LeafMaterial>>,
+        ),
+        With<FoliageSlot>,
+    >,
+) {
+    for (entity, pruned, params, mesh, material) in &trees {
+        let Some(tree) = baked.get(&pruned.baked) else {
+            continue;
+        };
+        let kept = kept_index_total(
+            &tree.pruning_input(),
+            &params.weights,
+            params.distance_fixed,
+        );
+        let bucket = slot_bucket(kept);
+        // Every bucket this type can need is created when the type is first seen: slot meshes
+        // created later, while the tree is already drawn, were observed not to be drawn on the
+        // frames that followed (Bevy 0.19, software Vulkan); creating them up front avoids it.
+        let full_bucket = slot_bucket(tree.indices.len() as u32);
+        let mut b = slot_bucket(0);
+        while b <= full_bucket {
+            slot_meshes
+                .0
+                .entry(b)
+                .or_insert_with(|| meshes.add(slot_mesh(b)));
+            b *= 2;
+        }
+        let handle = slot_meshes
+            .0
+            .entry(bucket)
+            .or_insert_with(|| meshes.add(slot_mesh(bucket)))
+            .clone();
+        let mut e = commands.entity(entity);
+        if mesh.map(|m| m.0.id()) != Some(handle.id()) {
+            e.insert((Mesh3d(handle), NoFrustumCulling));
+        }
+        if material.map(|m| m.0.id()) != Some(pruned.material.id()) {
+            e.insert(MeshMaterial3d(pruned.material.clone()));
+        }
+    }
+}
+
+/// Points every leaf material in use at the current pruning buffers and settings.
+pub fn refresh_leaf_materials(
+    store: Res<FoliageStore>,
+    settings: Res<FoliagePruningSettings>,
+    mut materials: ResMut<Assets<LeafMaterial>>,
+    trees: Query<&PrunedFoliage>,
+    mut seen: Local<(u32, Vec<AssetId<LeafMaterial>>)>,
+) {
+    let mut ids: Vec<AssetId<LeafMaterial>> = trees.iter().map(|t| t.material.id()).collect();
+    ids.sort();
+    ids.dedup();
+    let changed = store.is_changed() && seen.0 != store.generation;
+    let params = LeafParams {
+        area_compensation: settings.area_compensation as u32,
+        ..default()
+    };
+    for id in &ids {
+        let fresh = !seen.1.contains(id);
+        let Some(material) = materials.get(*id) else {
+            continue;
+        };
+        let b = &store.buffers;
+        let ext = &material.extension;
+        if fresh
+            || changed
+            || ext.params != params
+            || ext.output != b.output
+            || ext.leaf_vertices != b.leaf_vertices
+        {
+            let mut material = materials.get_mut(*id).unwrap();
+            material.extension = LeafExtension {
+                instances: b.instances.clone(),
+                output: b.output.clone(),
+                draws: b.draws.clone(),
+                cell_offsets: b.cell_offsets.clone(),
+                leaf_vertices: b.leaf_vertices.clone(),
+                cell_full: b.cell_full.clone(),
+                params,
+            };
+        }
+    }
+    *seen = (store.generation, ids);
+}
+
+/// Registers the leaf material and its systems.
+pub(crate) fn build(app: &mut App) {
+    load_shader_library!(app, "leaf_pulling.wgsl");
+    embedded_asset!(app, "leaf.wgsl");
+    embedded_asset!(app, "leaf_prepass.wgsl");
+    app.add_plugins(MaterialPlugin::<LeafMaterial>::default())
+        .init_resource::<SlotMeshes>()
+        .add_systems(
+            PostUpdate,
+            (assign_slot_meshes, refresh_leaf_materials)
+                .after(super::gpu::update_foliage_store)
+                .before(bevy::camera::visibility::VisibilitySystems::CheckVisibility),
+        );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn buckets_hold_the_count_and_waste_at_most_half() {
+        for kept in [0u32, 3, 189, 192, 195, 3000, 96_000, 786_252] {
+            let b = slot_bucket(kept);
+            assert!(b >= kept && b % 3 == 0, "{kept} -> {b}");
+            if kept > 192 {
+                assert!(b < 2 * kept + 6, "{kept} -> {b}");
+            }
+        }
+    }
+}
