@@ -1,11 +1,17 @@
 //! The main example scene (`cargo run --example nature`), shared with the tests so that what a
 //! new user sees first is also what CI renders.
 //!
-//! So far: a lit ground plane with a box casting a shadow under a directional light, with
+//! So far: a lit ground plane with a box casting a shadow under a directional light, and an
+//! olive tree (the thesis' *Olea europaea*, 16,107 leaves) whose leaves are pruned every frame by
+//! distance and view direction ([`bevy_foliage::pruning`]), with
 //! [`NaturePlugins`](crate::NaturePlugins) added. Each feature of the suite adds itself here as
 //! it lands.
 
 use bevy::prelude::*;
+use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
+use bevy_foliage::pruning::gpu::PrunedFoliage;
+use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
+use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 
 /// Where the showcase puts things, so tests can find them on screen.
 pub mod layout {
@@ -17,10 +23,14 @@ pub mod layout {
     pub const BOX_SIZE: f32 = 1.0;
     /// Direction the sunlight travels (from the sun into the scene).
     pub const SUN_DIRECTION: Vec3 = Vec3::new(1.0, -1.0, 0.0);
-    /// Camera position; it looks at the origin.
-    pub const CAMERA_POSITION: Vec3 = Vec3::new(0.0, 4.0, 6.0);
+    /// Camera position.
+    pub const CAMERA_POSITION: Vec3 = Vec3::new(1.5, 4.5, 9.0);
+    /// Where the camera looks.
+    pub const CAMERA_TARGET: Vec3 = Vec3::new(-1.0, 1.8, -2.0);
     /// Edge length of the square ground plane.
     pub const GROUND_SIZE: f32 = 20.0;
+    /// Where the pruned olive tree stands (behind the box, its shadow falls away from it).
+    pub const TREE_POSITION: Vec3 = Vec3::new(-4.0, 0.0, -4.5);
 }
 
 /// Options of the showcase scene.
@@ -63,6 +73,8 @@ fn spawn_showcase(
     options: Res<ShowcaseOptions>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
+    mut baked_trees: ResMut<Assets<BakedFoliage>>,
+    mut leaf_materials: ResMut<Assets<LeafMaterial>>,
 ) {
     use layout::*;
     commands.spawn((
@@ -83,6 +95,13 @@ fn spawn_showcase(
         })),
         Transform::from_translation(BOX_CENTER + options.box_offset),
     ));
+    spawn_pruned_tree(
+        &mut commands,
+        &mut meshes,
+        &mut materials,
+        &mut baked_trees,
+        &mut leaf_materials,
+    );
     commands.spawn((
         Name::new("sun"),
         DirectionalLight {
@@ -100,9 +119,59 @@ fn spawn_showcase(
         Name::new("camera"),
         ShowcaseCamera,
         Camera3d::default(),
-        Transform::from_translation(CAMERA_POSITION).looking_at(Vec3::ZERO, Vec3::Y),
+        Transform::from_translation(CAMERA_POSITION).looking_at(CAMERA_TARGET, Vec3::Y),
     ));
     if !options.msaa {
         camera.insert(Msaa::Off);
     }
+}
+
+/// Generates and bakes the thesis' olive tree (about a fifth of a second) and spawns it: bark as an
+/// ordinary mesh, leaves as a pruned leaf set.
+fn spawn_pruned_tree(
+    commands: &mut Commands,
+    meshes: &mut Assets<Mesh>,
+    materials: &mut Assets<StandardMaterial>,
+    baked_trees: &mut Assets<BakedFoliage>,
+    leaf_materials: &mut Assets<LeafMaterial>,
+) {
+    let species = TreeSpecies::olea();
+    let tree = generate(&species);
+    let baked = match bake(&tree.leaves, &BakeSettings::default(), &|_| {}) {
+        Ok((baked, timings)) => {
+            info!(
+                "baked {} ({} leaves) in {:.0} ms",
+                species.name,
+                baked.leaf_count(),
+                timings.total().as_secs_f64() * 1e3
+            );
+            baked
+        }
+        Err(e) => {
+            error!("could not bake {}: {e}", species.name);
+            return;
+        }
+    };
+    commands
+        .spawn((
+            Name::new(species.name),
+            PrunedFoliage {
+                baked: baked_trees.add(baked),
+                material: leaf_materials.add(leaf_material(StandardMaterial {
+                    base_color: Color::srgb(0.32, 0.42, 0.2),
+                    perceptual_roughness: 0.8,
+                    ..default()
+                })),
+            },
+            Transform::from_translation(layout::TREE_POSITION),
+        ))
+        .with_child((
+            Name::new("bark"),
+            Mesh3d(meshes.add(tree.bark.to_mesh())),
+            MeshMaterial3d(materials.add(StandardMaterial {
+                base_color: Color::srgb(0.35, 0.27, 0.2),
+                perceptual_roughness: 0.95,
+                ..default()
+            })),
+        ));
 }

@@ -14,6 +14,7 @@ use super::gpu::{FoliageSlot, FoliageStore, PrunedFoliage, PruningParams};
 use crate::settings::FoliagePruningSettings;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::camera::visibility::NoFrustumCulling;
+use bevy::diagnostic::{Diagnostic, DiagnosticPath, Diagnostics, RegisterDiagnostic};
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
 use bevy::platform::collections::HashMap;
@@ -115,9 +116,20 @@ fn slot_mesh(vertices: u32) -> Mesh {
     mesh
 }
 
-/// Gives every pruned tree the slot mesh that fits its kept count, its material and its tag.
+/// Leaf triangles drawn this frame, over all pruned trees.
+pub const TRIANGLES_DRAWN: DiagnosticPath = DiagnosticPath::const_new("foliage/triangles_drawn");
+/// Leaf triangles of the same trees at full detail.
+pub const TRIANGLES_FULL: DiagnosticPath = DiagnosticPath::const_new("foliage/triangles_full");
+/// `100 · drawn / full`.
+pub const KEPT_PERCENT: DiagnosticPath = DiagnosticPath::const_new("foliage/kept_percent");
+/// Pruned trees this frame.
+pub const TREES_PRUNED: DiagnosticPath = DiagnosticPath::const_new("foliage/trees_pruned");
+
+/// Gives every pruned tree the slot mesh that fits its kept count, its material and its tag,
+/// and publishes the leaf counts as diagnostics.
 pub fn assign_slot_meshes(
     mut commands: Commands,
+    mut diagnostics: Diagnostics,
     mut slot_meshes: ResMut<SlotMeshes>,
     mut meshes: ResMut<Assets<Mesh>>,
     baked: Res<Assets<BakedFoliage>>,
@@ -132,6 +144,7 @@ pub fn assign_slot_meshes(
         With<FoliageSlot>,
     >,
 ) {
+    let (mut drawn, mut full, mut count) = (0u64, 0u64, 0u32);
     for (entity, pruned, params, mesh, material) in &trees {
         let Some(tree) = baked.get(&pruned.baked) else {
             continue;
@@ -141,6 +154,9 @@ pub fn assign_slot_meshes(
             &params.weights,
             params.distance_fixed,
         );
+        drawn += kept as u64 / 3;
+        full += tree.indices.len() as u64 / 3;
+        count += 1;
         let bucket = slot_bucket(kept);
         // Every bucket this type can need is created when the type is first seen: slot meshes
         // created later, while the tree is already drawn, were observed not to be drawn on the
@@ -167,6 +183,16 @@ pub fn assign_slot_meshes(
             e.insert(MeshMaterial3d(pruned.material.clone()));
         }
     }
+    diagnostics.add_measurement(&TRIANGLES_DRAWN, || drawn as f64);
+    diagnostics.add_measurement(&TRIANGLES_FULL, || full as f64);
+    diagnostics.add_measurement(&TREES_PRUNED, || count as f64);
+    diagnostics.add_measurement(&KEPT_PERCENT, || {
+        if full == 0 {
+            100.0
+        } else {
+            100.0 * drawn as f64 / full as f64
+        }
+    });
 }
 
 /// Points every leaf material in use at the current pruning buffers and settings.
@@ -218,6 +244,9 @@ pub(crate) fn build(app: &mut App) {
     load_shader_library!(app, "leaf_pulling.wgsl");
     embedded_asset!(app, "leaf.wgsl");
     embedded_asset!(app, "leaf_prepass.wgsl");
+    for path in [TRIANGLES_DRAWN, TRIANGLES_FULL, KEPT_PERCENT, TREES_PRUNED] {
+        app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
+    }
     app.add_plugins(MaterialPlugin::<LeafMaterial>::default())
         .init_resource::<SlotMeshes>()
         .add_systems(
