@@ -449,6 +449,7 @@ struct PruningPipelines {
 pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "prune.wgsl");
     app.init_asset::<BakedFoliage>()
+        .init_asset_loader::<super::format::BakedFoliageLoader>()
         .init_resource::<FoliageStore>()
         .add_systems(
             PostUpdate,
