@@ -165,16 +165,28 @@ impl Extraction {
 /// Total indices kept for one tree (what the GPU writes into the draw arguments), without
 /// building the index list.
 pub fn kept_index_total(input: &PruningInput, weights: &ViewWeights, distance_fixed: u32) -> u32 {
-    let cells = input.cell_first_leaf.len().saturating_sub(1);
-    (0..cells)
-        .map(|c| {
-            let first = input.cell_first_leaf[c];
-            let n = input.cell_first_leaf[c + 1] - first;
-            let vis = &input.visibility[c * input.views..(c + 1) * input.views];
-            let u = kept_leaves(n, cell_lod(vis, weights, distance_fixed));
-            input.leaf_index_start[(first + u) as usize] - input.leaf_index_start[first as usize]
-        })
+    (0..input.cell_count())
+        .map(|c| input.kept_in_cell(c, weights, distance_fixed).1)
         .sum()
+}
+
+impl PruningInput<'_> {
+    /// Number of cells.
+    pub fn cell_count(&self) -> usize {
+        self.cell_first_leaf.len().saturating_sub(1)
+    }
+
+    /// Leaves and indices cell `c` keeps: `u_n = round(leaves_n · LoD(cell))` and the index
+    /// count of its first `u_n` stored leaves.
+    pub fn kept_in_cell(&self, c: usize, weights: &ViewWeights, distance_fixed: u32) -> (u32, u32) {
+        let first = self.cell_first_leaf[c];
+        let n = self.cell_first_leaf[c + 1] - first;
+        let vis = &self.visibility[c * self.views..(c + 1) * self.views];
+        let u = kept_leaves(n, cell_lod(vis, weights, distance_fixed));
+        let indices =
+            self.leaf_index_start[(first + u) as usize] - self.leaf_index_start[first as usize];
+        (u, indices)
+    }
 }
 
 /// Runs the whole per-frame pipeline for one tree.
@@ -183,19 +195,10 @@ pub fn extract_indices(
     weights: &ViewWeights,
     distance_fixed: u32,
 ) -> Extraction {
-    let cells = input.cell_first_leaf.len().saturating_sub(1);
-    let mut kept_leaves_v = Vec::with_capacity(cells);
-    let mut kept_indices = Vec::with_capacity(cells);
-    for c in 0..cells {
-        let first = input.cell_first_leaf[c];
-        let n = input.cell_first_leaf[c + 1] - first;
-        let vis = &input.visibility[c * input.views..(c + 1) * input.views];
-        let u = kept_leaves(n, cell_lod(vis, weights, distance_fixed));
-        kept_leaves_v.push(u);
-        kept_indices.push(
-            input.leaf_index_start[(first + u) as usize] - input.leaf_index_start[first as usize],
-        );
-    }
+    let cells = input.cell_count();
+    let (kept_leaves_v, kept_indices): (Vec<u32>, Vec<u32>) = (0..cells)
+        .map(|c| input.kept_in_cell(c, weights, distance_fixed))
+        .unzip();
     let (offsets, total) = exclusive_scan(&kept_indices);
     let mut indices = vec![0u32; total as usize];
     for c in 0..cells {
