@@ -11,7 +11,13 @@
 // fraction actually kept in that cell this frame.
 #define_import_path bevy_foliage::leaf_pulling
 
-#import bevy_pbr::mesh_functions
+#import bevy_pbr::{mesh_functions, view_transformations::position_world_to_clip}
+
+// The slot mesh's vertex: only its index (in position.x) and the instance are used.
+struct SlotVertex {
+    @builtin(instance_index) instance_index: u32,
+    @location(0) position: vec3<f32>,
+}
 
 struct Instance {
     views: vec3<u32>,
@@ -60,8 +66,12 @@ struct PulledLeafVertex {
     local_position: vec3<f32>,
     local_normal: vec3<f32>,
     uv: vec2<f32>,
+    world_position: vec4<f32>,
+    clip_position: vec4<f32>,
+    world_normal: vec3<f32>,
 }
 
+// Pulls the vertex and places it in the world; `clip_position` is CULLED for dropped vertices.
 fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeafVertex {
     var out: PulledLeafVertex;
     let slot = mesh_functions::get_tag(instance_index);
@@ -69,6 +79,7 @@ fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeaf
     let kept_count = draws[slot * 5u];
     out.kept = i < kept_count;
     if !out.kept {
+        out.clip_position = CULLED;
         return out;
     }
     let inst = instances[slot];
@@ -84,6 +95,10 @@ fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeaf
     out.local_position = centroid + v.offset * scale;
     out.local_normal = v.normal;
     out.uv = v.uv;
+    let world_from_local = mesh_functions::get_world_from_local(instance_index);
+    out.world_position = mesh_functions::mesh_position_local_to_world(world_from_local, vec4<f32>(out.local_position, 1.0));
+    out.clip_position = position_world_to_clip(out.world_position.xyz);
+    out.world_normal = mesh_functions::mesh_normal_local_to_world(out.local_normal, instance_index);
     return out;
 }
 
