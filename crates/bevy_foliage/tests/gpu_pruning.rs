@@ -208,13 +208,16 @@ fn triangles_drawn_fall_with_distance_as_eq_3_4_and_3_5_predict() {
         .resource_mut::<Assets<BakedFoliage>>()
         .add(tree.clone());
     let material = harness_material(&mut harness);
-    harness.world_mut().spawn((
-        PrunedFoliage {
-            baked: handle,
-            material,
-        },
-        Transform::IDENTITY,
-    ));
+    let good = harness
+        .world_mut()
+        .spawn((
+            PrunedFoliage {
+                baked: handle,
+                material,
+            },
+            Transform::IDENTITY,
+        ))
+        .id();
     let direction = Vec3::new(1.0, 0.3, 0.5).normalize();
     let camera = harness
         .world_mut()
@@ -223,7 +226,49 @@ fn triangles_drawn_fall_with_distance_as_eq_3_4_and_3_5_predict() {
             Transform::from_translation(direction * 20.0),
         ))
         .id();
+    // Bad transforms: logged once, drawn as nothing, and the good tree is unaffected.
+    let bad_material = harness_material(&mut harness);
+    let bad_handle = harness
+        .world_mut()
+        .query::<&PrunedFoliage>()
+        .iter(harness.world_mut())
+        .next()
+        .unwrap()
+        .baked
+        .clone();
+    let bad: Vec<Entity> = [
+        Transform::from_xyz(f32::NAN, 0.0, 0.0),
+        Transform::from_scale(Vec3::ZERO),
+    ]
+    .into_iter()
+    .map(|t| {
+        harness
+            .world_mut()
+            .spawn((
+                PrunedFoliage {
+                    baked: bad_handle.clone(),
+                    material: bad_material.clone(),
+                },
+                t,
+            ))
+            .id()
+    })
+    .collect();
     harness.wait_until_ready().unwrap();
+    {
+        let (instances, _, draws) = read_frame(&mut harness);
+        for entity in &bad {
+            let inst = instances
+                .iter()
+                .find(|i| i.entity == *entity)
+                .expect("bad tree still has a slot");
+            assert_eq!(
+                draws[inst.draw as usize * 5],
+                0,
+                "a tree that cannot be placed draws nothing"
+            );
+        }
+    }
 
     // The camera moves away along a fixed direction from the crown centre, so the view-dependent
     // factor stays the same and only the distance factor (eq. 3.4, |camera − tree|) changes.
@@ -234,8 +279,9 @@ fn triangles_drawn_fall_with_distance_as_eq_3_4_and_3_5_predict() {
         *harness.world_mut().get_mut::<Transform>(camera).unwrap() =
             Transform::from_translation(position).looking_at(crown, Vec3::Y);
         harness.step();
-        let (_, _, draws) = read_frame(&mut harness);
-        drawn.push((position.length(), draws[0] / 3));
+        let (instances, _, draws) = read_frame(&mut harness);
+        let slot = instances.iter().find(|i| i.entity == good).unwrap().draw as usize;
+        drawn.push((position.length(), draws[slot * 5] / 3));
     }
     eprintln!("(distance, triangles drawn): {drawn:?}");
     let full = drawn[0].1 as f32;
