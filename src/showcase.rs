@@ -8,10 +8,8 @@
 //! it lands.
 
 use bevy::prelude::*;
-use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
-use bevy_foliage::pruning::gpu::PrunedFoliage;
-use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
-use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
+use bevy_foliage::pruning::procedural::TreeSpecies;
+use bevy_foliage::pruning::spawn::TreeAssets;
 
 /// Where the showcase puts things, so tests can find them on screen.
 pub mod layout {
@@ -68,14 +66,10 @@ pub fn build_showcase(app: &mut App, options: ShowcaseOptions) {
 #[derive(Component)]
 pub struct ShowcaseCamera;
 
-fn spawn_showcase(
-    mut commands: Commands,
-    options: Res<ShowcaseOptions>,
-    mut meshes: ResMut<Assets<Mesh>>,
-    mut materials: ResMut<Assets<StandardMaterial>>,
-    mut baked_trees: ResMut<Assets<BakedFoliage>>,
-    mut leaf_materials: ResMut<Assets<LeafMaterial>>,
-) {
+fn spawn_showcase(mut commands: Commands, options: Res<ShowcaseOptions>, mut trees: TreeAssets) {
+    let TreeAssets {
+        meshes, materials, ..
+    } = &mut trees;
     use layout::*;
     commands.spawn((
         Name::new("ground"),
@@ -95,13 +89,14 @@ fn spawn_showcase(
         })),
         Transform::from_translation(BOX_CENTER + options.box_offset),
     ));
-    spawn_pruned_tree(
+    // The thesis' olive tree, baked at start-up (about a fifth of a second).
+    if let Err(e) = trees.spawn_procedural(
         &mut commands,
-        &mut meshes,
-        &mut materials,
-        &mut baked_trees,
-        &mut leaf_materials,
-    );
+        &TreeSpecies::olea(),
+        Transform::from_translation(layout::TREE_POSITION),
+    ) {
+        error!("could not bake the showcase tree: {e}");
+    }
     commands.spawn((
         Name::new("sun"),
         DirectionalLight {
@@ -124,54 +119,4 @@ fn spawn_showcase(
     if !options.msaa {
         camera.insert(Msaa::Off);
     }
-}
-
-/// Generates and bakes the thesis' olive tree (about a fifth of a second) and spawns it: bark as an
-/// ordinary mesh, leaves as a pruned leaf set.
-fn spawn_pruned_tree(
-    commands: &mut Commands,
-    meshes: &mut Assets<Mesh>,
-    materials: &mut Assets<StandardMaterial>,
-    baked_trees: &mut Assets<BakedFoliage>,
-    leaf_materials: &mut Assets<LeafMaterial>,
-) {
-    let species = TreeSpecies::olea();
-    let tree = generate(&species);
-    let baked = match bake(&tree.leaves, &BakeSettings::default(), &|_| {}) {
-        Ok((baked, timings)) => {
-            info!(
-                "baked {} ({} leaves) in {:.0} ms",
-                species.name,
-                baked.leaf_count(),
-                timings.total().as_secs_f64() * 1e3
-            );
-            baked
-        }
-        Err(e) => {
-            error!("could not bake {}: {e}", species.name);
-            return;
-        }
-    };
-    commands
-        .spawn((
-            Name::new(species.name),
-            PrunedFoliage {
-                baked: baked_trees.add(baked),
-                material: leaf_materials.add(leaf_material(StandardMaterial {
-                    base_color: Color::srgb(0.32, 0.42, 0.2),
-                    perceptual_roughness: 0.8,
-                    ..default()
-                })),
-            },
-            Transform::from_translation(layout::TREE_POSITION),
-        ))
-        .with_child((
-            Name::new("bark"),
-            Mesh3d(meshes.add(tree.bark.to_mesh())),
-            MeshMaterial3d(materials.add(StandardMaterial {
-                base_color: Color::srgb(0.35, 0.27, 0.2),
-                perceptual_roughness: 0.95,
-                ..default()
-            })),
-        ));
 }

@@ -20,4 +20,5 @@ pub mod gpu;
 pub mod leaves;
 pub mod material;
 pub mod procedural;
+pub mod spawn;
 pub mod visibility;
