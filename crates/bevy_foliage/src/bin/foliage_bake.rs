@@ -1,14 +1,18 @@
 //! Bakes trees for view-dependent stochastic pruning and writes `*.foliage` files.
 //!
 //! ```text
-//! cargo run -p bevy_foliage --bin foliage_bake -- [--out DIR] [--resolution N] [--depth D] [TREE ...]
+//! cargo run -p bevy_foliage --bin foliage_bake -- [--out DIR] [--resolution N] [--depth D]
+//!     [--leaf-material NAME ...] [TREE | FILE.gltf | FILE.glb ...]
 //! ```
-//! TREE is one of `olea`, `fraxinus`, `quercus`, `cedrus` (the thesis' test trees; default: all).
+//! TREE is one of `olea`, `fraxinus`, `quercus`, `cedrus` (the thesis' test trees; default: all);
+//! a glTF file is split into leaves as `bevy_foliage::pruning::gltf` documents.
 //! Prints progress on stderr and one JSON object per tree on stdout (bake time per stage, leaf
 //! count, GPU bytes).
 
 use bevy_foliage::pruning::bake::{BakeProgress, BakeSettings, BakeStage, bake};
 use bevy_foliage::pruning::format::save;
+use bevy_foliage::pruning::gltf::{GltfLeafSettings, load_gltf_tree};
+use bevy_foliage::pruning::leaves::LeafSet;
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 use std::io::Write;
 use std::path::PathBuf;
@@ -17,6 +21,7 @@ fn main() {
     let mut out = PathBuf::from("assets/trees");
     let mut settings = BakeSettings::default();
     let mut names: Vec<String> = Vec::new();
+    let mut gltf_settings = GltfLeafSettings::default();
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         let mut value = |flag: &str| {
@@ -31,68 +36,89 @@ fn main() {
                 settings.resolution = value("--resolution").parse().expect("--resolution N")
             }
             "--depth" => settings.cell_depth = value("--depth").parse().expect("--depth D"),
+            "--leaf-material" => gltf_settings.leaf_materials.push(value("--leaf-material")),
             "--help" | "-h" => {
                 eprintln!(
                     "foliage_bake [--out DIR] [--resolution N] [--depth D] [olea|fraxinus|quercus|cedrus ...]"
                 );
                 return;
             }
-            name => names.push(name.to_ascii_lowercase()),
+            name => names.push(name.to_string()),
         }
     }
     let all = TreeSpecies::thesis_trees();
-    let selected: Vec<TreeSpecies> = if names.is_empty() {
-        all.to_vec()
-    } else {
-        names
-            .iter()
-            .map(|n| {
-                all.iter()
-                    .find(|s| s.name.to_ascii_lowercase().starts_with(n.as_str()))
-                    .cloned()
-                    .unwrap_or_else(|| {
-                        eprintln!("unknown tree '{n}' (olea, fraxinus, quercus, cedrus)");
-                        std::process::exit(2)
-                    })
-            })
-            .collect()
-    };
-    for species in selected {
-        let tree = generate(&species);
+    if names.is_empty() {
+        names = all.iter().map(|s| s.name.to_string()).collect();
+    }
+    for name in names {
+        let (label, leaves): (String, LeafSet) = if name.ends_with(".gltf")
+            || name.ends_with(".glb")
+        {
+            let path = PathBuf::from(&name);
+            let bytes = std::fs::read(&path).unwrap_or_else(|e| {
+                eprintln!("{name}: {e}");
+                std::process::exit(1)
+            });
+            match load_gltf_tree(&bytes, path.parent(), &gltf_settings) {
+                Ok(tree) => (
+                    path.file_stem()
+                        .unwrap_or_default()
+                        .to_string_lossy()
+                        .into_owned(),
+                    tree.leaves,
+                ),
+                Err(e) => {
+                    eprintln!("{name}: {e}");
+                    std::process::exit(1)
+                }
+            }
+        } else {
+            let lower = name.to_ascii_lowercase();
+            let species = all
+                .iter()
+                .find(|s| s.name.to_ascii_lowercase().starts_with(lower.as_str()))
+                .unwrap_or_else(|| {
+                    eprintln!("unknown tree '{name}' (olea, fraxinus, quercus, cedrus, or a .gltf/.glb file)");
+                    std::process::exit(2)
+                });
+            (
+                species
+                    .name
+                    .split_whitespace()
+                    .next()
+                    .unwrap_or("tree")
+                    .to_ascii_lowercase(),
+                generate(species).leaves,
+            )
+        };
+        let species_name = label.as_str();
         let progress = |p: BakeProgress| {
             let stage = match p.stage {
                 BakeStage::Cells => "cells",
                 BakeStage::Visibility => "visibility",
                 BakeStage::Order => "order",
             };
-            eprint!("\r{}: {stage} {}/{}        ", species.name, p.done, p.total);
+            eprint!("\r{species_name}: {stage} {}/{}        ", p.done, p.total);
             let _ = std::io::stderr().flush();
         };
-        let (baked, timings) = match bake(&tree.leaves, &settings, &progress) {
+        let (baked, timings) = match bake(&leaves, &settings, &progress) {
             Ok(result) => result,
             Err(e) => {
-                eprintln!("\n{}: {e}", species.name);
+                eprintln!("\n{species_name}: {e}");
                 std::process::exit(1);
             }
         };
         eprintln!();
-        let file = out.join(format!(
-            "{}.foliage",
-            species
-                .name
-                .split_whitespace()
-                .next()
-                .unwrap_or("tree")
-                .to_ascii_lowercase()
-        ));
+        let file = out.join(format!("{label}.foliage"));
         if let Err(e) = save(&baked, &file) {
             eprintln!("{e}");
             std::process::exit(1);
         }
         println!(
-            "{{\"tree\": \"{}\", \"leaves\": {}, \"cells\": {}, \"views\": {}, \"resolution\": {}, \"bake_ms\": {{\"cells\": {:.1}, \"visibility\": {:.1}, \"order\": {:.1}, \"total\": {:.1}}}, \"gpu_bytes\": {}, \"file\": \"{}\"}}",
-            species.name,
+            "{{\"tree\": \"{}\", \"leaves\": {}, \"skipped\": {}, \"cells\": {}, \"views\": {}, \"resolution\": {}, \"bake_ms\": {{\"cells\": {:.1}, \"visibility\": {:.1}, \"order\": {:.1}, \"total\": {:.1}}}, \"gpu_bytes\": {}, \"file\": \"{}\"}}",
+            species_name,
             baked.leaf_count(),
+            baked.skipped.total(),
             baked.cell_count(),
             baked.view_count(),
             settings.resolution,

@@ -16,6 +16,7 @@ pub mod bake;
 pub mod cells;
 pub mod extract;
 pub mod format;
+pub mod gltf;
 pub mod gpu;
 pub mod leaves;
 pub mod material;
