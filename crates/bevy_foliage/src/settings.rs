@@ -32,8 +32,22 @@ pub struct FoliagePruningSettings {
     pub view_weighting: ViewWeighting,
     /// Enlarge kept leaves so the total leaf area is preserved (eq. 3.7–3.9).
     pub area_compensation: bool,
-    /// Fade leaves at or below pixel size to a solid colour so distant crowns keep their density.
+    /// Fade leaves at or below pixel size to a solid colour so distant crowns keep their density
+    /// (§3.4): as a leaf's projected size falls from `fade_start_pixels` to `fade_end_pixels`,
+    /// its texture coordinates converge on the leaf's centre texel (so its alpha mask stops
+    /// averaging away in the coarse mips and it is drawn in one colour) and it shrinks to the
+    /// opaque area of its texture (see [`crate::pruning::appearance`]).
     pub subpixel_fade: bool,
+    /// Projected leaf diameter (pixels) at which the fade starts. A mip-mapped alpha mask starts
+    /// losing the leaf when the leaf's narrow side is about 4 texels of the mip level sampled,
+    /// i.e. a diameter near 9 px for a leaf half as wide as long: the fade must be well under way
+    /// by then, hence 16 px.
+    pub fade_start_pixels: f32,
+    /// Projected leaf diameter (pixels) at which a leaf is fully solid. Below `fade_start_pixels`.
+    pub fade_end_pixels: f32,
+    /// Largest linear enlargement of a kept leaf by area compensation. A cell keeping 1 leaf of
+    /// 30 would otherwise draw it √30 ≈ 5.5 times larger, a visible spike.
+    pub max_leaf_scale: f32,
 }
 
 impl Default for FoliagePruningSettings {
@@ -45,6 +59,9 @@ impl Default for FoliagePruningSettings {
             view_weighting: ViewWeighting::InverseAngle,
             area_compensation: true,
             subpixel_fade: true,
+            fade_start_pixels: 16.0,
+            fade_end_pixels: 1.0,
+            max_leaf_scale: 4.0,
         }
     }
 }
@@ -78,6 +95,28 @@ impl FoliagePruningSettings {
                 out.far, out.near
             ));
             out.far = far;
+        }
+        if !(out.max_leaf_scale.is_finite() && out.max_leaf_scale >= 1.0) {
+            fixes.push(format!(
+                "max_leaf_scale = {} must be finite and at least 1: using {}",
+                out.max_leaf_scale, default.max_leaf_scale
+            ));
+            out.max_leaf_scale = default.max_leaf_scale;
+        }
+        let fade_ok = |v: f32| v.is_finite() && v >= 0.0;
+        if !(fade_ok(out.fade_start_pixels)
+            && fade_ok(out.fade_end_pixels)
+            && out.fade_start_pixels > out.fade_end_pixels)
+        {
+            fixes.push(format!(
+                "fade_start_pixels = {} must be finite and above fade_end_pixels = {} >= 0: using {} and {}",
+                out.fade_start_pixels,
+                out.fade_end_pixels,
+                default.fade_start_pixels,
+                default.fade_end_pixels
+            ));
+            out.fade_start_pixels = default.fade_start_pixels;
+            out.fade_end_pixels = default.fade_end_pixels;
         }
         (out, fixes)
     }
@@ -145,6 +184,17 @@ mod tests {
         let (fixed, fixes) = inverted.sanitized();
         assert_eq!(fixes.len(), 1);
         assert!(fixed.far > 500.0);
+
+        let bad_leaf = FoliagePruningSettings {
+            max_leaf_scale: 0.5,
+            fade_start_pixels: 1.0,
+            fade_end_pixels: 3.0,
+            ..default()
+        };
+        let (fixed, fixes) = bad_leaf.sanitized();
+        assert_eq!(fixes.len(), 2, "{fixes:?}");
+        assert_eq!(fixed.max_leaf_scale, 4.0);
+        assert!(fixed.fade_start_pixels > fixed.fade_end_pixels);
 
         let (same, none) = FoliagePruningSettings::default().sanitized();
         assert!(none.is_empty());

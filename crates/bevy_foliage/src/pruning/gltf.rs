@@ -301,7 +301,7 @@ fn append_leaves(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::pruning::bake::{BakeSettings, bake};
 
@@ -410,7 +410,7 @@ mod tests {
 
     /// Bark: one triangle. Leaves (alpha-masked material): a quad, a 3-triangle fan, a single
     /// triangle, a degenerate (collinear) leaf and a leaf with a NaN vertex.
-    fn sample_tree() -> String {
+    pub(crate) fn sample_tree() -> String {
         let bark = Primitive {
             material: 0,
             positions: vec![[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.1, 2.0, 0.0]],

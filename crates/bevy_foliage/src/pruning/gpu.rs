@@ -176,7 +176,7 @@ pub struct TypeSlot {
 }
 
 /// Words per packed leaf vertex in the `leaf_vertices` buffer:
-/// `position.xyz, cell, offset.xyz, 0, normal.xyz, 0, uv.xy, 0, 0`.
+/// `position.xyz, cell, offset.xyz, leaf radius, normal.xyz, 0, uv.xy, leaf uv centre.xy`.
 pub const LEAF_VERTEX_WORDS: usize = 16;
 
 /// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf.wgsl`).
@@ -309,6 +309,31 @@ pub fn update_foliage_store(
                 full.push(end - start);
             }
             full.push(0);
+            // Per vertex, its leaf's radius and the centre of its leaf's texture coordinates
+            // (for the sub-pixel fade, see `appearance`).
+            let mut leaf_radius = vec![0.0f32; tree.positions.len()];
+            let mut uv_centre = vec![Vec2::ZERO; tree.positions.len()];
+            let mut corners: Vec<u32> = Vec::new();
+            for leaf in 0..tree.leaf_count() {
+                let (start, end) = (
+                    tree.leaf_index_start[leaf] as usize,
+                    tree.leaf_index_start[leaf + 1] as usize,
+                );
+                corners.clear();
+                corners.extend_from_slice(&tree.indices[start..end]);
+                corners.sort_unstable();
+                corners.dedup();
+                let radius = corners
+                    .iter()
+                    .map(|&v| tree.centroid_offsets[v as usize].length())
+                    .fold(0.0f32, f32::max);
+                let centre = corners.iter().map(|&v| tree.uvs[v as usize]).sum::<Vec2>()
+                    / corners.len().max(1) as f32;
+                for &v in &corners {
+                    leaf_radius[v as usize] = radius;
+                    uv_centre[v as usize] = centre;
+                }
+            }
             for v in 0..tree.positions.len() {
                 let (p, e, n, uv) = (
                     tree.positions[v],
@@ -324,15 +349,15 @@ pub fn update_foliage_store(
                     e.x.to_bits(),
                     e.y.to_bits(),
                     e.z.to_bits(),
-                    0,
+                    leaf_radius[v].to_bits(),
                     n.x.to_bits(),
                     n.y.to_bits(),
                     n.z.to_bits(),
                     0,
                     uv.x.to_bits(),
                     uv.y.to_bits(),
-                    0,
-                    0,
+                    uv_centre[v].x.to_bits(),
+                    uv_centre[v].y.to_bits(),
                 ]);
             }
             store.types.insert(id, slot);

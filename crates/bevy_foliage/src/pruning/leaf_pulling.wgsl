@@ -8,10 +8,15 @@
 // Area preservation (Gumbau 2011, eq. 3.7-3.10): a kept leaf of a cell that keeps the fraction
 // u of its leaves is scaled about its centroid by sqrt(1/u), so the cell's total leaf area, and
 // with it the statistical coverage of the crown (Cook & Halstead 2007), is preserved. u is the
-// fraction actually kept in that cell this frame.
+// fraction actually kept in that cell this frame, and the scale is capped (`max_scale`).
+//
+// Sub-pixel fade (§3.4): as the leaf's projected diameter falls from `fade_start` to `fade_end`
+// pixels, its texture coordinates converge on its centre texel (one opaque colour instead of a
+// mask averaging away in coarse mips) and it shrinks to its texture's opaque area. The CPU
+// reference of these formulas is `bevy_foliage::pruning::appearance`.
 #define_import_path bevy_foliage::leaf_pulling
 
-#import bevy_pbr::{mesh_functions, view_transformations::position_world_to_clip}
+#import bevy_pbr::{mesh_functions, mesh_view_bindings::view, view_transformations::position_world_to_clip}
 
 // The slot mesh's vertex: only its index (in position.x) and the instance are used.
 struct SlotVertex {
@@ -38,19 +43,29 @@ struct LeafVertex {
     position: vec3<f32>,
     cell: u32,
     offset: vec3<f32>,
-    pad_a: u32,
+    // Largest centroid offset of the vertex's leaf.
+    leaf_radius: f32,
     normal: vec3<f32>,
     pad_b: u32,
     uv: vec2<f32>,
-    pad_c: vec2<u32>,
+    // Mean texture coordinate of the vertex's leaf.
+    uv_centre: vec2<f32>,
 }
 
 struct LeafParams {
     // 1: enlarge kept leaves to preserve area.
     area_compensation: u32,
+    // 1: fade sub-pixel leaves to a solid colour.
+    subpixel_fade: u32,
+    // Cap of the linear area-compensation scale.
+    max_scale: f32,
+    // Opaque fraction of the leaf texture (1 for untextured leaves).
+    opaque_fraction: f32,
+    // Projected diameters (pixels) where the fade starts and where leaves are fully solid.
+    fade_start: f32,
+    fade_end: f32,
     pad_x: u32,
     pad_y: u32,
-    pad_z: u32,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<storage, read> instances: array<Instance>;
@@ -88,14 +103,26 @@ fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeaf
     if leaf_params.area_compensation != 0u {
         let kept = cell_offsets[inst.cell_offsets_base + v.cell].x;
         let full = cell_full[inst.cell_base + v.cell];
-        // Area scale s = 1/u with u = kept/full (eq. 3.9); linear scale sqrt(s).
-        scale = sqrt(f32(full) / f32(max(kept, 1u)));
+        // Area scale s = 1/u with u = kept/full (eq. 3.9); linear scale sqrt(s), capped.
+        scale = min(sqrt(f32(full) / f32(max(kept, 1u))), leaf_params.max_scale);
     }
     let centroid = v.position - v.offset;
+    let world_from_local = mesh_functions::get_world_from_local(instance_index);
+    out.uv = v.uv;
+    if leaf_params.subpixel_fade != 0u {
+        // Projected diameter of the (compensated) leaf, in pixels of this view's target.
+        let centroid_world = mesh_functions::mesh_position_local_to_world(world_from_local, vec4<f32>(centroid, 1.0));
+        let w = position_world_to_clip(centroid_world.xyz).w;
+        let instance_scale = (length(world_from_local[0].xyz) + length(world_from_local[1].xyz) + length(world_from_local[2].xyz)) / 3.0;
+        let pixels = v.leaf_radius * scale * instance_scale * view.clip_from_view[1][1] / max(w, 1e-6) * view.viewport.w;
+        let fade = clamp((leaf_params.fade_start - pixels) / max(leaf_params.fade_start - leaf_params.fade_end, 1e-6), 0.0, 1.0);
+        out.uv = mix(v.uv, v.uv_centre, fade);
+        // Keep the opaque area: the converging texture window is opaque over o + f(1 - o).
+        let o = clamp(leaf_params.opaque_fraction, 1e-3, 1.0);
+        scale = scale * sqrt(o / (o + fade * (1.0 - o)));
+    }
     out.local_position = centroid + v.offset * scale;
     out.local_normal = v.normal;
-    out.uv = v.uv;
-    let world_from_local = mesh_functions::get_world_from_local(instance_index);
     out.world_position = mesh_functions::mesh_position_local_to_world(world_from_local, vec4<f32>(out.local_position, 1.0));
     out.clip_position = position_world_to_clip(out.world_position.xyz);
     out.world_normal = mesh_functions::mesh_normal_local_to_world(out.local_normal, instance_index);

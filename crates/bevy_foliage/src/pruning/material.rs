@@ -28,17 +28,43 @@ use bevy::shader::load_shader_library;
 /// stage draws the pruned leaf set. Make one with [`leaf_material`].
 pub type LeafMaterial = ExtendedMaterial<StandardMaterial, LeafExtension>;
 
-/// Per-material switches of the leaf vertex stage.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ShaderType, Reflect)]
+/// Per-material parameters of the leaf vertex stage (see [`super::appearance`]). The switches and
+/// fade thresholds follow [`FoliagePruningSettings`]; `opaque_fraction` is the material's own.
+#[derive(Clone, Copy, Debug, PartialEq, ShaderType, Reflect)]
 pub struct LeafParams {
     /// 1 to enlarge kept leaves so total leaf area is preserved (eq. 3.7–3.9).
     pub area_compensation: u32,
+    /// 1 to fade sub-pixel leaves to a solid colour.
+    pub subpixel_fade: u32,
+    /// Cap of the linear compensation scale.
+    pub max_scale: f32,
+    /// Fraction of the leaf texture that is opaque (1 for untextured leaves); a fully faded leaf
+    /// shrinks to this fraction of its area.
+    pub opaque_fraction: f32,
+    /// Projected diameter (pixels) where the fade starts.
+    pub fade_start: f32,
+    /// Projected diameter (pixels) where leaves are fully solid.
+    pub fade_end: f32,
     /// Padding.
     pub pad_x: u32,
     /// Padding.
     pub pad_y: u32,
-    /// Padding.
-    pub pad_z: u32,
+}
+
+impl Default for LeafParams {
+    fn default() -> Self {
+        let s = FoliagePruningSettings::default();
+        Self {
+            area_compensation: s.area_compensation as u32,
+            subpixel_fade: s.subpixel_fade as u32,
+            max_scale: s.max_leaf_scale,
+            opaque_fraction: 1.0,
+            fade_start: s.fade_start_pixels,
+            fade_end: s.fade_end_pixels,
+            pad_x: 0,
+            pad_y: 0,
+        }
+    }
 }
 
 /// The extension binding the pruning buffers (managed by the plugin: leave them default).
@@ -82,15 +108,35 @@ impl MaterialExtension for LeafExtension {
     }
 }
 
-/// A leaf material from a `StandardMaterial`; leaves are two-sided.
+/// A leaf material from a `StandardMaterial`; leaves are two-sided. For alpha-masked leaf
+/// textures use [`leaf_material_textured`] so faded leaves keep the right area.
 pub fn leaf_material(base: StandardMaterial) -> LeafMaterial {
+    leaf_material_textured(base, 1.0)
+}
+
+/// A leaf material whose texture is opaque over `opaque_fraction` of its area (measure it with
+/// [`opaque_fraction`](super::appearance::opaque_fraction)): sub-pixel leaves, drawn solid,
+/// shrink to that area so distant crowns keep their density.
+pub fn leaf_material_textured(base: StandardMaterial, opaque_fraction: f32) -> LeafMaterial {
+    let opaque_fraction = if opaque_fraction.is_finite() && opaque_fraction > 0.0 {
+        opaque_fraction.min(1.0)
+    } else {
+        warn!("leaf opaque fraction {opaque_fraction} must be in (0, 1]: using 1");
+        1.0
+    };
     LeafMaterial {
         base: StandardMaterial {
             double_sided: true,
             cull_mode: None,
             ..base
         },
-        extension: LeafExtension::default(),
+        extension: LeafExtension {
+            params: LeafParams {
+                opaque_fraction,
+                ..default()
+            },
+            ..default()
+        },
     }
 }
 
@@ -207,14 +253,18 @@ pub fn refresh_leaf_materials(
     ids.sort();
     ids.dedup();
     let changed = store.is_changed() && seen.0 != store.generation;
-    let params = LeafParams {
-        area_compensation: settings.area_compensation as u32,
-        ..default()
-    };
     for id in &ids {
         let fresh = !seen.1.contains(id);
         let Some(material) = materials.get(*id) else {
             continue;
+        };
+        let params = LeafParams {
+            area_compensation: settings.area_compensation as u32,
+            subpixel_fade: settings.subpixel_fade as u32,
+            max_scale: settings.max_leaf_scale,
+            fade_start: settings.fade_start_pixels,
+            fade_end: settings.fade_end_pixels,
+            ..material.extension.params
         };
         let b = &store.buffers;
         let ext = &material.extension;

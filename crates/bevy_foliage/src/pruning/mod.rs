@@ -10,8 +10,10 @@
 //! and view-dependent visibility and compacts the survivors into an index buffer;
 //! [`extract`] is the exact CPU reference of that pass.
 //!
+//! [`appearance`] holds how a kept leaf is drawn (area compensation, sub-pixel fade).
 //! [`procedural`] generates the thesis' four test trees at their leaf counts.
 
+pub mod appearance;
 pub mod bake;
 pub mod cells;
 pub mod extract;
