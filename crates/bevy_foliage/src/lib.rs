@@ -15,6 +15,7 @@
 
 use bevy::prelude::*;
 
+pub mod forest;
 pub mod pruning;
 pub mod rng;
 pub mod settings;
