@@ -7,8 +7,11 @@
 //!   grouped in cells with baked per-view visibility; every frame a compute pass keeps, per cell, a
 //!   prefix of a stochastically ordered leaf list sized by distance and visibility, and the kept
 //!   leaves are enlarged so the crown keeps its area.
-//! - an urgency-ranked forest LoD manager under a frame budget, LoD caches with borrowing, grass
-//!   with geometry/slice LoD, tree lighting and impostors (each in its own module as it lands).
+//! - **an urgency-ranked forest LoD manager** under a frame budget with **LoD caches** (Gumbau,
+//!   §3.6 and ch. 4): tag instances with [`ForestTree`]; per type, a few cached extractions are
+//!   shared by every tree whose desired LoD falls in the same slot ([`forest`]).
+//! - grass with geometry/slice LoD, tree lighting and impostors (each in its own module as it
+//!   lands).
 //!
 //! Add [`FoliagePlugin`]; tune [`FoliagePruningSettings`] (a reflected resource, so inspectors can
 //! edit it live).
@@ -20,6 +23,7 @@ pub mod pruning;
 pub mod rng;
 pub mod settings;
 
+pub use forest::plugin::{ForestBudget, ForestSettings, ForestTree, TreeLod};
 pub use settings::{FoliagePruningSettings, ViewWeighting};
 
 /// The foliage plugin: registers the settings and keeps them valid.
@@ -39,11 +43,15 @@ impl Plugin for FoliagePlugin {
         if app.world().contains_resource::<AssetServer>() {
             pruning::gpu::build(app);
             pruning::material::build(app);
+            forest::plugin::build(app);
         }
     }
 }
 
 /// Everything a game usually imports.
 pub mod prelude {
-    pub use crate::{FoliagePlugin, FoliagePruningSettings, ViewWeighting};
+    pub use crate::{
+        FoliagePlugin, FoliagePruningSettings, ForestBudget, ForestSettings, ForestTree, TreeLod,
+        ViewWeighting,
+    };
 }

@@ -34,38 +34,6 @@ fn render_variant(
     harness.render().unwrap()
 }
 
-/// Box-filters `image` by `k × k`: the crown as seen from farther away, where individual leaf
-/// positions no longer matter but density does.
-fn downsample(image: &RgbaImage, k: u32) -> RgbaImage {
-    let (w, h) = (image.width / k, image.height / k);
-    let mut out = RgbaImage::filled(w, h, [0, 0, 0, 255]);
-    for y in 0..h {
-        for x in 0..w {
-            let mut sum = [0u32; 3];
-            for dy in 0..k {
-                for dx in 0..k {
-                    let p = image.pixel(x * k + dx, y * k + dy);
-                    for c in 0..3 {
-                        sum[c] += p[c] as u32;
-                    }
-                }
-            }
-            let n = k * k;
-            out.set_pixel(
-                x,
-                y,
-                [
-                    (sum[0] / n) as u8,
-                    (sum[1] / n) as u8,
-                    (sum[2] / n) as u8,
-                    255,
-                ],
-            );
-        }
-    }
-    out
-}
-
 #[test]
 fn area_compensation_keeps_crown_coverage_that_plain_pruning_loses() {
     let Some(mut harness) = RenderHarness::for_test("pruning_image", SIZE, SIZE) else {
@@ -189,13 +157,13 @@ fn area_compensation_keeps_crown_coverage_that_plain_pruning_loses() {
         let cmp_plain = Comparison::new(format!("pruning_image/d{d:02}_plain"), &plain, &full);
         let coarse_comp = Comparison::new(
             format!("pruning_image/d{d:02}_compensated_8x8"),
-            &downsample(&compensated, 8),
-            &downsample(&full, 8),
+            &compensated.box_downsample(8),
+            &full.box_downsample(8),
         );
         let coarse_plain = Comparison::new(
             format!("pruning_image/d{d:02}_plain_8x8"),
-            &downsample(&plain, 8),
-            &downsample(&full, 8),
+            &plain.box_downsample(8),
+            &full.box_downsample(8),
         );
         let line = format!(
             "d {d:>4} m: leaves kept {:5.1} %, crown coverage full {:.3}, compensated {:.3} (loss {:+.1} %, rmse {:.4}, 8x8 rmse {:.4}), plain {:.3} (loss {:+.1} %, rmse {:.4}, 8x8 rmse {:.4})",

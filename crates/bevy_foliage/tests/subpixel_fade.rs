@@ -126,29 +126,6 @@ fn render(harness: &mut RenderHarness, fade: bool) -> RgbaImage {
     harness.render().unwrap()
 }
 
-/// Mean of `k × k` blocks.
-fn downsample(image: &RgbaImage, k: u32) -> RgbaImage {
-    let (w, h) = (image.width / k, image.height / k);
-    let mut out = RgbaImage::filled(w, h, [0, 0, 0, 255]);
-    for y in 0..h {
-        for x in 0..w {
-            let mut sum = [0u32; 3];
-            for dy in 0..k {
-                for dx in 0..k {
-                    let p = image.pixel(x * k + dx, y * k + dy);
-                    for c in 0..3 {
-                        sum[c] += p[c] as u32;
-                    }
-                }
-            }
-            let n = k * k;
-            let m = |c: usize| ((sum[c] + n / 2) / n) as u8;
-            out.set_pixel(x, y, [m(0), m(1), m(2), 255]);
-        }
-    }
-    out
-}
-
 /// Fraction of the image covered by leaves (mean brightness of white-on-black).
 fn leaf_coverage(image: &RgbaImage) -> f64 {
     image.mean_luma(0, 0, image.width, image.height)
@@ -178,7 +155,7 @@ fn subpixel_fade_keeps_the_density_that_alpha_mips_lose() {
     let Some(mut fine) = scene(SIZE * SUPERSAMPLE, false, &baked, camera) else {
         return;
     };
-    let reference = downsample(&render(&mut fine, false), SUPERSAMPLE);
+    let reference = render(&mut fine, false).box_downsample(SUPERSAMPLE);
     drop(fine);
     let mut harness = scene(SIZE, true, &baked, camera).unwrap();
     let plain = render(&mut harness, false);
@@ -201,8 +178,8 @@ fn subpixel_fade_keeps_the_density_that_alpha_mips_lose() {
     let block = |a: &RgbaImage, name: &str| {
         Comparison::new(
             format!("subpixel_fade/{name}_8x8"),
-            &downsample(a, 8),
-            &downsample(&reference, 8),
+            &a.box_downsample(8),
+            &reference.box_downsample(8),
         )
     };
     let (cmp_plain, cmp_faded) = (block(&plain, "plain"), block(&faded, "faded"));

@@ -78,6 +78,31 @@ impl RgbaImage {
         self.data[i..i + 4].copy_from_slice(&rgba);
     }
 
+    /// The image box-filtered by `k × k` (means of the encoded values, rounded; partial blocks
+    /// at the right and bottom edges dropped): how a crown or forest looks from farther away,
+    /// where single leaves no longer matter but their density does.
+    pub fn box_downsample(&self, k: u32) -> RgbaImage {
+        let k = k.max(1);
+        let (w, h) = (self.width / k, self.height / k);
+        let mut out = RgbaImage::filled(w, h, [0, 0, 0, 255]);
+        let n = k * k;
+        for y in 0..h {
+            for x in 0..w {
+                let mut sum = [0u32; 4];
+                for dy in 0..k {
+                    for dx in 0..k {
+                        let p = self.pixel(x * k + dx, y * k + dy);
+                        for c in 0..4 {
+                            sum[c] += p[c] as u32;
+                        }
+                    }
+                }
+                out.set_pixel(x, y, sum.map(|s| ((s + n / 2) / n) as u8));
+            }
+        }
+        out
+    }
+
     /// Rec. 709 luma of the sRGB-encoded values at `(x, y)`, in `[0, 1]`.
     pub fn luma(&self, x: u32, y: u32) -> f64 {
         let [r, g, b, _] = self.pixel(x, y);
@@ -400,6 +425,17 @@ fn sanitize(name: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn box_downsample_averages_blocks() {
+        let mut img = RgbaImage::filled(4, 2, [0, 0, 0, 255]);
+        img.set_pixel(0, 0, [255, 100, 0, 255]);
+        img.set_pixel(1, 1, [255, 0, 0, 255]);
+        let small = img.box_downsample(2);
+        assert_eq!((small.width, small.height), (2, 1));
+        assert_eq!(small.pixel(0, 0), [128, 25, 0, 255]);
+        assert_eq!(small.pixel(1, 0), [0, 0, 0, 255]);
+    }
 
     fn gradient(w: u32, h: u32) -> RgbaImage {
         let mut img = RgbaImage::filled(w, h, [0, 0, 0, 255]);

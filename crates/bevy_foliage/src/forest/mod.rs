@@ -11,3 +11,4 @@ pub mod cache;
 pub mod feedback;
 pub mod lod;
 pub mod manager;
+pub mod plugin;

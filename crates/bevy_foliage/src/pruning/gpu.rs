@@ -81,7 +81,22 @@ impl BakedFoliage {
         let n = self.cell_boxes.len().max(1) as f32;
         self.cell_boxes.iter().map(|b| b.center).sum::<Vec3>() / n
     }
+
+    /// Radius, about [`crown_center`](Self::crown_center), of a sphere holding every cell box.
+    pub fn crown_radius(&self) -> f32 {
+        let c = self.crown_center();
+        self.cell_boxes
+            .iter()
+            .map(|b| (b.center - c).length() + b.half_extents.length())
+            .fold(0.0, f32::max)
+    }
 }
+
+/// Marks a [`PrunedFoliage`] entity whose [`PruningParams`] are written by someone else (the
+/// forest manager's cache extractions) instead of from the pruning camera every frame, and that
+/// is not drawn itself.
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct ManagedPruning;
 
 /// Computes [`PruningParams`] for every pruned tree from the pruning camera.
 pub fn compute_pruning_params(
@@ -90,12 +105,15 @@ pub fn compute_pruning_params(
     baked: Res<Assets<BakedFoliage>>,
     marked: Query<&GlobalTransform, With<FoliageCamera>>,
     cameras: Query<(&Camera, &GlobalTransform), With<Camera3d>>,
-    mut trees: Query<(
-        Entity,
-        &PrunedFoliage,
-        &GlobalTransform,
-        Option<&mut PruningParams>,
-    )>,
+    mut trees: Query<
+        (
+            Entity,
+            &PrunedFoliage,
+            &GlobalTransform,
+            Option<&mut PruningParams>,
+        ),
+        Without<ManagedPruning>,
+    >,
 ) {
     let camera = marked.iter().next().copied().or_else(|| {
         cameras

@@ -10,7 +10,7 @@
 
 use super::bake::BakedFoliage;
 use super::extract::kept_index_total;
-use super::gpu::{FoliageSlot, FoliageStore, PrunedFoliage, PruningParams};
+use super::gpu::{FoliageSlot, FoliageStore, ManagedPruning, PrunedFoliage, PruningParams};
 use crate::settings::FoliagePruningSettings;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::camera::visibility::NoFrustumCulling;
@@ -144,6 +144,27 @@ pub fn leaf_material_textured(base: StandardMaterial, opaque_fraction: f32) -> L
 #[derive(Resource, Default)]
 pub struct SlotMeshes(HashMap<u32, Handle<Mesh>>);
 
+impl SlotMeshes {
+    /// The slot mesh for `kept` kept indices of a tree type with `full` indices.
+    ///
+    /// Every bucket the type can need is created when the type is first seen: slot meshes
+    /// created later, while the tree is already drawn, were observed not to be drawn on the
+    /// frames that followed (Bevy 0.19, software Vulkan); creating them up front avoids it.
+    pub fn fitting(&mut self, kept: u32, full: u32, meshes: &mut Assets<Mesh>) -> Handle<Mesh> {
+        let full_bucket = slot_bucket(full);
+        let mut b = slot_bucket(0);
+        while b <= full_bucket {
+            self.0.entry(b).or_insert_with(|| meshes.add(slot_mesh(b)));
+            b *= 2;
+        }
+        let bucket = slot_bucket(kept);
+        self.0
+            .entry(bucket)
+            .or_insert_with(|| meshes.add(slot_mesh(bucket)))
+            .clone()
+    }
+}
+
 /// The smallest slot-mesh size (vertices) that holds `indices` kept indices: `3 · 2^k`, at least 192.
 pub fn slot_bucket(indices: u32) -> u32 {
     let triangles = indices.div_ceil(3).max(64);
@@ -187,7 +208,7 @@ pub fn assign_slot_meshes(
             Option<&Mesh3d>,
             Option<&MeshMaterial3d<LeafMaterial>>,
         ),
-        With<FoliageSlot>,
+        (With<FoliageSlot>, Without<ManagedPruning>),
     >,
 ) {
     let (mut drawn, mut full, mut count) = (0u64, 0u64, 0u32);
@@ -203,24 +224,7 @@ pub fn assign_slot_meshes(
         drawn += kept as u64 / 3;
         full += tree.indices.len() as u64 / 3;
         count += 1;
-        let bucket = slot_bucket(kept);
-        // Every bucket this type can need is created when the type is first seen: slot meshes
-        // created later, while the tree is already drawn, were observed not to be drawn on the
-        // frames that followed (Bevy 0.19, software Vulkan); creating them up front avoids it.
-        let full_bucket = slot_bucket(tree.indices.len() as u32);
-        let mut b = slot_bucket(0);
-        while b <= full_bucket {
-            slot_meshes
-                .0
-                .entry(b)
-                .or_insert_with(|| meshes.add(slot_mesh(b)));
-            b *= 2;
-        }
-        let handle = slot_meshes
-            .0
-            .entry(bucket)
-            .or_insert_with(|| meshes.add(slot_mesh(bucket)))
-            .clone();
+        let handle = slot_meshes.fitting(kept, tree.indices.len() as u32, &mut meshes);
         let mut e = commands.entity(entity);
         if mesh.map(|m| m.0.id()) != Some(handle.id()) {
             e.insert((Mesh3d(handle), NoFrustumCulling));
@@ -247,9 +251,14 @@ pub fn refresh_leaf_materials(
     settings: Res<FoliagePruningSettings>,
     mut materials: ResMut<Assets<LeafMaterial>>,
     trees: Query<&PrunedFoliage>,
+    forest: Query<&crate::forest::plugin::ForestTree>,
     mut seen: Local<(u32, Vec<AssetId<LeafMaterial>>)>,
 ) {
-    let mut ids: Vec<AssetId<LeafMaterial>> = trees.iter().map(|t| t.material.id()).collect();
+    let mut ids: Vec<AssetId<LeafMaterial>> = trees
+        .iter()
+        .map(|t| t.material.id())
+        .chain(forest.iter().map(|t| t.material.id()))
+        .collect();
     ids.sort();
     ids.dedup();
     let changed = store.is_changed() && seen.0 != store.generation;
