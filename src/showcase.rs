@@ -41,6 +41,9 @@ pub struct ShowcaseOptions {
     pub box_offset: Vec3,
     /// Multisampling of the camera (tests turn it off: the software rasteriser pays for it).
     pub msaa: bool,
+    /// A backdrop forest of [`ForestTree`](bevy_foliage::ForestTree)s behind the scene, drawn by
+    /// the forest LoD manager from shared LoD-cache extractions.
+    pub forest: bool,
 }
 
 impl Default for ShowcaseOptions {
@@ -49,6 +52,7 @@ impl Default for ShowcaseOptions {
             box_color: Color::srgb(0.8, 0.25, 0.2),
             box_offset: Vec3::ZERO,
             msaa: true,
+            forest: true,
         }
     }
 }
@@ -73,7 +77,13 @@ fn spawn_showcase(mut commands: Commands, options: Res<ShowcaseOptions>, mut tre
     use layout::*;
     commands.spawn((
         Name::new("ground"),
-        Mesh3d(meshes.add(Plane3d::default().mesh().size(GROUND_SIZE, GROUND_SIZE))),
+        Mesh3d(
+            meshes.add(
+                Plane3d::default()
+                    .mesh()
+                    .size(GROUND_SIZE * 6.0, GROUND_SIZE * 6.0),
+            ),
+        ),
         MeshMaterial3d(materials.add(StandardMaterial {
             base_color: Color::srgb(0.6, 0.6, 0.55),
             perceptual_roughness: 0.9,
@@ -97,6 +107,9 @@ fn spawn_showcase(mut commands: Commands, options: Res<ShowcaseOptions>, mut tre
     ) {
         error!("could not bake the showcase tree: {e}");
     }
+    if options.forest {
+        spawn_backdrop_forest(&mut commands, &mut trees);
+    }
     commands.spawn((
         Name::new("sun"),
         DirectionalLight {
@@ -118,5 +131,55 @@ fn spawn_showcase(mut commands: Commands, options: Res<ShowcaseOptions>, mut tre
     ));
     if !options.msaa {
         camera.insert(Msaa::Off);
+    }
+}
+
+/// Two dozen managed trees (ash and cedar at reduced leaf counts) in a band 16–45 m behind the
+/// scene: the forest LoD manager ranks them and draws them from per-type LoD-cache extractions.
+fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets) {
+    use bevy_foliage::pruning::bake::BakeSettings;
+    use bevy_foliage::pruning::material::leaf_material;
+    use bevy_foliage::pruning::spawn::{default_bark_material, default_leaf_material};
+    let species = [
+        TreeSpecies::fraxinus().with_leaf_count(3000),
+        TreeSpecies::cedrus().with_leaf_count(4000),
+    ];
+    let mut types = Vec::new();
+    for s in &species {
+        match trees.bake_species(s, &BakeSettings::default()) {
+            Ok(t) => types.push(t),
+            Err(e) => error!("could not bake the backdrop {}: {e}", s.name),
+        }
+    }
+    if types.is_empty() {
+        return;
+    }
+    let leaves = trees
+        .leaf_materials
+        .add(leaf_material(default_leaf_material()));
+    let bark = trees.materials.add(default_bark_material());
+    let root = commands
+        .spawn((
+            Name::new("backdrop forest"),
+            Transform::IDENTITY,
+            Visibility::Inherited,
+        ))
+        .id();
+    let mut rng = bevy_foliage::rng::SplitMix64::new(42);
+    for i in 0..24 {
+        let (baked, bark_mesh) = &types[i % types.len()];
+        let x = rng.range(-40.0, 40.0);
+        let z = -rng.range(16.0, 45.0);
+        commands.entity(root).with_child((
+            Name::new(format!("forest tree {i}")),
+            bevy_foliage::ForestTree {
+                baked: baked.clone(),
+                material: leaves.clone(),
+            },
+            Transform::from_xyz(x, 0.0, z)
+                .with_rotation(Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)))
+                .with_scale(Vec3::splat(rng.range(0.8, 1.2))),
+            children![(Mesh3d(bark_mesh.clone()), MeshMaterial3d(bark.clone()))],
+        ));
     }
 }

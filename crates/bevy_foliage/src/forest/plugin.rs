@@ -77,7 +77,8 @@ pub enum ForestBudget {
 #[derive(Resource, Clone, Debug, PartialEq, Reflect)]
 #[reflect(Resource, Default, Debug, PartialEq)]
 pub struct ForestSettings {
-    /// Run the manager. Off: every forest tree draws full detail (LoD 1), for comparison.
+    /// Run the manager. Off: every tree the manager would show (in the frustum and nearer than
+    /// `far`) draws every leaf, for comparison.
     pub enabled: bool,
     /// Uniform range slots per type (eq. 4.4), used when `slot_bounds` is empty.
     pub slots: u32,
@@ -347,11 +348,17 @@ pub fn run_forest_manager(
             extraction_list,
         )
     } else {
-        // Manager off: every visible tree draws the exact LoD 1 slot, extracted once per type.
+        let mut report_visible = 0;
+        // Manager off: every tree the manager would show (in the frustum, nearer than `far`)
+        // draws every leaf, from one extraction per type.
         for (i, s) in state.states.iter_mut().enumerate() {
             let tree = state.inputs[i];
-            s.visible =
-                tree.center.is_finite() && frustum.intersects_sphere(tree.center, tree.radius);
+            s.visible = tree.center.is_finite()
+                && tree.center.distance(camera) - tree.radius < pruning.far
+                && frustum.intersects_sphere(tree.center, tree.radius);
+            if s.visible {
+                report_visible += 1;
+            }
             if s.slot != Some(SLOT_LOD_ONE) {
                 s.slot = Some(SLOT_LOD_ONE);
                 s.stored_lod = 1.0;
@@ -364,7 +371,10 @@ pub fn run_forest_manager(
                 });
             }
         }
-        default()
+        super::manager::FrameReport {
+            visible: report_visible,
+            ..default()
+        }
     };
     // Without borrowing every tree extracts its own LoD: its extraction is keyed by the tree.
     let per_tree = settings.enabled && !settings.borrowing;
