@@ -16,7 +16,7 @@
 //!
 //! ```text
 //! cargo run --release --example forest_bench -- [--forest dense|sparse] [--leaf-scale F]
-//!     [--frames N] [--size WxH] [--screenshot DIR]
+//!     [--no-borrowing] [--exponent N] [--frames N] [--size WxH] [--screenshot DIR]
 //! ```
 //! `--leaf-scale` scales the thesis' leaf counts (default 0.1: the full counts give a software
 //! rasteriser frames of tens of seconds at full detail).
@@ -46,6 +46,8 @@ fn main() {
     // Our own flags first; the rest are the runner's.
     let mut kind = ForestKind::Dense;
     let mut leaf_scale = 0.1f32;
+    let mut borrowing = true;
+    let mut exponent = 1.0f32;
     let mut rest = Vec::new();
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
@@ -68,11 +70,23 @@ fn main() {
                         std::process::exit(2)
                     });
             }
+            "--no-borrowing" => borrowing = false,
+            "--exponent" => {
+                let v = args.next().unwrap_or_default();
+                exponent = v
+                    .parse()
+                    .ok()
+                    .filter(|n: &f32| *n > 0.0)
+                    .unwrap_or_else(|| {
+                        eprintln!("--exponent takes a positive number, not '{v}'");
+                        std::process::exit(2)
+                    });
+            }
             _ => rest.push(arg),
         }
     }
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
-        eprintln!("{e} [--forest dense|sparse] [--leaf-scale F]");
+        eprintln!("{e} [--forest dense|sparse] [--leaf-scale F] [--no-borrowing] [--exponent N]");
         std::process::exit(2)
     });
     let size = args.size.unwrap_or(UVec2::new(480, 270));
@@ -92,6 +106,8 @@ fn main() {
         })
         .insert_resource(ForestSettings {
             budget: bevy_nature::foliage::ForestBudget::Extractions(64),
+            borrowing,
+            exponent,
             ..default()
         })
         .add_systems(Startup, spawn_forest);
@@ -173,7 +189,8 @@ fn main() {
     for _ in 0..3 {
         harness.step();
     }
-    let empty = measure(&mut harness, "no_trees");
+    let mut empty = measure(&mut harness, "no_trees");
+    empty.leaf_triangles = 0.0;
     show(&mut harness, true, false);
     let full = measure(&mut harness, "full");
     let visible = harness.world_mut().resource::<ForestState>().last.visible;
@@ -232,7 +249,7 @@ fn main() {
         })
         .collect();
     println!(
-        "{{\"bench\": \"forest\", \"forest\": \"{kind:?}\", \"trees\": {}, \"in_view\": {visible}, \"leaf_scale\": {leaf_scale}, \"size\": [{}, {}], \"frames\": {frames}, \"adapter\": {:?}, \"manager_last_frame\": {{\"visible\": {}, \"extractions\": {}, \"borrows\": {}}}, \"rows\": [\n  {}\n]}}",
+        "{{\"bench\": \"forest\", \"forest\": \"{kind:?}\", \"trees\": {}, \"in_view\": {visible}, \"leaf_scale\": {leaf_scale}, \"borrowing\": {borrowing}, \"exponent\": {exponent}, \"size\": [{}, {}], \"frames\": {frames}, \"adapter\": {:?}, \"manager_last_frame\": {{\"visible\": {}, \"extractions\": {}, \"borrows\": {}}}, \"rows\": [\n  {}\n]}}",
         kind.tree_count(),
         size.x,
         size.y,

@@ -134,15 +134,15 @@ fn spawn_showcase(mut commands: Commands, options: Res<ShowcaseOptions>, mut tre
     }
 }
 
-/// Two dozen managed trees (ash and cedar at reduced leaf counts) in a band 16–45 m behind the
+/// Sixteen managed trees (ash and cedar at reduced leaf counts) in a band 18–50 m behind the
 /// scene: the forest LoD manager ranks them and draws them from per-type LoD-cache extractions.
 fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets) {
     use bevy_foliage::pruning::bake::BakeSettings;
     use bevy_foliage::pruning::material::leaf_material;
     use bevy_foliage::pruning::spawn::{default_bark_material, default_leaf_material};
     let species = [
-        TreeSpecies::fraxinus().with_leaf_count(3000),
-        TreeSpecies::cedrus().with_leaf_count(4000),
+        TreeSpecies::fraxinus().with_leaf_count(2000),
+        TreeSpecies::cedrus().with_leaf_count(3000),
     ];
     let mut types = Vec::new();
     for s in &species {
@@ -166,10 +166,10 @@ fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets) {
         ))
         .id();
     let mut rng = bevy_foliage::rng::SplitMix64::new(42);
-    for i in 0..24 {
+    for i in 0..16 {
         let (baked, bark_mesh) = &types[i % types.len()];
         let x = rng.range(-40.0, 40.0);
-        let z = -rng.range(16.0, 45.0);
+        let z = -rng.range(18.0, 50.0);
         commands.entity(root).with_child((
             Name::new(format!("forest tree {i}")),
             bevy_foliage::ForestTree {

@@ -14,7 +14,7 @@ use bevy_foliage::forest::plugin::{ForestState, LEAF_TRIANGLES};
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
 use bevy_foliage::pruning::extract::kept_index_total;
 use bevy_foliage::pruning::gpu::{
-    FoliageSlot, ManagedPruning, PrunedFoliage, PruningFrame, PruningParams,
+    FoliageSlot, ManagedPruning, PrunedFoliage, PruningFrame, PruningParams, QUAD_TAG_BIT,
 };
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
@@ -215,7 +215,13 @@ fn forest_trees_draw_borrowed_extractions_within_the_budget() {
             .get::<MeshTag>(tree)
             .expect("a shown tree has a tag")
             .0;
-        assert!(slots_in_use.contains(&tag), "tree draws instance {tag}");
+        // Procedural leaves are quads: drawn with quad slot meshes (tag bit 31).
+        assert_ne!(tag & QUAD_TAG_BIT, 0, "quad leaves use the quad path");
+        let instance = tag & !QUAD_TAG_BIT;
+        assert!(
+            slots_in_use.contains(&instance),
+            "tree draws instance {instance}"
+        );
     }
 
     // Image: the managed forest against the same forest at full detail, same run.

@@ -21,6 +21,7 @@ use super::feedback::{ExponentController, FeedbackSettings};
 use super::manager::{Budget, ForestManager, Frustum, ManagerSettings, TreeInput, TreeLodState};
 use crate::pruning::bake::BakedFoliage;
 use crate::pruning::extract::{FIXED_ONE, KEEP_ALL, kept_index_total, view_weights};
+use crate::pruning::gpu::mesh_tag;
 use crate::pruning::gpu::{
     FoliageCamera, FoliageSlot, ManagedPruning, PrunedFoliage, PruningParams, update_foliage_store,
 };
@@ -95,6 +96,9 @@ pub struct ForestSettings {
     pub budget: ForestBudget,
     /// Steer detail with the frame-rate feedback exponent (eq. 4.3).
     pub feedback: bool,
+    /// The exponent n of eq. 4.3 while `feedback` is off (1: the linear LoD of eq. 4.2; above 1
+    /// less detail, below 1 more).
+    pub exponent: f32,
     /// The feedback controller's settings.
     pub feedback_settings: FeedbackSettings,
 }
@@ -110,6 +114,7 @@ impl Default for ForestSettings {
             double_buffered: false,
             budget: ForestBudget::Extractions(16),
             feedback: false,
+            exponent: 1.0,
             feedback_settings: FeedbackSettings::default(),
         }
     }
@@ -313,7 +318,11 @@ pub fn run_forest_manager(
         state.controller.update(time.delta_secs() * 1000.0, &fixed)
     } else {
         state.controller = ExponentController::default();
-        1.0
+        if settings.exponent.is_finite() && settings.exponent > 0.0 {
+            settings.exponent
+        } else {
+            1.0
+        }
     };
 
     let manager_settings = ManagerSettings {
@@ -548,11 +557,12 @@ pub fn draw_forest_trees(
             continue;
         };
         let (tag_value, kept, full) = *kept_cache.entry(extraction).or_insert_with(|| {
+            let tag = mesh_tag(foliage_slot.slot, &foliage_slot.ty);
             let Some(data) = baked.get(&pruned.baked) else {
-                return (foliage_slot.slot, 0, 0);
+                return (tag, 0, 0);
             };
             (
-                foliage_slot.slot,
+                tag,
                 kept_index_total(
                     &data.pruning_input(),
                     &params.weights,
@@ -563,7 +573,7 @@ pub fn draw_forest_trees(
         });
         visible += 1;
         triangles += kept as u64 / 3;
-        let handle = slot_meshes.fitting(kept, full, &mut meshes);
+        let handle = slot_meshes.fitting(kept, full, foliage_slot.ty.quads, &mut meshes);
         let mut e = commands.entity(entity);
         if tag.map(|t| t.0) != Some(tag_value) {
             e.insert(MeshTag(tag_value));

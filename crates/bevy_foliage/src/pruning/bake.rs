@@ -150,6 +150,29 @@ impl BakedFoliage {
         self.cell_first_leaf.len().saturating_sub(1)
     }
 
+    /// Whether every leaf is a quad stored as the two triangles `a b c, a c d` (the procedural
+    /// trees' leaves, and quads from most exporters): such trees are drawn with indexed quad slot
+    /// meshes, four vertex-stage runs per leaf instead of six.
+    pub fn quad_leaves(&self) -> bool {
+        self.leaf_count() > 0
+            && (0..self.leaf_count()).all(|l| {
+                let (a, b) = (
+                    self.leaf_index_start[l] as usize,
+                    self.leaf_index_start[l + 1] as usize,
+                );
+                let i = &self.indices[a..b];
+                i.len() == 6
+                    && i[3] == i[0]
+                    && i[4] == i[2]
+                    && i[0] != i[1]
+                    && i[1] != i[2]
+                    && i[2] != i[0]
+                    && i[5] != i[0]
+                    && i[5] != i[1]
+                    && i[5] != i[2]
+            })
+    }
+
     /// Number of leaves.
     pub fn leaf_count(&self) -> usize {
         self.leaf_index_start.len().saturating_sub(1)

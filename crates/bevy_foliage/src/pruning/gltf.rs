@@ -480,6 +480,8 @@ pub(crate) mod tests {
         let (baked, _) = bake(leaves, &settings, &|_| {}).unwrap();
         assert_eq!(baked.leaf_count(), 3);
         assert_eq!((baked.skipped.degenerate, baked.skipped.non_finite), (1, 1));
+        // A fan and a lone triangle are not quads: drawn with triangle slot meshes.
+        assert!(!baked.quad_leaves());
     }
 
     #[test]

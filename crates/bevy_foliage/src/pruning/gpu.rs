@@ -191,6 +191,18 @@ pub struct TypeSlot {
     pub vertex_base: u32,
     /// Indices with every leaf kept.
     pub full_index_count: u32,
+    /// Every leaf is a canonical quad ([`BakedFoliage::quad_leaves`]): drawn with quad slot
+    /// meshes.
+    pub quads: bool,
+}
+
+/// Set in a pruned tree's `MeshTag` when it is drawn with a quad slot mesh; the low bits are the
+/// instance slot.
+pub const QUAD_TAG_BIT: u32 = 1 << 31;
+
+/// The `MeshTag` of a tree drawing instance `slot` of a type laid out as `ty`.
+pub fn mesh_tag(slot: u32, ty: &TypeSlot) -> u32 {
+    if ty.quads { slot | QUAD_TAG_BIT } else { slot }
 }
 
 /// Words per packed leaf vertex in the `leaf_vertices` buffer:
@@ -234,6 +246,9 @@ pub struct FoliageStore {
     pub buffers: StoreBuffers,
     /// Bumped whenever a buffer is replaced, so materials binding them are refreshed.
     pub generation: u32,
+    /// Draw every type with triangle slot meshes, even quad-leaf types (for comparing the two
+    /// paths; takes effect for types uploaded afterwards).
+    pub force_triangle_slots: bool,
     capacity: Capacity,
     vertex_words: u32,
 }
@@ -269,6 +284,7 @@ pub fn update_foliage_store(
     trees: Query<(Entity, &PrunedFoliage, Option<&FoliageSlot>), With<PruningParams>>,
 ) {
     let store = &mut *store;
+    let store_force_triangles = store.force_triangle_slots;
     // New tree types.
     let mut new_types: Vec<AssetId<BakedFoliage>> = Vec::new();
     for (_, pruned, _) in &trees {
@@ -309,6 +325,7 @@ pub fn update_foliage_store(
                 index_base: idx.len() as u32,
                 vertex_base: (verts.len() / LEAF_VERTEX_WORDS) as u32,
                 full_index_count: tree.indices.len() as u32,
+                quads: tree.quad_leaves() && !store_force_triangles,
             };
             cfl.extend_from_slice(&tree.cell_first_leaf);
             vis.extend(tree.visibility.iter().map(|&v| v as u32));
@@ -413,7 +430,7 @@ pub fn update_foliage_store(
         if *old != Some(new) {
             commands
                 .entity(*entity)
-                .insert((new, bevy::mesh::MeshTag(slot as u32)));
+                .insert((new, bevy::mesh::MeshTag(mesh_tag(slot as u32, &ty))));
         }
     }
     let cap = store.capacity;

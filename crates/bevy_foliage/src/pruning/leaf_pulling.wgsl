@@ -1,9 +1,10 @@
 // Vertex pulling for pruned leaves, shared by the forward and prepass vertex shaders.
 //
 // A pruned tree is drawn as a "slot mesh" whose vertex i carries i in position.x. Vertex i of
-// the tree is the i-th index the pruning pass wrote into this instance's region of `output`;
-// vertices past this frame's kept count collapse outside the clip volume (culled before
-// rasterisation). The instance is found through its MeshTag (= its slot).
+// the tree is the i-th index the pruning pass wrote into this instance's region of `output`
+// (quad slot meshes: four vertices per leaf, see below); vertices past this frame's kept count
+// collapse outside the clip volume (culled before rasterisation). The instance is found through
+// its MeshTag (its slot, bit 31 set for quad slot meshes).
 //
 // Area preservation (Gumbau 2011, eq. 3.7-3.10): a kept leaf of a cell that keeps the fraction
 // u of its leaves is scaled about its centroid by sqrt(1/u), so the cell's total leaf area, and
@@ -89,8 +90,16 @@ struct PulledLeafVertex {
 // Pulls the vertex and places it in the world; `clip_position` is CULLED for dropped vertices.
 fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeafVertex {
     var out: PulledLeafVertex;
-    let slot = mesh_functions::get_tag(instance_index);
-    let i = u32(slot_position.x);
+    let tag = mesh_functions::get_tag(instance_index);
+    let slot = tag & 0x7fffffffu;
+    let vertex = u32(slot_position.x);
+    // Quad slot meshes (tag bit 31): vertex 4k + c is corner c of kept leaf k, whose six kept
+    // indices are a b c a c d; its index is 6k + [0, 1, 2, 5][c].
+    var i = vertex;
+    if (tag >> 31u) != 0u {
+        let corner = vertex % 4u;
+        i = (vertex / 4u) * 6u + select(corner, 5u, corner == 3u);
+    }
     let kept_count = draws[slot * 5u];
     out.kept = i < kept_count;
     if !out.kept {
