@@ -560,6 +560,40 @@ mod tests {
     }
 
     #[test]
+    fn a_time_budget_serves_the_most_urgent_chunk_first_and_stops() {
+        let trees = forest(3000, 2, 5);
+        let mut states = vec![TreeLodState::default(); trees.len()];
+        let mut m = ForestManager::new(2, LodSlots::uniform(16), 30, false);
+        let mut out = Vec::new();
+        // A zero budget still serves one chunk (progress every frame), not everything.
+        let r = m.run_frame(
+            &trees,
+            &mut states,
+            Vec3::ZERO,
+            None,
+            1.0,
+            &settings(false),
+            Budget::Time(Duration::ZERO),
+            &mut out,
+        );
+        assert!(r.candidates > 256, "{r:?}");
+        assert_eq!(r.served, 256);
+        assert_eq!(r.deferred, r.candidates - 256);
+        // A generous budget serves everything.
+        let r = m.run_frame(
+            &trees,
+            &mut states,
+            Vec3::ZERO,
+            None,
+            1.0,
+            &settings(false),
+            Budget::Time(Duration::from_secs(10)),
+            &mut out,
+        );
+        assert_eq!(r.deferred, 0, "{r:?}");
+    }
+
+    #[test]
     fn frustum_rejects_trees_behind_the_camera() {
         let m = bevy::math::Mat4::perspective_infinite_reverse_rh(1.0, 1.0, 0.1)
             * bevy::math::Mat4::look_at_rh(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y);

@@ -121,6 +121,55 @@ impl Default for ForestSettings {
 }
 
 impl ForestSettings {
+    /// These settings with unusable values replaced (and what was replaced, for the log).
+    pub fn sanitized(&self) -> (Self, Vec<String>) {
+        let d = Self::default();
+        let mut s = self.clone();
+        let mut fixes = Vec::new();
+        if !(1..=1024).contains(&s.slots) {
+            fixes.push(format!(
+                "slots = {} must be in 1..=1024: using {}",
+                s.slots, d.slots
+            ));
+            s.slots = d.slots;
+        }
+        if !s.slot_bounds.is_empty()
+            && let Err(e) = LodSlots::from_bounds(s.slot_bounds.clone())
+        {
+            fixes.push(format!("{e}: using {} uniform slots", s.slots));
+            s.slot_bounds.clear();
+        }
+        match s.budget {
+            ForestBudget::Extractions(0) => {
+                fixes.push("an extraction budget of 0 would never update a tree: using 1".into());
+                s.budget = ForestBudget::Extractions(1);
+            }
+            ForestBudget::Milliseconds(ms) if !(ms.is_finite() && ms > 0.0) => {
+                fixes.push(format!(
+                    "a time budget of {ms} ms must be positive and finite: using {:?}",
+                    d.budget
+                ));
+                s.budget = d.budget;
+            }
+            _ => {}
+        }
+        if !(s.exponent.is_finite() && s.exponent > 0.0) {
+            fixes.push(format!(
+                "exponent = {} must be positive: using 1",
+                s.exponent
+            ));
+            s.exponent = 1.0;
+        }
+        let (feedback, feedback_fixes) = s.feedback_settings.sanitized();
+        s.feedback_settings = feedback;
+        fixes.extend(
+            feedback_fixes
+                .into_iter()
+                .map(|f| format!("feedback_settings: {f}")),
+        );
+        (s, fixes)
+    }
+
     /// The slot layout, or the reason the bounds are unusable.
     pub fn lod_slots(&self) -> Result<LodSlots, super::cache::SlotBoundsError> {
         if self.slot_bounds.is_empty() {
@@ -598,6 +647,17 @@ pub fn draw_forest_trees(
     });
 }
 
+/// Replaces unusable [`ForestSettings`] values, with a warning for each.
+pub fn sanitize_forest_settings(mut settings: ResMut<ForestSettings>) {
+    let (fixed, fixes) = settings.sanitized();
+    if !fixes.is_empty() {
+        for fix in &fixes {
+            warn!("ForestSettings: {fix}");
+        }
+        *settings = fixed;
+    }
+}
+
 /// Registers the forest manager.
 pub(crate) fn build(app: &mut App) {
     for path in [
@@ -616,6 +676,10 @@ pub(crate) fn build(app: &mut App) {
         .init_resource::<ForestSettings>()
         .init_resource::<ForestState>()
         .add_systems(
+            PreUpdate,
+            sanitize_forest_settings.run_if(resource_changed::<ForestSettings>),
+        )
+        .add_systems(
             PostUpdate,
             (
                 run_forest_manager
@@ -626,4 +690,36 @@ pub(crate) fn build(app: &mut App) {
                     .before(VisibilitySystems::CheckVisibility),
             ),
         );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn absurd_forest_settings_are_replaced() {
+        let bad = ForestSettings {
+            slots: 0,
+            slot_bounds: vec![0.0, 0.7, 0.3, 1.0],
+            budget: ForestBudget::Extractions(0),
+            exponent: f32::NAN,
+            ..default()
+        };
+        let (fixed, fixes) = bad.sanitized();
+        assert_eq!(fixes.len(), 4, "{fixes:?}");
+        assert_eq!(fixed.slots, 8);
+        assert!(fixed.slot_bounds.is_empty());
+        assert_eq!(fixed.budget, ForestBudget::Extractions(1));
+        assert_eq!(fixed.exponent, 1.0);
+        let (time, fixes) = ForestSettings {
+            budget: ForestBudget::Milliseconds(-2.0),
+            ..default()
+        }
+        .sanitized();
+        assert_eq!(fixes.len(), 1);
+        assert_eq!(time.budget, ForestSettings::default().budget);
+        let (same, none) = ForestSettings::default().sanitized();
+        assert!(none.is_empty());
+        assert_eq!(same, ForestSettings::default());
+    }
 }
