@@ -195,7 +195,7 @@ fn triangles_drawn_fall_with_distance_as_eq_3_4_and_3_5_predict() {
     let Some(mut harness) = RenderHarness::for_test("pruning_distance", 32, 32) else {
         return;
     };
-    let (near, far) = (10.0, 50.0);
+    let (near, far) = (20.0, 80.0);
     harness.app_mut().add_plugins(FoliagePlugin);
     harness.app_mut().insert_resource(FoliagePruningSettings {
         near,
@@ -273,8 +273,22 @@ fn triangles_drawn_fall_with_distance_as_eq_3_4_and_3_5_predict() {
     // The camera moves away along a fixed direction from the crown centre, so the view-dependent
     // factor stays the same and only the distance factor (eq. 3.4, |camera − tree|) changes.
     let crown = tree.crown_center();
+    // Inside the crown the exterior viewpoints' visibility does not apply: every leaf is kept.
+    *harness.world_mut().get_mut::<Transform>(camera).unwrap() =
+        Transform::from_translation(crown + direction).looking_at(crown, Vec3::Y);
+    harness.step();
+    {
+        let (instances, _, draws) = read_frame(&mut harness);
+        let slot = instances.iter().find(|i| i.entity == good).unwrap().draw as usize;
+        assert_eq!(
+            draws[slot * 5] as usize,
+            tree.indices.len(),
+            "inside the crown every leaf is drawn"
+        );
+    }
+    let r = tree.crown_radius();
     let mut drawn = Vec::new();
-    for s in [1.0, 2.0, 15.0, 25.0, 35.0, 44.0, 60.0, 90.0] {
+    for s in [r + 0.5, r + 1.5, 25.0, 38.0, 50.0, 62.0, 85.0, 120.0] {
         let position = crown + direction * s;
         *harness.world_mut().get_mut::<Transform>(camera).unwrap() =
             Transform::from_translation(position).looking_at(crown, Vec3::Y);

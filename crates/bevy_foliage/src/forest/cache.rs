@@ -3,7 +3,7 @@
 //! in the slot may borrow, instead of extracting its own.
 //!
 //! Slot layout: two exact slots, LoD 0 (nothing drawn — never needs extracting) and LoD 1 (full
-//! detail), then `N` range slots, slot i covering `[b_i, b_{i+1})` (eq. 4.4 with uniform
+//! detail: every leaf, no view-dependent pruning — see the forest plugin), then `N` range slots, slot i covering `[b_i, b_{i+1})` (eq. 4.4 with uniform
 //! `b_i = i/N`; non-uniform bounds can make the slots finer near the camera, i.e. at high LoD).
 //!
 //! Algorithm 3: if the tree's current slot is the slot of its desired LoD, nothing is done; else

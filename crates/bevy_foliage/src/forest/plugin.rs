@@ -463,8 +463,11 @@ pub fn run_forest_manager(
                 &data.view_directions,
                 pruning.view_weighting,
             ),
-            distance_fixed: if !settings.enabled || !pruning.enabled {
-                // Full detail: every leaf, as with pruning off.
+            distance_fixed: if !settings.enabled || !pruning.enabled || e.slot == SLOT_LOD_ONE {
+                // Full detail: every leaf, as with pruning off. The exact LoD 1 slot is full
+                // detail too: it holds the trees nearer than `near`, which cover the most
+                // pixels and may stand around the camera, where visibility baked from viewpoints
+                // outside the crown does not apply.
                 KEEP_ALL
             } else {
                 ((e.lod.clamp(0.0, 1.0) * FIXED_ONE as f32).round() as u32).min(FIXED_ONE)

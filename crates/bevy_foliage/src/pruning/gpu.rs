@@ -150,9 +150,12 @@ pub fn compute_pruning_params(
             let local_camera = affine.inverse().transform_point3(camera_position);
             let direction = local_camera - tree.crown_center();
             let distance = camera_position.distance(transform.translation());
+            // Inside the crown the visibility baked from viewpoints around it does not apply:
+            // keep every leaf.
+            let inside_crown = direction.length() < tree.crown_radius();
             PruningParams {
                 weights: view_weights(direction, &tree.view_directions, settings.view_weighting),
-                distance_fixed: if settings.enabled {
+                distance_fixed: if settings.enabled && !inside_crown {
                     distance_factor_fixed(distance, settings.near, settings.far)
                 } else {
                     KEEP_ALL
