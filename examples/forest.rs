@@ -13,37 +13,18 @@
 
 use bevy::prelude::*;
 use bevy_nature::foliage::{FoliagePruningSettings, ForestSettings};
-use bevy_nature::forest_scene::{ForestKind, ForestScene, camera_transform, spawn_forest};
+use bevy_nature::forest_scene::{ForestArgs, ForestScene, camera_transform, spawn_forest};
 use bevy_nature_harness::{ExampleArgs, ExampleRunner};
 
 fn main() -> AppExit {
-    let mut kind = ForestKind::Dense;
-    let mut leaf_scale = 0.25f32;
-    let mut rest = Vec::new();
-    let mut args = std::env::args().skip(1);
-    while let Some(arg) = args.next() {
-        match arg.as_str() {
-            "--forest" => {
-                let v = args.next().unwrap_or_default();
-                kind = ForestKind::parse(&v).unwrap_or_else(|| {
-                    eprintln!("--forest takes dense or sparse, not '{v}'");
-                    std::process::exit(2)
-                });
-            }
-            "--leaf-scale" => {
-                let v = args.next().unwrap_or_default();
-                leaf_scale = v
-                    .parse()
-                    .ok()
-                    .filter(|s: &f32| *s > 0.0 && *s <= 1.0)
-                    .unwrap_or_else(|| {
-                        eprintln!("--leaf-scale takes a number in (0, 1], not '{v}'");
-                        std::process::exit(2)
-                    });
-            }
-            _ => rest.push(arg),
-        }
-    }
+    let ForestArgs {
+        kind,
+        leaf_scale,
+        rest,
+    } = ForestArgs::parse(std::env::args().skip(1), 0.25).unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(2)
+    });
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
         eprintln!("{e} [--forest dense|sparse] [--leaf-scale F]");
         std::process::exit(2)

@@ -27,7 +27,7 @@ use bevy::prelude::*;
 use bevy_nature::foliage::ForestSettings;
 use bevy_nature::foliage::forest::plugin::{ForestState, LEAF_TRIANGLES, MANAGER_MS};
 use bevy_nature::forest_scene::{
-    ForestKind, ForestScene, HlodForestRoot, ManagedForestRoot, camera_transform, spawn_forest,
+    ForestArgs, ForestScene, HlodForestRoot, ManagedForestRoot, camera_transform, spawn_forest,
 };
 use bevy_nature_harness::compare::{Comparison, RgbaImage};
 use bevy_nature_harness::headless::HarnessConfig;
@@ -44,35 +44,23 @@ struct Measured {
 
 fn main() {
     // Our own flags first; the rest are the runner's.
-    let mut kind = ForestKind::Dense;
-    let mut leaf_scale = 0.1f32;
+    let ForestArgs {
+        kind,
+        leaf_scale,
+        rest,
+    } = ForestArgs::parse(std::env::args().skip(1), 0.1).unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(2)
+    });
     let mut borrowing = true;
     let mut exponent = 1.0f32;
-    let mut rest = Vec::new();
-    let mut args = std::env::args().skip(1);
-    while let Some(arg) = args.next() {
+    let mut runner_flags = Vec::new();
+    let mut rest = rest.into_iter();
+    while let Some(arg) = rest.next() {
         match arg.as_str() {
-            "--forest" => {
-                let v = args.next().unwrap_or_default();
-                kind = ForestKind::parse(&v).unwrap_or_else(|| {
-                    eprintln!("--forest takes dense or sparse, not '{v}'");
-                    std::process::exit(2)
-                });
-            }
-            "--leaf-scale" => {
-                let v = args.next().unwrap_or_default();
-                leaf_scale = v
-                    .parse()
-                    .ok()
-                    .filter(|s: &f32| *s > 0.0 && *s <= 1.0)
-                    .unwrap_or_else(|| {
-                        eprintln!("--leaf-scale takes a number in (0, 1], not '{v}'");
-                        std::process::exit(2)
-                    });
-            }
             "--no-borrowing" => borrowing = false,
             "--exponent" => {
-                let v = args.next().unwrap_or_default();
+                let v = rest.next().unwrap_or_default();
                 exponent = v
                     .parse()
                     .ok()
@@ -82,9 +70,10 @@ fn main() {
                         std::process::exit(2)
                     });
             }
-            _ => rest.push(arg),
+            _ => runner_flags.push(arg),
         }
     }
+    let rest = runner_flags;
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
         eprintln!("{e} [--forest dense|sparse] [--leaf-scale F] [--no-borrowing] [--exponent N]");
         std::process::exit(2)

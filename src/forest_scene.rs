@@ -64,6 +64,51 @@ impl ForestKind {
     }
 }
 
+/// The scene flags shared by the `forest` example and benchmark: `--forest dense|sparse` and
+/// `--leaf-scale F`; everything else is returned for the example runner.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ForestArgs {
+    /// Which forest (`--forest`, default dense).
+    pub kind: ForestKind,
+    /// Fraction of the thesis' leaf counts (`--leaf-scale`, in (0, 1]).
+    pub leaf_scale: f32,
+    /// The flags not taken here, in order.
+    pub rest: Vec<String>,
+}
+
+impl ForestArgs {
+    /// Takes the scene flags out of `args`; `leaf_scale` is the default scale.
+    pub fn parse(args: impl IntoIterator<Item = String>, leaf_scale: f32) -> Result<Self, String> {
+        let mut out = Self {
+            kind: ForestKind::Dense,
+            leaf_scale,
+            rest: Vec::new(),
+        };
+        let mut args = args.into_iter();
+        while let Some(arg) = args.next() {
+            match arg.as_str() {
+                "--forest" => {
+                    let v = args.next().unwrap_or_default();
+                    out.kind = ForestKind::parse(&v)
+                        .ok_or_else(|| format!("--forest takes dense or sparse, not '{v}'"))?;
+                }
+                "--leaf-scale" => {
+                    let v = args.next().unwrap_or_default();
+                    out.leaf_scale = v
+                        .parse()
+                        .ok()
+                        .filter(|s: &f32| *s > 0.0 && *s <= 1.0)
+                        .ok_or_else(|| {
+                            format!("--leaf-scale takes a number in (0, 1], not '{v}'")
+                        })?;
+                }
+                _ => out.rest.push(arg),
+            }
+        }
+        Ok(out)
+    }
+}
+
 /// The forest to build.
 #[derive(Resource, Clone, Debug)]
 pub struct ForestScene {
@@ -250,4 +295,30 @@ pub fn spawn_forest(
 /// The camera's standing point: the forest's centre, looking along +x, slightly down.
 pub fn camera_transform() -> Transform {
     Transform::from_xyz(0.0, 3.0, 0.0).looking_to(Vec3::new(1.0, -0.05, 0.15), Vec3::Y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scene_flags_are_taken_and_the_rest_kept() {
+        let args = [
+            "--headless",
+            "--forest",
+            "sparse",
+            "--leaf-scale",
+            "0.5",
+            "--frames",
+            "3",
+        ]
+        .map(String::from);
+        let parsed = ForestArgs::parse(args, 0.1).unwrap();
+        assert_eq!(parsed.kind, ForestKind::Sparse);
+        assert_eq!(parsed.leaf_scale, 0.5);
+        assert_eq!(parsed.rest, ["--headless", "--frames", "3"]);
+        assert!(ForestArgs::parse(["--forest".into(), "jungle".into()], 0.1).is_err());
+        assert!(ForestArgs::parse(["--leaf-scale".into(), "0".into()], 0.1).is_err());
+        assert_eq!(ForestArgs::parse([], 0.25).unwrap().leaf_scale, 0.25);
+    }
 }
