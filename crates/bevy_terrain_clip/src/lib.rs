@@ -7,10 +7,17 @@
 //! the camera needs, refreshed by toroidal subtile updates under a per-frame budget so a flight
 //! never stalls.
 //!
+//! Built so far: the plain-Rust core — [`clip`] (layer state matrices, toroidal placement,
+//! ring-ordered updates under a budget, coverage, the CPU reference of the shader's layer choice)
+//! and [`cache`] (LRU tile cache, coarsest-first request queue with merging, absent tiles and
+//! back-off). The streaming, GPU stack and terrain material land on top (issue 5).
+//!
 //! Add [`TerrainClipPlugin`]; tune [`ClipmapSettings`] (a reflected resource).
 
 use bevy::prelude::*;
 
+pub mod cache;
+pub mod clip;
 pub mod settings;
 
 pub use settings::{ClipmapSettings, UpdateBudget};
