@@ -10,7 +10,8 @@
 //! Built so far: the plain-Rust core — [`clip`] (layer state matrices, toroidal placement,
 //! ring-ordered updates under a budget, coverage, the CPU reference of the shader's layer choice)
 //! and [`cache`] (LRU tile cache, coarsest-first request queue with merging, absent tiles and
-//! back-off). The streaming, GPU stack and terrain material land on top (issue 5).
+//! back-off), [`pyramid`] (XYZ/TMS tile pyramids with a validated JSON manifest), [`source`] (asynchronous
+//! tile sources: disk and procedural). The streaming, GPU stack and terrain material land on top (issue 5).
 //!
 //! Add [`TerrainClipPlugin`]; tune [`ClipmapSettings`] (a reflected resource).
 
@@ -18,7 +19,9 @@ use bevy::prelude::*;
 
 pub mod cache;
 pub mod clip;
+pub mod pyramid;
 pub mod settings;
+pub mod source;
 
 pub use settings::{ClipmapSettings, UpdateBudget};
 

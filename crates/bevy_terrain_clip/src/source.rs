@@ -1,0 +1,326 @@
+//! Where tiles come from (spec T1): the [`TileSource`] trait, asynchronous so loads run on
+//! Bevy's IO task pool; a [`DiskTileSource`] over an XYZ/TMS pyramid directory; and a
+//! [`ProceduralTileSource`] computing texels from a function (tests, and flights over data too
+//! large to store).
+//!
+//! A load gives `Ok(Some(tile))`, `Ok(None)` when the tile does not exist (outside a partial
+//! level, or no file: remembered as absent by the cache), or an error naming the file (corrupt
+//! image, wrong size) — never a panic.
+
+use crate::cache::TileKey;
+use crate::pyramid::{ManifestError, PyramidManifest};
+use bevy::tasks::BoxedFuture;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// A decoded tile: `size × size` RGBA8 texels, rows top (north) first.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TileData {
+    /// Side in texels.
+    pub size: u32,
+    /// `size² · 4` bytes.
+    pub rgba: Vec<u8>,
+}
+
+impl TileData {
+    /// The texel at column `x`, row `y`.
+    pub fn texel(&self, x: u32, y: u32) -> [u8; 4] {
+        let i = ((y * self.size + x) * 4) as usize;
+        [
+            self.rgba[i],
+            self.rgba[i + 1],
+            self.rgba[i + 2],
+            self.rgba[i + 3],
+        ]
+    }
+}
+
+/// Why a tile could not be loaded.
+#[derive(Debug)]
+pub enum TileError {
+    /// The file exists but could not be read.
+    Io(PathBuf, std::io::Error),
+    /// The file is not a decodable image.
+    Decode(PathBuf, String),
+    /// The image is not `tile_size` square.
+    WrongSize {
+        /// The file.
+        path: PathBuf,
+        /// Its size.
+        found: [u32; 2],
+        /// The manifest's tile size.
+        expected: u32,
+    },
+}
+
+impl std::fmt::Display for TileError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Io(p, e) => write!(f, "{}: {e}", p.display()),
+            Self::Decode(p, e) => write!(f, "{}: corrupt tile image: {e}", p.display()),
+            Self::WrongSize {
+                path,
+                found,
+                expected,
+            } => write!(
+                f,
+                "{}: tile is {}×{}, the manifest says {expected}×{expected}",
+                path.display(),
+                found[0],
+                found[1]
+            ),
+        }
+    }
+}
+
+impl std::error::Error for TileError {}
+
+/// A source of tiles.
+pub trait TileSource: Send + Sync + 'static {
+    /// Tile side in texels.
+    fn tile_size(&self) -> u32;
+    /// Pyramid levels (`0..levels`).
+    fn levels(&self) -> u32;
+    /// Whether `key` can exist at all (cheap, no I/O).
+    fn may_exist(&self, key: TileKey) -> bool;
+    /// Loads a tile.
+    fn load(&self, key: TileKey) -> BoxedFuture<'static, Result<Option<TileData>, TileError>>;
+}
+
+/// Tiles read from an XYZ/TMS directory with a `pyramid.json` manifest.
+#[derive(Clone, Debug)]
+pub struct DiskTileSource {
+    /// The pyramid directory.
+    pub dir: PathBuf,
+    /// Its manifest.
+    pub manifest: Arc<PyramidManifest>,
+}
+
+impl DiskTileSource {
+    /// Opens a pyramid directory (reads and checks its manifest).
+    pub fn open(dir: impl AsRef<Path>) -> Result<Self, ManifestError> {
+        let dir = dir.as_ref().to_path_buf();
+        let manifest = PyramidManifest::load(&dir)?;
+        Ok(Self {
+            dir,
+            manifest: Arc::new(manifest),
+        })
+    }
+}
+
+/// Decodes tile bytes (PNG) into RGBA8, checking the size.
+pub fn decode_tile(bytes: &[u8], path: &Path, tile_size: u32) -> Result<TileData, TileError> {
+    let image = image::load_from_memory(bytes)
+        .map_err(|e| TileError::Decode(path.to_path_buf(), e.to_string()))?
+        .to_rgba8();
+    if image.width() != tile_size || image.height() != tile_size {
+        return Err(TileError::WrongSize {
+            path: path.to_path_buf(),
+            found: [image.width(), image.height()],
+            expected: tile_size,
+        });
+    }
+    Ok(TileData {
+        size: tile_size,
+        rgba: image.into_raw(),
+    })
+}
+
+impl TileSource for DiskTileSource {
+    fn tile_size(&self) -> u32 {
+        self.manifest.tile_size
+    }
+
+    fn levels(&self) -> u32 {
+        self.manifest.levels
+    }
+
+    fn may_exist(&self, key: TileKey) -> bool {
+        self.manifest.may_exist(key)
+    }
+
+    fn load(&self, key: TileKey) -> BoxedFuture<'static, Result<Option<TileData>, TileError>> {
+        let manifest = self.manifest.clone();
+        let path = manifest.tile_path(&self.dir, key);
+        Box::pin(async move {
+            if !manifest.may_exist(key) {
+                return Ok(None);
+            }
+            let bytes = match std::fs::read(&path) {
+                Ok(b) => b,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+                Err(e) => return Err(TileError::Io(path, e)),
+            };
+            decode_tile(&bytes, &path, manifest.tile_size).map(Some)
+        })
+    }
+}
+
+/// The texel function of a procedural source: `(virtual level, texel x, texel y) → RGBA8`.
+pub type TexelFn = dyn Fn(u32, u64, u64) -> [u8; 4] + Send + Sync;
+
+/// Tiles computed from a texel function of the virtual level and texel coordinates.
+#[derive(Clone)]
+pub struct ProceduralTileSource {
+    /// Tile side.
+    pub tile_size: u32,
+    /// Pyramid levels.
+    pub levels: u32,
+    /// The texels.
+    pub texel: Arc<TexelFn>,
+}
+
+impl std::fmt::Debug for ProceduralTileSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ProceduralTileSource")
+            .field("tile_size", &self.tile_size)
+            .field("levels", &self.levels)
+            .finish()
+    }
+}
+
+/// A texel function that says where it was sampled: red and green are the texel's x and y
+/// modulo 256, blue is 16 × the virtual level plus bits 8–11 of x — so a test reading one texel
+/// back knows which level and position it came from.
+pub fn address_texel(level: u32, x: u64, y: u64) -> [u8; 4] {
+    [
+        (x & 255) as u8,
+        (y & 255) as u8,
+        ((level & 15) * 16 + ((x >> 8) & 15) as u32) as u8,
+        255,
+    ]
+}
+
+impl ProceduralTileSource {
+    /// A source of `levels` levels of `tile_size` tiles whose texels come from `texel`.
+    pub fn new(
+        tile_size: u32,
+        levels: u32,
+        texel: impl Fn(u32, u64, u64) -> [u8; 4] + Send + Sync + 'static,
+    ) -> Self {
+        Self {
+            tile_size,
+            levels,
+            texel: Arc::new(texel),
+        }
+    }
+
+    /// The tile `key`, computed now.
+    pub fn tile(&self, key: TileKey) -> TileData {
+        let t = self.tile_size;
+        let level = key.z + t.trailing_zeros();
+        let mut rgba = Vec::with_capacity((t * t * 4) as usize);
+        for row in 0..t as u64 {
+            for col in 0..t as u64 {
+                let x = key.x as u64 * t as u64 + col;
+                let y = key.y as u64 * t as u64 + row;
+                rgba.extend_from_slice(&(self.texel)(level, x, y));
+            }
+        }
+        TileData { size: t, rgba }
+    }
+}
+
+impl TileSource for ProceduralTileSource {
+    fn tile_size(&self) -> u32 {
+        self.tile_size
+    }
+
+    fn levels(&self) -> u32 {
+        self.levels
+    }
+
+    fn may_exist(&self, key: TileKey) -> bool {
+        key.z < self.levels && (key.x as u64) < (1u64 << key.z) && (key.y as u64) < (1u64 << key.z)
+    }
+
+    fn load(&self, key: TileKey) -> BoxedFuture<'static, Result<Option<TileData>, TileError>> {
+        let source = self.clone();
+        Box::pin(async move { Ok(source.may_exist(key).then(|| source.tile(key))) })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pyramid::{MANIFEST, TileScheme};
+
+    fn write_png(path: &Path, size: u32, fill: [u8; 4]) {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        let data: Vec<u8> = (0..size * size).flat_map(|_| fill).collect();
+        image::RgbaImage::from_raw(size, size, data)
+            .unwrap()
+            .save_with_format(path, image::ImageFormat::Png)
+            .unwrap();
+    }
+
+    #[test]
+    fn disk_tiles_load_and_bad_ones_are_clear_errors() {
+        let dir = std::env::temp_dir().join(format!("terrain_source_{}", std::process::id()));
+        let manifest = PyramidManifest {
+            version: 1,
+            scheme: TileScheme::Tms,
+            extension: "png".into(),
+            tile_size: 32,
+            levels: 3,
+            origin_m: [0.0, 0.0],
+            metres_per_texel: 1.0,
+            partial_levels: Vec::new(),
+        };
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join(MANIFEST),
+            serde_json::to_string(&manifest).unwrap(),
+        )
+        .unwrap();
+        let source = DiskTileSource::open(&dir).unwrap();
+        // XYZ row 0 of level 1 is TMS row 1.
+        write_png(&dir.join("1/0/1.png"), 32, [10, 20, 30, 255]);
+        let key = TileKey { z: 1, x: 0, y: 0 };
+        let tile = bevy::tasks::block_on(source.load(key)).unwrap().unwrap();
+        assert_eq!(tile.texel(5, 7), [10, 20, 30, 255]);
+        // Missing file: absent, not an error.
+        let missing = TileKey { z: 1, x: 1, y: 1 };
+        assert!(
+            bevy::tasks::block_on(source.load(missing))
+                .unwrap()
+                .is_none()
+        );
+        // Corrupt image and wrong size: errors naming the file.
+        std::fs::create_dir_all(dir.join("2/0")).unwrap();
+        std::fs::write(dir.join("2/0/3.png"), b"\x89PNG not really").unwrap();
+        let e = bevy::tasks::block_on(source.load(TileKey { z: 2, x: 0, y: 0 })).unwrap_err();
+        assert!(
+            e.to_string().contains("2/0/3.png") && e.to_string().contains("corrupt"),
+            "{e}"
+        );
+        write_png(&dir.join("2/1/3.png"), 16, [0; 4]);
+        let e = bevy::tasks::block_on(source.load(TileKey { z: 2, x: 1, y: 0 })).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                TileError::WrongSize {
+                    found: [16, 16],
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn procedural_tiles_encode_their_address() {
+        let source = ProceduralTileSource::new(64, 8, address_texel);
+        let tile = bevy::tasks::block_on(source.load(TileKey { z: 3, x: 5, y: 2 }))
+            .unwrap()
+            .unwrap();
+        // Virtual level 3 + 6 = 9; texel (5·64 + 1, 2·64 + 3) = (321, 131).
+        assert_eq!(tile.texel(1, 3), [(321 & 255) as u8, 131, 9 * 16 + 1, 255]);
+        assert!(
+            bevy::tasks::block_on(source.load(TileKey { z: 8, x: 0, y: 0 }))
+                .unwrap()
+                .is_none()
+        );
+    }
+}
