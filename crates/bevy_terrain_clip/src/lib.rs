@@ -19,6 +19,7 @@ use bevy::prelude::*;
 
 pub mod cache;
 pub mod clip;
+pub mod flight;
 pub mod pyramid;
 pub mod settings;
 pub mod source;

@@ -133,14 +133,21 @@ impl ClipStack {
     }
 }
 
-/// The subtile of level `level` holding virtual coordinates `uv`, computed in f64 (2^20 texels
-/// and more exceed f32 precision).
+/// The centre subtile of level `level`'s window for virtual coordinates `uv`, computed in f64
+/// (2^20 texels and more exceed f32 precision).
+///
+/// Each level's subtile grid is shifted by `frac(level · 0.618…)` of a subtile (a golden-ratio
+/// sequence) before rounding. Without it, subtile boundaries of every level nest in the finer
+/// levels', so whenever the centre crosses a boundary of one level it crosses one in every finer
+/// level in the same frame, and several layers invalidate a strip at once — the dips of the
+/// paper's minimum quality. Shifted, the crossings of different levels fall on different frames.
 pub fn center_subtile(uv: [f64; 2], level: u32, subtile_size: u32) -> Subtile {
     let texels = (1u64 << level) as f64;
     let s = subtile_size as f64;
+    let shift = (level as f64 * 0.618_033_988_749_895).fract();
     [
-        (uv[0] * texels / s).floor() as i64,
-        (uv[1] * texels / s).floor() as i64,
+        (uv[0] * texels / s + shift).floor() as i64,
+        (uv[1] * texels / s + shift).floor() as i64,
     ]
 }
 
