@@ -291,7 +291,7 @@ mod tests {
     }
 
     #[test]
-    fn a_slow_disk_or_tiny_budget_shows_in_the_quality() {
+    fn a_slow_disk_shows_in_the_quality() {
         let slow = simulate_flight(&FlightConfig {
             frames: 600,
             speed_m_s: 2500.0,
@@ -308,7 +308,8 @@ mod tests {
             ..Default::default()
         });
         assert!(slow.quality_min < fast.quality_min, "{slow:?} vs {fast:?}");
-        assert!(slow.tile_latency_max_ms > fast.tile_latency_max_ms);
+        assert!(slow.quality_avg < fast.quality_avg);
+        assert!(slow.tiles_per_frame_avg < fast.tiles_per_frame_avg);
     }
 
     #[test]
