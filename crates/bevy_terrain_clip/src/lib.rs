@@ -17,6 +17,7 @@
 
 use bevy::prelude::*;
 
+pub mod builder;
 pub mod cache;
 pub mod clip;
 pub mod flight;

@@ -1,0 +1,343 @@
+//! Building a tile pyramid from one large image (spec T1, issue 5): the image is padded to a
+//! power-of-two square of whole tiles (transparent beyond its edges), cut into the finest
+//! level's tiles, and every coarser tile is the 2×2 box filter of its four children — the exact
+//! average for a halving, which is what a mip chain of the whole image would hold.
+//!
+//! Tiles are built depth-first (a few tiles in memory at a time, whatever the image size) and
+//! written atomically (temporary file, then rename), the manifest last. An interrupted build
+//! resumes: tiles already on disk that decode at the right size are reused, anything else
+//! (missing, truncated, left-over temporary files) is rebuilt, so a resumed build writes the same
+//! files as an uninterrupted one.
+
+use crate::cache::TileKey;
+use crate::pyramid::{MANIFEST, PyramidManifest, TileScheme};
+use crate::source::decode_tile;
+use std::path::{Path, PathBuf};
+
+/// How to build.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BuildSettings {
+    /// Tile side (power of two).
+    pub tile_size: u32,
+    /// Row order on disk.
+    pub scheme: TileScheme,
+    /// World (x, z) of the image's north-west corner (m).
+    pub origin_m: [f64; 2],
+    /// Size of one image texel (m).
+    pub metres_per_texel: f64,
+}
+
+impl Default for BuildSettings {
+    fn default() -> Self {
+        Self {
+            tile_size: 512,
+            scheme: TileScheme::Xyz,
+            origin_m: [0.0, 0.0],
+            metres_per_texel: 1.0,
+        }
+    }
+}
+
+/// Why a build stopped.
+#[derive(Debug)]
+pub enum BuildError {
+    /// Writing failed.
+    Io(PathBuf, std::io::Error),
+    /// The settings are unusable.
+    Settings(String),
+    /// Stopped on request after this many tiles (resume by building again).
+    Interrupted(usize),
+}
+
+impl std::fmt::Display for BuildError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Io(p, e) => write!(f, "{}: {e}", p.display()),
+            Self::Settings(e) => write!(f, "bad build settings: {e}"),
+            Self::Interrupted(n) => {
+                write!(f, "interrupted after {n} tiles (build again to resume)")
+            }
+        }
+    }
+}
+
+impl std::error::Error for BuildError {}
+
+/// What a build did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BuildReport {
+    /// Pyramid levels.
+    pub levels: u32,
+    /// Tiles in the pyramid.
+    pub tiles: usize,
+    /// Tiles written by this run.
+    pub written: usize,
+    /// Tiles found valid on disk and reused.
+    pub reused: usize,
+}
+
+struct Builder<'a> {
+    image: &'a image::RgbaImage,
+    dir: &'a Path,
+    manifest: PyramidManifest,
+    report: BuildReport,
+    stop_after: Option<usize>,
+    progress: &'a dyn Fn(usize, usize),
+}
+
+/// Pyramid levels for an image of `width × height` with `tile_size` tiles: the smallest square
+/// of `tile_size · 2^k` texels holding it has `k + 1` levels.
+pub fn levels_for(width: u32, height: u32, tile_size: u32) -> u32 {
+    let side = width
+        .max(height)
+        .max(1)
+        .div_ceil(tile_size)
+        .next_power_of_two();
+    side.trailing_zeros() + 1
+}
+
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), BuildError> {
+    let io = |e| BuildError::Io(path.to_path_buf(), e);
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).map_err(io)?;
+    }
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes).map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(io)
+}
+
+fn encode_png(tile: &image::RgbaImage, path: &Path) -> Result<Vec<u8>, BuildError> {
+    let mut bytes = Vec::new();
+    tile.write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )
+    .map_err(|e| BuildError::Io(path.to_path_buf(), std::io::Error::other(e)))?;
+    Ok(bytes)
+}
+
+impl Builder<'_> {
+    /// Builds (or reuses) tile `key` and returns its texels.
+    fn tile(&mut self, key: TileKey) -> Result<image::RgbaImage, BuildError> {
+        let t = self.manifest.tile_size;
+        let path = self.manifest.tile_path(self.dir, key);
+        if let Ok(bytes) = std::fs::read(&path)
+            && let Ok(tile) = decode_tile(&bytes, &path, t)
+        {
+            self.report.reused += 1;
+            (self.progress)(self.report.reused + self.report.written, self.report.tiles);
+            return Ok(image::RgbaImage::from_raw(t, t, tile.rgba).expect("size checked"));
+        }
+        let finest = self.manifest.levels - 1;
+        let tile = if key.z == finest {
+            let mut tile = image::RgbaImage::new(t, t);
+            for y in 0..t {
+                for x in 0..t {
+                    let (sx, sy) = (key.x * t + x, key.y * t + y);
+                    if sx < self.image.width() && sy < self.image.height() {
+                        tile.put_pixel(x, y, *self.image.get_pixel(sx, sy));
+                    }
+                }
+            }
+            tile
+        } else {
+            let mut tile = image::RgbaImage::new(t, t);
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let child = self.tile(TileKey {
+                    z: key.z + 1,
+                    x: key.x * 2 + dx,
+                    y: key.y * 2 + dy,
+                })?;
+                let half = t / 2;
+                for y in 0..half {
+                    for x in 0..half {
+                        let mut sum = [0u32; 4];
+                        for (ox, oy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                            let p = child.get_pixel(2 * x + ox, 2 * y + oy).0;
+                            for c in 0..4 {
+                                sum[c] += p[c] as u32;
+                            }
+                        }
+                        tile.put_pixel(
+                            dx * half + x,
+                            dy * half + y,
+                            image::Rgba(sum.map(|s| ((s + 2) / 4) as u8)),
+                        );
+                    }
+                }
+            }
+            tile
+        };
+        if self.stop_after.is_some_and(|n| self.report.written >= n) {
+            return Err(BuildError::Interrupted(self.report.written));
+        }
+        write_atomically(&path, &encode_png(&tile, &path)?)?;
+        self.report.written += 1;
+        (self.progress)(self.report.reused + self.report.written, self.report.tiles);
+        Ok(tile)
+    }
+}
+
+/// Builds (or resumes building) the pyramid of `image` in `dir`. `progress(done, total)` is
+/// called after every tile; `stop_after` interrupts the build after that many newly written
+/// tiles (for tests of resuming).
+pub fn build_pyramid(
+    image: &image::RgbaImage,
+    dir: &Path,
+    settings: &BuildSettings,
+    progress: &dyn Fn(usize, usize),
+    stop_after: Option<usize>,
+) -> Result<BuildReport, BuildError> {
+    let levels = levels_for(image.width(), image.height(), settings.tile_size);
+    let manifest = PyramidManifest {
+        version: 1,
+        scheme: settings.scheme,
+        extension: "png".into(),
+        tile_size: settings.tile_size,
+        levels,
+        origin_m: settings.origin_m,
+        metres_per_texel: settings.metres_per_texel,
+        partial_levels: Vec::new(),
+    };
+    let problems = manifest.problems();
+    if !problems.is_empty() {
+        return Err(BuildError::Settings(problems.join("; ")));
+    }
+    let tiles = (0..levels).map(|z| 1usize << (2 * z)).sum();
+    let mut builder = Builder {
+        image,
+        dir,
+        manifest,
+        report: BuildReport {
+            levels,
+            tiles,
+            ..Default::default()
+        },
+        stop_after,
+        progress,
+    };
+    builder.tile(TileKey { z: 0, x: 0, y: 0 })?;
+    let json = serde_json::to_string_pretty(&builder.manifest).expect("manifest serialises");
+    write_atomically(&dir.join(MANIFEST), json.as_bytes())?;
+    Ok(builder.report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::source::{DiskTileSource, TileSource};
+
+    fn test_image() -> image::RgbaImage {
+        image::RgbaImage::from_fn(200, 150, |x, y| {
+            image::Rgba([
+                (x * 7 % 256) as u8,
+                (y * 3 % 256) as u8,
+                ((x ^ y) % 256) as u8,
+                255,
+            ])
+        })
+    }
+
+    fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+        let mut out = Vec::new();
+        let mut stack = vec![dir.to_path_buf()];
+        while let Some(d) = stack.pop() {
+            for e in std::fs::read_dir(d).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else {
+                    out.push((
+                        p.strip_prefix(dir).unwrap().to_path_buf(),
+                        std::fs::read(&p).unwrap(),
+                    ));
+                }
+            }
+        }
+        out.sort();
+        out
+    }
+
+    #[test]
+    fn a_built_pyramid_holds_the_image_and_its_box_filtered_levels() {
+        let dir = std::env::temp_dir().join(format!("pyramid_build_{}", std::process::id()));
+        std::fs::remove_dir_all(&dir).ok();
+        let image = test_image();
+        let settings = BuildSettings {
+            tile_size: 64,
+            ..Default::default()
+        };
+        let report = build_pyramid(&image, &dir, &settings, &|_, _| {}, None).unwrap();
+        // 200 × 150 in 64² tiles: a 256² square, levels of 1, 2² and 4² tiles.
+        assert_eq!((report.levels, report.tiles, report.written), (3, 21, 21));
+        let source = DiskTileSource::open(&dir).unwrap();
+        let load = |z, x, y| {
+            bevy::tasks::block_on(source.load(TileKey { z, x, y }))
+                .unwrap()
+                .unwrap()
+        };
+        // Finest level: the image itself, transparent beyond it.
+        assert_eq!(load(2, 1, 2).texel(3, 4), image.get_pixel(67, 132).0);
+        assert_eq!(load(2, 3, 3).texel(0, 0), [0, 0, 0, 0]);
+        // Level 0 texel (5, 6) is the mean of the 4×4 image block at (20, 24).
+        let mut sum = [0u32; 4];
+        for y in 24..28 {
+            for x in 20..24 {
+                for c in 0..4 {
+                    sum[c] += image.get_pixel(x, y).0[c] as u32;
+                }
+            }
+        }
+        let expected = sum.map(|s| s as f32 / 16.0);
+        let got = load(0, 0, 0).texel(5, 6);
+        for c in 0..4 {
+            // Two rounded halvings: within one step of the exact mean.
+            assert!(
+                (got[c] as f32 - expected[c]).abs() <= 1.0,
+                "{got:?} vs {expected:?}"
+            );
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn an_interrupted_build_resumes_to_the_same_files() {
+        let base = std::env::temp_dir().join(format!("pyramid_resume_{}", std::process::id()));
+        std::fs::remove_dir_all(&base).ok();
+        let (clean, resumed) = (base.join("clean"), base.join("resumed"));
+        let image = test_image();
+        let settings = BuildSettings {
+            tile_size: 64,
+            scheme: TileScheme::Tms,
+            ..Default::default()
+        };
+        build_pyramid(&image, &clean, &settings, &|_, _| {}, None).unwrap();
+        let stopped = build_pyramid(&image, &resumed, &settings, &|_, _| {}, Some(7));
+        assert!(
+            matches!(stopped, Err(BuildError::Interrupted(7))),
+            "{stopped:?}"
+        );
+        assert!(
+            !resumed.join(MANIFEST).exists(),
+            "no manifest before the build completes"
+        );
+        // A crash mid-write leaves a temporary file; a tile truncated by hand must be rebuilt.
+        std::fs::write(resumed.join("2/0/0.tmp"), b"half a tile").unwrap();
+        let some_tile = files(&resumed)
+            .into_iter()
+            .find(|(p, _)| p.extension().is_some_and(|e| e == "png"))
+            .unwrap()
+            .0;
+        std::fs::write(resumed.join(&some_tile), b"\x89PNG trunc").unwrap();
+        let report = build_pyramid(&image, &resumed, &settings, &|_, _| {}, None).unwrap();
+        assert_eq!(report.reused, 6, "{report:?}");
+        assert_eq!(report.written, 15);
+        let clean_files = files(&clean);
+        let resumed_files: Vec<_> = files(&resumed)
+            .into_iter()
+            .filter(|(p, _)| p.extension().is_none_or(|e| e != "tmp"))
+            .collect();
+        assert_eq!(clean_files, resumed_files);
+        std::fs::remove_dir_all(&base).ok();
+    }
+}
