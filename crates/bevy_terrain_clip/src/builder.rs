@@ -117,19 +117,30 @@ fn encode_png(tile: &image::RgbaImage, path: &Path) -> Result<Vec<u8>, BuildErro
 }
 
 impl Builder<'_> {
-    /// Builds (or reuses) tile `key` and returns its texels.
+    /// The tile at `path` if it is on disk and decodes at the right size.
+    fn on_disk(&self, path: &Path) -> Option<image::RgbaImage> {
+        let t = self.manifest.tile_size;
+        let bytes = std::fs::read(path).ok()?;
+        let tile = decode_tile(&bytes, path, t).ok()?;
+        image::RgbaImage::from_raw(t, t, tile.rgba)
+    }
+
+    fn reuse(&mut self, tile: image::RgbaImage) -> image::RgbaImage {
+        self.report.reused += 1;
+        (self.progress)(self.report.reused + self.report.written, self.report.tiles);
+        tile
+    }
+
+    /// Builds (or reuses) tile `key` and returns its texels. Children are always visited first,
+    /// so a resumed build checks every tile, not only the ones under a missing parent.
     fn tile(&mut self, key: TileKey) -> Result<image::RgbaImage, BuildError> {
         let t = self.manifest.tile_size;
         let path = self.manifest.tile_path(self.dir, key);
-        if let Ok(bytes) = std::fs::read(&path)
-            && let Ok(tile) = decode_tile(&bytes, &path, t)
-        {
-            self.report.reused += 1;
-            (self.progress)(self.report.reused + self.report.written, self.report.tiles);
-            return Ok(image::RgbaImage::from_raw(t, t, tile.rgba).expect("size checked"));
-        }
         let finest = self.manifest.levels - 1;
         let tile = if key.z == finest {
+            if let Some(tile) = self.on_disk(&path) {
+                return Ok(self.reuse(tile));
+            }
             let mut tile = image::RgbaImage::new(t, t);
             for y in 0..t {
                 for x in 0..t {
@@ -141,14 +152,21 @@ impl Builder<'_> {
             }
             tile
         } else {
-            let mut tile = image::RgbaImage::new(t, t);
+            let mut children = Vec::with_capacity(4);
             for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
                 let child = self.tile(TileKey {
                     z: key.z + 1,
                     x: key.x * 2 + dx,
                     y: key.y * 2 + dy,
                 })?;
-                let half = t / 2;
+                children.push(((dx, dy), child));
+            }
+            if let Some(tile) = self.on_disk(&path) {
+                return Ok(self.reuse(tile));
+            }
+            let mut tile = image::RgbaImage::new(t, t);
+            let half = t / 2;
+            for ((dx, dy), child) in &children {
                 for y in 0..half {
                     for x in 0..half {
                         let mut sum = [0u32; 4];
@@ -338,6 +356,11 @@ mod tests {
             .filter(|(p, _)| p.extension().is_none_or(|e| e != "tmp"))
             .collect();
         assert_eq!(clean_files, resumed_files);
+        // Even in a finished pyramid, a damaged tile under intact parents is found and rebuilt.
+        std::fs::write(resumed.join("2/3/1.png"), b"garbage").unwrap();
+        let again = build_pyramid(&image, &resumed, &settings, &|_, _| {}, None).unwrap();
+        assert_eq!((again.written, again.reused), (1, 20));
+        assert_eq!(files(&clean), files(&resumed));
         std::fs::remove_dir_all(&base).ok();
     }
 }
