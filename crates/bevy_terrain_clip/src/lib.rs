@@ -24,6 +24,7 @@ pub mod flight;
 pub mod pyramid;
 pub mod settings;
 pub mod source;
+pub mod tile_cache;
 
 pub use settings::{ClipmapSettings, UpdateBudget};
 
