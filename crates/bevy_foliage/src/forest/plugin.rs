@@ -187,6 +187,8 @@ pub struct ForestState {
     pub manager: ForestManager,
     /// Tree types by index.
     pub types: Vec<AssetId<BakedFoliage>>,
+    /// Per type, the crown's bounding sphere in model space (centre, radius), computed once.
+    pub type_spheres: Vec<(Vec3, f32)>,
     /// Extraction entities by (type, slot, copy).
     pub extractions: HashMap<(usize, usize, usize), Entity>,
     /// The exponent controller.
@@ -206,6 +208,7 @@ impl Default for ForestState {
         Self {
             manager: ForestManager::new(0, LodSlots::uniform(1), 0, false),
             types: Vec::new(),
+            type_spheres: Vec::new(),
             extractions: HashMap::default(),
             controller: ExponentController::default(),
             last: default(),
@@ -329,6 +332,9 @@ pub fn run_forest_manager(
             Some(ty) => ty,
             None => {
                 state.types.push(id);
+                state
+                    .type_spheres
+                    .push((data.crown_center(), data.crown_radius()));
                 let template = state.manager.caches.first().cloned().unwrap_or_else(|| {
                     let slots = settings.lod_slots().unwrap_or(LodSlots::uniform(8));
                     super::cache::LodCache::new(
@@ -345,11 +351,9 @@ pub fn run_forest_manager(
         };
         let affine = transform.affine();
         let scale = transform.scale().abs().max_element();
+        let (crown_center, crown_radius) = state.type_spheres[ty];
         let (center, radius) = if affine.is_finite() && scale > 0.0 {
-            (
-                affine.transform_point3(data.crown_center()),
-                data.crown_radius() * scale,
-            )
+            (affine.transform_point3(crown_center), crown_radius * scale)
         } else {
             // Not placeable: never visible.
             (Vec3::splat(f32::INFINITY), 0.0)
@@ -459,7 +463,7 @@ pub fn run_forest_manager(
         let local_camera = transform.affine().inverse().transform_point3(camera);
         let new = PruningParams {
             weights: view_weights(
-                local_camera - data.crown_center(),
+                local_camera - state.type_spheres[e.ty].0,
                 &data.view_directions,
                 pruning.view_weighting,
             ),
