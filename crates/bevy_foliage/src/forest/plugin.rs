@@ -272,9 +272,22 @@ pub fn run_forest_manager(
         &mut Visibility,
     )>,
     mut params: Query<&mut PruningParams, With<ManagedPruning>>,
+    mut asset_events: MessageReader<AssetEvent<BakedFoliage>>,
 ) {
     let started = Instant::now();
     let state = &mut *state;
+    // A tree type whose data changed: new crown sphere, and its cached extractions are stale.
+    for event in asset_events.read() {
+        if let AssetEvent::Modified { id } = event
+            && let Some(ty) = state.types.iter().position(|t| t == id)
+            && let Some(data) = baked.get(*id)
+        {
+            state.type_spheres[ty] = (data.crown_center(), data.crown_radius());
+            if let Some(cache) = state.manager.caches.get_mut(ty) {
+                cache.clear();
+            }
+        }
+    }
     // (Re)build the caches when the slot settings change.
     if state.built_with.as_ref().is_none_or(|b| {
         b.slots != settings.slots

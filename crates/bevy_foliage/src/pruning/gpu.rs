@@ -101,6 +101,7 @@ pub struct ManagedPruning;
 /// Computes [`PruningParams`] for every pruned tree from the pruning camera.
 pub fn compute_pruning_params(
     mut commands: Commands,
+    mut asset_events: MessageReader<AssetEvent<BakedFoliage>>,
     settings: Res<FoliagePruningSettings>,
     baked: Res<Assets<BakedFoliage>>,
     marked: Query<&GlobalTransform, With<FoliageCamera>>,
@@ -114,6 +115,7 @@ pub fn compute_pruning_params(
         ),
         Without<ManagedPruning>,
     >,
+    mut crowns: Local<HashMap<AssetId<BakedFoliage>, (Vec3, f32)>>,
 ) {
     let camera = marked.iter().next().copied().or_else(|| {
         cameras
@@ -122,6 +124,11 @@ pub fn compute_pruning_params(
             .min_by_key(|(c, _)| c.order)
             .map(|(_, t)| *t)
     });
+    for event in asset_events.read() {
+        if let AssetEvent::Modified { id } | AssetEvent::Removed { id } = event {
+            crowns.remove(id);
+        }
+    }
     let Some(camera) = camera else { return };
     let camera_position = camera.translation();
     for (entity, pruned, transform, params) in &mut trees {
@@ -148,11 +155,15 @@ pub fn compute_pruning_params(
             }
         } else {
             let local_camera = affine.inverse().transform_point3(camera_position);
-            let direction = local_camera - tree.crown_center();
+            // The crown sphere, once per tree type (and again if the asset changes).
+            let (crown_center, crown_radius) = *crowns
+                .entry(pruned.baked.id())
+                .or_insert_with(|| (tree.crown_center(), tree.crown_radius()));
+            let direction = local_camera - crown_center;
             let distance = camera_position.distance(transform.translation());
             // Inside the crown the visibility baked from viewpoints around it does not apply:
             // keep every leaf.
-            let inside_crown = direction.length() < tree.crown_radius();
+            let inside_crown = direction.length() < crown_radius;
             PruningParams {
                 weights: view_weights(direction, &tree.view_directions, settings.view_weighting),
                 distance_fixed: if settings.enabled && !inside_crown {
