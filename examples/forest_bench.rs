@@ -22,7 +22,6 @@
 //! rasteriser frames of tens of seconds at full detail).
 
 use bevy::camera::visibility::VisibilityRange;
-use bevy::diagnostic::DiagnosticsStore;
 use bevy::prelude::*;
 use bevy_nature::foliage::ForestSettings;
 use bevy_nature::foliage::forest::plugin::{ForestState, LEAF_TRIANGLES, MANAGER_MS};
@@ -105,15 +104,6 @@ fn main() {
         .spawn((Camera3d::default(), Msaa::Off, camera_transform()));
     harness.wait_until_ready().expect("scene ready");
 
-    let diagnostic = |harness: &RenderHarness, path| {
-        harness
-            .app()
-            .world()
-            .resource::<DiagnosticsStore>()
-            .get(&path)
-            .and_then(|d| d.value())
-            .unwrap_or(0.0)
-    };
     let show = |harness: &mut RenderHarness, managed: bool, manager_on: bool| {
         let world = harness.world_mut();
         world.resource_mut::<ForestSettings>().enabled = manager_on;
@@ -153,8 +143,8 @@ fn main() {
         harness.reset_timing();
         harness.run_frames(frames).unwrap();
         let stats = harness.frame_stats();
-        let leaf_triangles = diagnostic(harness, LEAF_TRIANGLES);
-        let manager_ms = diagnostic(harness, MANAGER_MS);
+        let leaf_triangles = harness.diagnostic(&LEAF_TRIANGLES).unwrap_or(0.0);
+        let manager_ms = harness.diagnostic(&MANAGER_MS).unwrap_or(0.0);
         let image = harness.render().unwrap();
         Measured {
             name,

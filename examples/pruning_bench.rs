@@ -44,15 +44,6 @@ fn main() {
             .single(world)
             .unwrap()
     };
-    let diagnostic = |harness: &RenderHarness, path| {
-        harness
-            .app()
-            .world()
-            .resource::<bevy::diagnostic::DiagnosticsStore>()
-            .get(&path)
-            .and_then(|d| d.value())
-            .unwrap_or(0.0)
-    };
     let mut rows = Vec::new();
     for distance in [30.0f32, 60.0, 100.0] {
         *harness.world_mut().get_mut::<Transform>(camera).unwrap() =
@@ -70,8 +61,8 @@ fn main() {
             harness.run_frames(frames).unwrap();
             let stats = harness.frame_stats();
             let opaque = harness.pass_time_ms("main_opaque_pass_3d");
-            let drawn = diagnostic(&harness, TRIANGLES_DRAWN);
-            let full = diagnostic(&harness, TRIANGLES_FULL);
+            let drawn = harness.diagnostic(&TRIANGLES_DRAWN).unwrap_or(0.0);
+            let full = harness.diagnostic(&TRIANGLES_FULL).unwrap_or(0.0);
             let image = harness.render().unwrap();
             (stats, opaque, drawn, full, image)
         };

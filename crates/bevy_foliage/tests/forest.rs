@@ -4,7 +4,6 @@
 //! that every tree draws its extraction, and that the forest rendered with the manager stays
 //! close to the same forest at full detail rendered in the same run, with fewer triangles.
 
-use bevy::diagnostic::DiagnosticsStore;
 use bevy::mesh::MeshTag;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
@@ -40,10 +39,7 @@ fn small_bake(species: TreeSpecies, leaves: usize) -> BakedFoliage {
 
 fn triangles(harness: &mut RenderHarness) -> f64 {
     harness
-        .world_mut()
-        .resource::<DiagnosticsStore>()
-        .get(&LEAF_TRIANGLES)
-        .and_then(|d| d.value())
+        .diagnostic(&LEAF_TRIANGLES)
         .expect("forest/leaf_triangles diagnostic")
 }
 

@@ -429,6 +429,15 @@ impl RenderHarness {
         }
     }
 
+    /// The latest value of a Bevy diagnostic (a plugin counter such as `foliage/triangles_drawn`).
+    pub fn diagnostic(&self, path: &bevy::diagnostic::DiagnosticPath) -> Option<f64> {
+        self.app
+            .world()
+            .get_resource::<DiagnosticsStore>()?
+            .get(path)?
+            .value()
+    }
+
     /// Median GPU (or, without timestamp queries, CPU span) time in ms of a named render pass,
     /// e.g. `"main_opaque_pass_3d"`, over the frames since the last [`reset_timing`](Self::reset_timing).
     pub fn pass_time_ms(&self, pass: &str) -> Option<f64> {
