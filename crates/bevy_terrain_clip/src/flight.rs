@@ -202,27 +202,13 @@ pub fn simulate_flight(config: &FlightConfig) -> FlightReport {
         }
         // Uploads: the first incomplete layer (coarsest first), rings from the centre; a subtile
         // whose tile is not in RAM yet waits for it.
-        let mut uploaded = 0u32;
-        'layers: for (i, layer) in stack.layers.iter_mut().enumerate() {
-            for subtile in layer.invalid_in_ring_order() {
-                let upload = SubtileUpload {
-                    layer: i + 1,
-                    level: layer.level,
-                    subtile,
-                };
-                let tile = tile_of(&upload, config.tile_size, config.subtile_size);
-                if cache.get(&tile).is_some() {
-                    if uploaded == config.subtiles_per_frame {
-                        break 'layers;
-                    }
-                    layer.set_state(subtile, crate::clip::layer::SlotState::Valid);
-                    uploaded += 1;
-                }
-            }
-            if !layer.complete() {
-                break;
-            }
-        }
+        let uploaded = stack
+            .plan_available(config.subtiles_per_frame, |u| {
+                cache
+                    .get(&tile_of(u, config.tile_size, config.subtile_size))
+                    .is_some()
+            })
+            .len() as u32;
         // The disk serves queued requests one at a time, coarsest first.
         // Only what the disk can start before the next frame leaves the queue, so a coarse tile
         // requested later still overtakes finer ones queued earlier.

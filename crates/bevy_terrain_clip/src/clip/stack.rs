@@ -107,6 +107,38 @@ impl ClipStack {
         out
     }
 
+    /// Like [`plan`](Self::plan), for subtiles whose data may not be at hand: `available` says
+    /// whether an upload's data is ready (e.g. its tile is in RAM); unavailable subtiles are
+    /// skipped (they stay invalid and wait), the rest of the layer goes on. Chosen uploads are
+    /// marked valid at once (the caller uploads them this frame). At most `max` uploads.
+    pub fn plan_available(
+        &mut self,
+        max: u32,
+        mut available: impl FnMut(&SubtileUpload) -> bool,
+    ) -> Vec<SubtileUpload> {
+        let mut out = Vec::new();
+        for (i, layer) in self.layers.iter_mut().enumerate() {
+            for subtile in layer.invalid_in_ring_order() {
+                let upload = SubtileUpload {
+                    layer: i + 1,
+                    level: layer.level,
+                    subtile,
+                };
+                if available(&upload) {
+                    if out.len() as u32 == max {
+                        return out;
+                    }
+                    layer.set_state(subtile, SlotState::Valid);
+                    out.push(upload);
+                }
+            }
+            if !layer.complete() {
+                break;
+            }
+        }
+        out
+    }
+
     /// Records that an upload arrived (dropped if its slot moved on meanwhile).
     pub fn uploaded(&mut self, upload: SubtileUpload) -> bool {
         self.layers[upload.layer - 1].set_state(upload.subtile, SlotState::Valid)
