@@ -24,6 +24,7 @@ pub mod flight;
 pub mod pyramid;
 pub mod settings;
 pub mod source;
+pub mod stack_gpu;
 pub mod tile_cache;
 
 pub use settings::{ClipmapSettings, UpdateBudget};
@@ -40,6 +41,10 @@ impl Plugin for TerrainClipPlugin {
                 PreUpdate,
                 settings::sanitize_clipmap_settings.run_if(resource_changed::<ClipmapSettings>),
             );
+        // Streaming into GPU textures needs Bevy's asset and render plugins.
+        if app.world().contains_resource::<AssetServer>() {
+            stack_gpu::build(app);
+        }
     }
 }
 

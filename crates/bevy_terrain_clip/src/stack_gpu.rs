@@ -1,0 +1,235 @@
+//! The clip stack on the GPU: a [`ClipStackTexture`] streams a virtual texture's windowed
+//! layers into a `c × c × layers` texture array. Every frame the main world recentres the stack,
+//! polls the tile cache, picks the subtiles whose tiles are in RAM (coarsest layer first, rings
+//! from the centre, under the per-frame budget), cuts them out of their tiles and queues them;
+//! the render world writes them into their toroidal slots with `write_texture`, right after the
+//! texture is prepared.
+//!
+//! Array layer `i` holds stack layer `i + 1` (virtual level `l_b + 1 + i`); level texel `t` of a
+//! layer lives at array texel `t mod c`, so the material samples with Repeat addressing.
+
+use crate::cache::TileKey;
+use crate::clip::stack::{ClipStack, SubtileUpload};
+use crate::source::TileSource;
+use crate::tile_cache::TileCache;
+use bevy::asset::RenderAssetUsages;
+use bevy::prelude::*;
+use bevy::render::render_asset::{RenderAssets, prepare_assets};
+use bevy::render::render_resource::{
+    Extent3d, Origin3d, TexelCopyBufferLayout, TexelCopyTextureInfo, TextureAspect,
+    TextureDimension, TextureFormat, TextureUsages, TextureViewDescriptor, TextureViewDimension,
+};
+use bevy::render::renderer::RenderQueue;
+use bevy::render::texture::GpuImage;
+use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderSystems};
+use std::sync::Arc;
+
+/// One subtile's texels on their way to the GPU.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SubtileWrite {
+    /// Array layer.
+    pub layer: u32,
+    /// Texel origin of the slot in the layer.
+    pub origin: [u32; 2],
+    /// `s × s` RGBA8 texels.
+    pub texels: Arc<Vec<u8>>,
+}
+
+/// A virtual texture streamed into a clip stack texture array.
+#[derive(Component)]
+pub struct ClipStackTexture {
+    /// The stack's bookkeeping.
+    pub stack: ClipStack,
+    /// The RAM tile cache.
+    pub cache: TileCache,
+    /// The `c × c × layers` texture array (RGBA8, linear).
+    pub layers: Handle<Image>,
+    /// Centre of detail in virtual-texture coordinates (f64; set it from the camera).
+    pub center_uv: [f64; 2],
+    /// Subtiles uploaded per frame at most.
+    pub subtiles_per_frame: u32,
+    writes: Vec<SubtileWrite>,
+}
+
+impl ClipStackTexture {
+    /// A stack of `clip_size` layers in `subtile_size` subtiles over `source`, with a
+    /// `cache_tiles` RAM cache, centred on `center_uv`; creates its texture array in `images`.
+    pub fn new(
+        source: Arc<dyn TileSource>,
+        clip_size: u32,
+        subtile_size: u32,
+        cache_tiles: usize,
+        center_uv: [f64; 2],
+        images: &mut Assets<Image>,
+    ) -> Self {
+        let levels = source.levels() + source.tile_size().trailing_zeros();
+        let stack = ClipStack::new(levels, clip_size, subtile_size, center_uv);
+        let layer_count = stack.layers.len().max(1) as u32;
+        let mut image = Image::new_uninit(
+            Extent3d {
+                width: clip_size,
+                height: clip_size,
+                depth_or_array_layers: layer_count,
+            },
+            TextureDimension::D2,
+            TextureFormat::Rgba8Unorm,
+            RenderAssetUsages::RENDER_WORLD,
+        );
+        image.texture_descriptor.usage |=
+            TextureUsages::COPY_DST | TextureUsages::COPY_SRC | TextureUsages::TEXTURE_BINDING;
+        image.texture_view_descriptor = Some(TextureViewDescriptor {
+            dimension: Some(TextureViewDimension::D2Array),
+            ..default()
+        });
+        Self {
+            cache: TileCache::new(source, cache_tiles),
+            stack,
+            layers: images.add(image),
+            center_uv,
+            subtiles_per_frame: 16,
+            writes: Vec::new(),
+        }
+    }
+
+    /// The uploads queued this frame.
+    pub fn writes(&self) -> &[SubtileWrite] {
+        &self.writes
+    }
+}
+
+/// The tile holding an upload's subtile, for a source of `tile_size` tiles.
+fn tile_key(upload: &SubtileUpload, tile_size: u32, subtile_size: u32) -> TileKey {
+    crate::flight::tile_of(upload, tile_size, subtile_size)
+}
+
+/// Recentres every clip stack, polls its tile cache and queues this frame's subtile uploads.
+pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>) {
+    for mut clip in &mut stacks {
+        let clip = &mut *clip;
+        clip.writes.clear();
+        clip.stack.recenter(clip.center_uv);
+        clip.cache.poll();
+        let tile_size = clip.cache.source().tile_size();
+        let s = clip.stack.subtile_size;
+        // Ask for every missing subtile's tile (the queue serves the coarsest first).
+        let mut wanted = Vec::new();
+        for (i, layer) in clip.stack.layers.iter().enumerate() {
+            for subtile in layer.invalid_in_ring_order() {
+                wanted.push(tile_key(
+                    &SubtileUpload {
+                        layer: i + 1,
+                        level: layer.level,
+                        subtile,
+                    },
+                    tile_size,
+                    s,
+                ));
+            }
+        }
+        for key in wanted {
+            clip.cache.get(key);
+        }
+        let cache = &mut clip.cache;
+        let plan = clip.stack.plan_available(clip.subtiles_per_frame, |u| {
+            cache.contains(tile_key(u, tile_size, s))
+        });
+        let n = clip.stack.clip_size / s;
+        for upload in plan {
+            let key = tile_key(&upload, tile_size, s);
+            let Some(tile) = clip.cache.get(key) else {
+                continue;
+            };
+            // The subtile's texels inside its tile.
+            let per_tile = (tile_size / s) as i64;
+            let (ox, oy) = (
+                upload.subtile[0].rem_euclid(per_tile) as u32 * s,
+                upload.subtile[1].rem_euclid(per_tile) as u32 * s,
+            );
+            let mut texels = Vec::with_capacity((s * s * 4) as usize);
+            for row in 0..s {
+                let start = (((oy + row) * tile_size + ox) * 4) as usize;
+                texels.extend_from_slice(&tile.rgba[start..start + (s * 4) as usize]);
+            }
+            let slot = [
+                upload.subtile[0].rem_euclid(n as i64) as u32,
+                upload.subtile[1].rem_euclid(n as i64) as u32,
+            ];
+            clip.writes.push(SubtileWrite {
+                layer: upload.layer as u32 - 1,
+                origin: [slot[0] * s, slot[1] * s],
+                texels: Arc::new(texels),
+            });
+        }
+    }
+}
+
+/// This frame's subtile writes (render world).
+#[derive(Resource, Default)]
+struct ExtractedClipWrites(Vec<(AssetId<Image>, u32, SubtileWrite)>);
+
+fn extract_clip_writes(
+    mut extracted: ResMut<ExtractedClipWrites>,
+    stacks: Extract<Query<&ClipStackTexture>>,
+) {
+    extracted.0.clear();
+    for clip in &stacks {
+        for write in &clip.writes {
+            extracted
+                .0
+                .push((clip.layers.id(), clip.stack.subtile_size, write.clone()));
+        }
+    }
+}
+
+fn write_subtiles(
+    extracted: Res<ExtractedClipWrites>,
+    images: Res<RenderAssets<GpuImage>>,
+    queue: Res<RenderQueue>,
+) {
+    for (image, s, write) in &extracted.0 {
+        let Some(gpu) = images.get(*image) else {
+            warn!("clip stack texture not prepared yet: a subtile upload was dropped");
+            continue;
+        };
+        queue.write_texture(
+            TexelCopyTextureInfo {
+                texture: &gpu.texture,
+                mip_level: 0,
+                origin: Origin3d {
+                    x: write.origin[0],
+                    y: write.origin[1],
+                    z: write.layer,
+                },
+                aspect: TextureAspect::All,
+            },
+            &write.texels,
+            TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(s * 4),
+                rows_per_image: Some(*s),
+            },
+            Extent3d {
+                width: *s,
+                height: *s,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+}
+
+/// Registers the clip stack streaming.
+pub(crate) fn build(app: &mut App) {
+    app.add_systems(PostUpdate, stream_clip_stacks);
+    let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+        return;
+    };
+    render_app
+        .init_resource::<ExtractedClipWrites>()
+        .add_systems(ExtractSchedule, extract_clip_writes)
+        .add_systems(
+            Render,
+            write_subtiles
+                .in_set(RenderSystems::PrepareAssets)
+                .after(prepare_assets::<GpuImage>),
+        );
+}
