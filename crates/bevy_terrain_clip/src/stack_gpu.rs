@@ -10,9 +10,11 @@
 
 use crate::cache::TileKey;
 use crate::clip::stack::{ClipStack, SubtileUpload};
+use crate::settings::{ClipmapSettings, UpdateBudget};
 use crate::source::TileSource;
 use crate::tile_cache::TileCache;
 use bevy::asset::RenderAssetUsages;
+use bevy::diagnostic::{Diagnostic, DiagnosticPath, Diagnostics, RegisterDiagnostic};
 use bevy::prelude::*;
 use bevy::render::render_asset::{RenderAssets, prepare_assets};
 use bevy::render::render_resource::{
@@ -46,8 +48,8 @@ pub struct ClipStackTexture {
     pub layers: Handle<Image>,
     /// Centre of detail in virtual-texture coordinates (f64; set it from the camera).
     pub center_uv: [f64; 2],
-    /// Subtiles uploaded per frame at most.
-    pub subtiles_per_frame: u32,
+    /// Work allowed per frame: subtiles, bytes, or milliseconds of the streaming system.
+    pub budget: UpdateBudget,
     writes: Vec<SubtileWrite>,
 }
 
@@ -86,9 +88,32 @@ impl ClipStackTexture {
             stack,
             layers: images.add(image),
             center_uv,
-            subtiles_per_frame: 16,
+            budget: UpdateBudget::Subtiles(16),
             writes: Vec::new(),
         }
+    }
+
+    /// A stack sized by [`ClipmapSettings`] (clip and subtile size, cache tiles, budget).
+    pub fn from_settings(
+        source: Arc<dyn TileSource>,
+        settings: &ClipmapSettings,
+        center_uv: [f64; 2],
+        images: &mut Assets<Image>,
+    ) -> Self {
+        let (settings, fixes) = settings.sanitized();
+        for fix in fixes {
+            warn!("ClipmapSettings: {fix}");
+        }
+        let mut clip = Self::new(
+            source,
+            settings.clip_size,
+            settings.subtile_size,
+            settings.cache_tiles as usize,
+            center_uv,
+            images,
+        );
+        clip.budget = settings.budget;
+        clip
     }
 
     /// The uploads queued this frame.
@@ -103,8 +128,11 @@ fn tile_key(upload: &SubtileUpload, tile_size: u32, subtile_size: u32) -> TileKe
 }
 
 /// Recentres every clip stack, polls its tile cache and queues this frame's subtile uploads.
-pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>) {
+pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnostics: Diagnostics) {
+    let (mut quality, mut uploaded, mut loaded, mut latency, mut failed) =
+        (f64::INFINITY, 0usize, 0u64, 0.0f64, 0u64);
     for mut clip in &mut stacks {
+        let started = std::time::Instant::now();
         let clip = &mut *clip;
         clip.writes.clear();
         clip.stack.recenter(clip.center_uv);
@@ -130,9 +158,35 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>) {
             clip.cache.get(key);
         }
         let cache = &mut clip.cache;
-        let plan = clip.stack.plan_available(clip.subtiles_per_frame, |u| {
-            cache.contains(tile_key(u, tile_size, s))
-        });
+        let subtile_bytes = (s * s * 4) as u64;
+        let plan = match clip.budget {
+            UpdateBudget::Subtiles(n) => clip
+                .stack
+                .plan_available(n, |u| cache.contains(tile_key(u, tile_size, s))),
+            UpdateBudget::Bytes(b) => clip
+                .stack
+                .plan_available((b / subtile_bytes).clamp(1, u32::MAX as u64) as u32, |u| {
+                    cache.contains(tile_key(u, tile_size, s))
+                }),
+            UpdateBudget::Millis(ms) => {
+                // One subtile at a time until the time is spent (at least one per frame).
+                let mut plan = Vec::new();
+                let limit = std::time::Duration::from_secs_f32(ms.max(0.0) / 1000.0);
+                loop {
+                    let next = clip
+                        .stack
+                        .plan_available(1, |u| cache.contains(tile_key(u, tile_size, s)));
+                    if next.is_empty() {
+                        break;
+                    }
+                    plan.extend(next);
+                    if started.elapsed() >= limit {
+                        break;
+                    }
+                }
+                plan
+            }
+        };
         let n = clip.stack.clip_size / s;
         for upload in plan {
             let key = tile_key(&upload, tile_size, s);
@@ -160,8 +214,32 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>) {
                 texels: Arc::new(texels),
             });
         }
+        quality = quality.min(clip.stack.quality() as f64 * 100.0);
+        uploaded += clip.writes.len();
+        loaded += clip.cache.stats.loaded;
+        failed += clip.cache.stats.failed;
+        latency = latency.max(clip.cache.stats.latency_avg_ms);
+    }
+    if quality.is_finite() {
+        diagnostics.add_measurement(&QUALITY, || quality);
+        diagnostics.add_measurement(&SUBTILES_UPLOADED, || uploaded as f64);
+        diagnostics.add_measurement(&TILES_LOADED, || loaded as f64);
+        diagnostics.add_measurement(&TILES_FAILED, || failed as f64);
+        diagnostics.add_measurement(&TILE_LATENCY_MS, || latency);
     }
 }
+
+/// Share of the clip stack holding valid data (%, the worst stack).
+pub const QUALITY: DiagnosticPath = DiagnosticPath::const_new("terrain/stack_valid_percent");
+/// Subtiles uploaded this frame.
+pub const SUBTILES_UPLOADED: DiagnosticPath =
+    DiagnosticPath::const_new("terrain/subtiles_uploaded");
+/// Tiles loaded since start.
+pub const TILES_LOADED: DiagnosticPath = DiagnosticPath::const_new("terrain/tiles_loaded");
+/// Tile loads that failed since start.
+pub const TILES_FAILED: DiagnosticPath = DiagnosticPath::const_new("terrain/tiles_failed");
+/// Mean tile latency (ms, the slowest stack).
+pub const TILE_LATENCY_MS: DiagnosticPath = DiagnosticPath::const_new("terrain/tile_latency_ms");
 
 /// This frame's subtile writes (render world).
 #[derive(Resource, Default)]
@@ -219,6 +297,15 @@ fn write_subtiles(
 
 /// Registers the clip stack streaming.
 pub(crate) fn build(app: &mut App) {
+    for path in [
+        QUALITY,
+        SUBTILES_UPLOADED,
+        TILES_LOADED,
+        TILES_FAILED,
+        TILE_LATENCY_MS,
+    ] {
+        app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
+    }
     app.add_systems(PostUpdate, stream_clip_stacks);
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;

@@ -15,9 +15,10 @@ use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy::render::texture::GpuImage;
 use bevy_nature_harness::RenderHarness;
 use bevy_nature_harness::headless::read_buffer_now;
-use bevy_terrain_clip::TerrainClipPlugin;
 use bevy_terrain_clip::source::{ProceduralTileSource, address_texel};
 use bevy_terrain_clip::stack_gpu::ClipStackTexture;
+use bevy_terrain_clip::stack_gpu::{QUALITY, SUBTILES_UPLOADED};
+use bevy_terrain_clip::{ClipmapSettings, TerrainClipPlugin, UpdateBudget};
 use std::sync::Arc;
 
 const CLIP: u32 = 128;
@@ -148,7 +149,18 @@ fn gpu_layers_hold_the_pyramid_texels_of_their_toroidal_slots() {
         let world = harness.world_mut();
         let clip = {
             let mut images = world.resource_mut::<Assets<Image>>();
-            ClipStackTexture::new(source, CLIP, SUBTILE, 64, [0.37, 0.61], &mut images)
+            ClipStackTexture::from_settings(
+                source,
+                &ClipmapSettings {
+                    clip_size: CLIP,
+                    subtile_size: SUBTILE,
+                    cache_tiles: 64,
+                    budget: UpdateBudget::Subtiles(16),
+                    ..default()
+                },
+                [0.37, 0.61],
+                &mut images,
+            )
         };
         world.spawn(clip).id()
     };
@@ -176,6 +188,12 @@ fn gpu_layers_hold_the_pyramid_texels_of_their_toroidal_slots() {
         clip.stack.clone().recenter(moved)
     };
     let (_, uploaded) = settle_and_compare(&mut harness, entity);
+    assert_eq!(
+        harness.diagnostic(&QUALITY),
+        Some(100.0),
+        "terrain/stack_valid_percent"
+    );
+    assert_eq!(harness.diagnostic(&SUBTILES_UPLOADED), Some(0.0));
     // Only the subtiles that entered the windows were uploaded, not the whole stack.
     assert!(entering > 0 && entering < 64, "{entering}");
     assert_eq!(uploaded, entering as usize);
