@@ -21,6 +21,7 @@ pub mod builder;
 pub mod cache;
 pub mod clip;
 pub mod flight;
+pub mod material;
 pub mod pyramid;
 pub mod settings;
 pub mod source;
@@ -44,6 +45,7 @@ impl Plugin for TerrainClipPlugin {
         // Streaming into GPU textures needs Bevy's asset and render plugins.
         if app.world().contains_resource::<AssetServer>() {
             stack_gpu::build(app);
+            material::build(app);
         }
     }
 }

@@ -44,8 +44,13 @@ pub struct ClipStackTexture {
     pub stack: ClipStack,
     /// The RAM tile cache.
     pub cache: TileCache,
-    /// The `c × c × layers` texture array (RGBA8, linear).
+    /// The `c × c × layers` texture array (RGBA8 sRGB).
     pub layers: Handle<Image>,
+    /// The base level `l_b` (`c × c`, full mip chain), loaded when the stack is made.
+    pub base: Handle<Image>,
+    /// Layers sampled bilinearly (coverage shrinks by a texel); otherwise nearest.
+    pub linear_filtering: bool,
+    materials: Vec<Handle<crate::material::ClipmapMaterial>>,
     /// Centre of detail in virtual-texture coordinates (f64; set it from the camera).
     pub center_uv: [f64; 2],
     /// Work allowed per frame: subtiles, bytes, or milliseconds of the streaming system.
@@ -74,19 +79,24 @@ impl ClipStackTexture {
                 depth_or_array_layers: layer_count,
             },
             TextureDimension::D2,
-            TextureFormat::Rgba8Unorm,
+            TextureFormat::Rgba8UnormSrgb,
             RenderAssetUsages::RENDER_WORLD,
         );
+        image.sampler = repeat_sampler(true);
         image.texture_descriptor.usage |=
             TextureUsages::COPY_DST | TextureUsages::COPY_SRC | TextureUsages::TEXTURE_BINDING;
         image.texture_view_descriptor = Some(TextureViewDescriptor {
             dimension: Some(TextureViewDimension::D2Array),
             ..default()
         });
+        let base = images.add(base_level_image(source.as_ref(), clip_size));
         Self {
             cache: TileCache::new(source, cache_tiles),
             stack,
             layers: images.add(image),
+            base,
+            linear_filtering: true,
+            materials: Vec::new(),
             center_uv,
             budget: UpdateBudget::Subtiles(16),
             writes: Vec::new(),
@@ -116,10 +126,135 @@ impl ClipStackTexture {
         clip
     }
 
+    /// A terrain material drawing this stack (its coverage is kept current by the plugin);
+    /// `look` gives the lighting response (its base colour multiplies the imagery).
+    pub fn material(
+        &mut self,
+        look: StandardMaterial,
+        materials: &mut Assets<crate::material::ClipmapMaterial>,
+    ) -> Handle<crate::material::ClipmapMaterial> {
+        let handle = materials.add(crate::material::ClipmapMaterial {
+            base: look,
+            extension: crate::material::ClipmapExtension {
+                layers: self.layers.clone(),
+                base: self.base.clone(),
+                params: crate::material::clipmap_params(self),
+            },
+        });
+        self.materials.push(handle.clone());
+        handle
+    }
+
+    /// The materials made with [`material`](Self::material).
+    pub fn materials(&self) -> &[Handle<crate::material::ClipmapMaterial>] {
+        &self.materials
+    }
+
+    /// Switches between bilinear and nearest sampling of the layers and the base level.
+    pub fn set_linear_filtering(&mut self, linear: bool, images: &mut Assets<Image>) {
+        self.linear_filtering = linear;
+        for handle in [&self.layers, &self.base] {
+            if let Some(mut image) = images.get_mut(handle) {
+                image.sampler = repeat_sampler(linear);
+            }
+        }
+    }
+
     /// The uploads queued this frame.
     pub fn writes(&self) -> &[SubtileWrite] {
         &self.writes
     }
+}
+
+fn repeat_sampler(linear: bool) -> bevy::image::ImageSampler {
+    use bevy::image::{ImageAddressMode, ImageFilterMode, ImageSampler, ImageSamplerDescriptor};
+    let filter = if linear {
+        ImageFilterMode::Linear
+    } else {
+        ImageFilterMode::Nearest
+    };
+    ImageSampler::Descriptor(ImageSamplerDescriptor {
+        address_mode_u: ImageAddressMode::Repeat,
+        address_mode_v: ImageAddressMode::Repeat,
+        mag_filter: filter,
+        min_filter: filter,
+        mipmap_filter: filter,
+        ..default()
+    })
+}
+
+/// The base level `l_b = log2 c` as a `c × c` image with its full mip chain (box-filtered), read
+/// from `source` now (blocking: `(c / tile)²` tiles, or one coarser tile downsampled). Missing
+/// or failed tiles are left transparent and logged.
+pub fn base_level_image(source: &dyn TileSource, clip_size: u32) -> Image {
+    let t = source.tile_size();
+    let base_level = clip_size.trailing_zeros();
+    let tile_bits = t.trailing_zeros();
+    // Pyramid level whose tiles cover the base level (or the coarsest if the base is smaller
+    // than a tile).
+    let z = base_level.saturating_sub(tile_bits);
+    let side = (1u32 << z) * t;
+    let mut texels = vec![0u8; (side * side * 4) as usize];
+    for ty in 0..(1u32 << z) {
+        for tx in 0..(1u32 << z) {
+            let key = TileKey { z, x: tx, y: ty };
+            match bevy::tasks::block_on(source.load(key)) {
+                Ok(Some(tile)) => {
+                    for row in 0..t {
+                        let src = (row * t * 4) as usize;
+                        let dst = (((ty * t + row) * side + tx * t) * 4) as usize;
+                        texels[dst..dst + (t * 4) as usize]
+                            .copy_from_slice(&tile.rgba[src..src + (t * 4) as usize]);
+                    }
+                }
+                Ok(None) => warn!("clip stack base level: tile {key:?} is absent"),
+                Err(e) => warn!("clip stack base level: {e}"),
+            }
+        }
+    }
+    let halve = |data: &[u8], side: u32| -> Vec<u8> {
+        let h = side / 2;
+        let mut out = vec![0u8; (h * h * 4) as usize];
+        for y in 0..h {
+            for x in 0..h {
+                for c in 0..4 {
+                    let at = |dx: u32, dy: u32| {
+                        data[(((2 * y + dy) * side + 2 * x + dx) * 4 + c) as usize] as u32
+                    };
+                    out[((y * h + x) * 4 + c) as usize] =
+                        ((at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1) + 2) / 4) as u8;
+                }
+            }
+        }
+        out
+    };
+    let (mut level, mut size) = (texels, side);
+    while size > clip_size {
+        level = halve(&level, size);
+        size /= 2;
+    }
+    let mut data = level.clone();
+    let mut mips = 1;
+    while size > 1 {
+        level = halve(&level, size);
+        size /= 2;
+        data.extend_from_slice(&level);
+        mips += 1;
+    }
+    let mut image = Image::new_uninit(
+        Extent3d {
+            width: clip_size,
+            height: clip_size,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.texture_descriptor.mip_level_count = mips;
+    image.data = Some(data);
+    image.sampler = repeat_sampler(true);
+    image
 }
 
 /// The tile holding an upload's subtile, for a source of `tile_size` tiles.

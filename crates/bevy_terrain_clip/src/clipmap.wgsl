@@ -1,0 +1,58 @@
+// Terrain fragment stage sampling a clip stack (Seoane et al. 2007, paper 1; spec T1 "Shader").
+//
+// The mesh's first texture coordinates are virtual-texture coordinates, computed on the CPU in
+// f64 (exact far from the world origin). Level texel t = uv * 2^level. The finest windowed layer
+// whose coverage rectangle holds t is sampled at t / c with Repeat addressing (the toroidal
+// slot); where no layer covers, the resident base level is. textureSampleLevel avoids
+// derivatives, which jump across the toroidal wrap. CPU reference: `clip::stack::finest_covering_layer`.
+#import bevy_pbr::{
+    pbr_fragment::pbr_input_from_standard_material,
+    pbr_functions::alpha_discard,
+    forward_io::{VertexOutput, FragmentOutput},
+    pbr_functions::{apply_pbr_lighting, main_pass_post_lighting_processing},
+    pbr_types::STANDARD_MATERIAL_FLAGS_UNLIT_BIT,
+}
+
+struct ClipmapParams {
+    // Coverage of windowed layer i (level base_level + 1 + i), in level texels: min.xy, max.xy.
+    coverage: array<vec4<f32>, 16>,
+    base_level: u32,
+    layer_count: u32,
+    clip_size: f32,
+    pad: u32,
+}
+
+@group(#{MATERIAL_BIND_GROUP}) @binding(100) var layers: texture_2d_array<f32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(101) var layers_sampler: sampler;
+@group(#{MATERIAL_BIND_GROUP}) @binding(102) var base: texture_2d<f32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(103) var base_sampler: sampler;
+@group(#{MATERIAL_BIND_GROUP}) @binding(104) var<uniform> clipmap: ClipmapParams;
+
+fn sample_clip_stack(uv: vec2<f32>) -> vec4<f32> {
+    for (var i = i32(clipmap.layer_count) - 1; i >= 0; i -= 1) {
+        let level = clipmap.base_level + 1u + u32(i);
+        let t = uv * exp2(f32(level));
+        let c = clipmap.coverage[i];
+        if all(t >= c.xy) && all(t < c.zw) {
+            return textureSampleLevel(layers, layers_sampler, t / clipmap.clip_size, i, 0.0);
+        }
+    }
+    return textureSampleLevel(base, base_sampler, uv, 0.0);
+}
+
+@fragment
+fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> FragmentOutput {
+    var pbr_input = pbr_input_from_standard_material(in, is_front);
+#ifdef VERTEX_UVS_A
+    pbr_input.material.base_color = pbr_input.material.base_color * sample_clip_stack(in.uv);
+#endif
+    pbr_input.material.base_color = alpha_discard(pbr_input.material, pbr_input.material.base_color);
+    var out: FragmentOutput;
+    if (pbr_input.material.flags & STANDARD_MATERIAL_FLAGS_UNLIT_BIT) == 0u {
+        out.color = apply_pbr_lighting(pbr_input);
+    } else {
+        out.color = pbr_input.material.base_color;
+    }
+    out.color = main_pass_post_lighting_processing(pbr_input, out.color);
+    return out;
+}

@@ -1,0 +1,171 @@
+//! The terrain material: Bevy's `StandardMaterial` (lighting, shadows) whose base colour is
+//! sampled from a clip stack by the mesh's virtual-texture coordinates — the finest layer that
+//! covers the point, falling back to coarser ones and to the resident base level
+//! (`clipmap.wgsl`). Make one with [`ClipStackTexture::material`]; build meshes whose texture
+//! coordinates are virtual-texture coordinates computed in f64 with [`flat_patch_mesh`].
+
+use crate::stack_gpu::ClipStackTexture;
+use bevy::asset::{RenderAssetUsages, embedded_asset};
+use bevy::math::{DVec2, Vec4};
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
+use bevy::prelude::*;
+use bevy::render::render_resource::{AsBindGroup, ShaderType};
+use bevy::shader::ShaderRef;
+
+/// Most windowed layers the material handles.
+pub const MAX_LAYERS: usize = 16;
+
+/// What the fragment stage needs to know about the stack.
+#[derive(Clone, Copy, Debug, PartialEq, ShaderType, Reflect)]
+pub struct ClipmapParams {
+    /// Per windowed layer, the valid level texels `[min.xy, max.xy)` (empty when none).
+    pub coverage: [Vec4; MAX_LAYERS],
+    /// Base level l_b.
+    pub base_level: u32,
+    /// Windowed layers.
+    pub layer_count: u32,
+    /// Clip size c.
+    pub clip_size: f32,
+    /// Padding.
+    pub pad: u32,
+}
+
+impl Default for ClipmapParams {
+    fn default() -> Self {
+        Self {
+            coverage: [Vec4::ZERO; MAX_LAYERS],
+            base_level: 0,
+            layer_count: 0,
+            clip_size: 1.0,
+            pad: 0,
+        }
+    }
+}
+
+/// The clip stack's textures and coverage (kept up to date by the plugin).
+#[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
+pub struct ClipmapExtension {
+    /// The windowed layers.
+    #[texture(100, dimension = "2d_array")]
+    #[sampler(101)]
+    pub layers: Handle<Image>,
+    /// The base level.
+    #[texture(102)]
+    #[sampler(103)]
+    pub base: Handle<Image>,
+    /// Coverage and sizes.
+    #[uniform(104)]
+    pub params: ClipmapParams,
+}
+
+/// The terrain material.
+pub type ClipmapMaterial = ExtendedMaterial<StandardMaterial, ClipmapExtension>;
+
+const SHADER: &str = "embedded://bevy_terrain_clip/clipmap.wgsl";
+
+impl MaterialExtension for ClipmapExtension {
+    fn fragment_shader() -> ShaderRef {
+        ShaderRef::Path(SHADER.into())
+    }
+}
+
+/// The material parameters of a stack: each layer's coverage, shrunk by one texel when the
+/// layers are filtered linearly (so a bilinear footprint never reaches an invalid texel).
+pub fn clipmap_params(clip: &ClipStackTexture) -> ClipmapParams {
+    let mut params = ClipmapParams {
+        base_level: clip.stack.base_level,
+        layer_count: clip.stack.layers.len().min(MAX_LAYERS) as u32,
+        clip_size: clip.stack.clip_size as f32,
+        ..default()
+    };
+    let shrink = if clip.linear_filtering { 1.0 } else { 0.0 };
+    for (i, coverage) in clip
+        .stack
+        .coverage()
+        .into_iter()
+        .take(MAX_LAYERS)
+        .enumerate()
+    {
+        params.coverage[i] = match coverage {
+            Some((min, max)) => Vec4::new(
+                min[0] as f32 + shrink,
+                min[1] as f32 + shrink,
+                max[0] as f32 - shrink,
+                max[1] as f32 - shrink,
+            ),
+            None => Vec4::ZERO,
+        };
+    }
+    params
+}
+
+/// Keeps every stack's materials' coverage current.
+pub fn update_clipmap_materials(
+    stacks: Query<&ClipStackTexture>,
+    mut materials: ResMut<Assets<ClipmapMaterial>>,
+) {
+    for clip in &stacks {
+        let params = clipmap_params(clip);
+        for handle in clip.materials() {
+            let Some(material) = materials.get(handle) else {
+                continue;
+            };
+            if material.extension.params != params {
+                materials.get_mut(handle).unwrap().extension.params = params;
+            }
+        }
+    }
+}
+
+/// A flat terrain patch in the XZ plane: `quads × quads` cells over the world square
+/// `[world_min, world_min + size]`, positions relative to `anchor` (place the entity there), and
+/// texture coordinates `uv_of(world point)` evaluated in f64 — exact however far the patch is
+/// from the world origin.
+pub fn flat_patch_mesh(
+    world_min: DVec2,
+    size: f64,
+    quads: u32,
+    anchor: DVec2,
+    uv_of: impl Fn(DVec2) -> DVec2,
+) -> Mesh {
+    let quads = quads.max(1);
+    let n = quads + 1;
+    let (mut positions, mut uvs, mut normals) = (Vec::new(), Vec::new(), Vec::new());
+    for j in 0..n {
+        for i in 0..n {
+            let world = world_min + DVec2::new(i as f64, j as f64) * (size / quads as f64);
+            let local = world - anchor;
+            positions.push([local.x as f32, 0.0, local.y as f32]);
+            let uv = uv_of(world);
+            uvs.push([uv.x as f32, uv.y as f32]);
+            normals.push([0.0, 1.0, 0.0]);
+        }
+    }
+    let mut indices = Vec::new();
+    for j in 0..quads {
+        for i in 0..quads {
+            let a = j * n + i;
+            indices.extend_from_slice(&[a, a + n, a + 1, a + 1, a + n, a + n + 1]);
+        }
+    }
+    let mut mesh = Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_UV_0, uvs);
+    mesh.insert_indices(Indices::U32(indices));
+    mesh
+}
+
+/// Registers the material.
+pub(crate) fn build(app: &mut App) {
+    embedded_asset!(app, "clipmap.wgsl");
+    app.add_plugins(MaterialPlugin::<ClipmapMaterial>::default())
+        .add_systems(
+            PostUpdate,
+            update_clipmap_materials.after(crate::stack_gpu::stream_clip_stacks),
+        );
+}

@@ -1,0 +1,149 @@
+//! The terrain material against its CPU reference: a flat terrain textured from a streamed clip
+//! stack, seen from above, and for every pixel the texel the CPU reference sampler picks (finest
+//! covering layer, else the base level) at that pixel's world point. The view spans several
+//! layers' boundaries and the toroidal wrap of each layer; it is rendered near the world origin
+//! and again 10^6 m away from it (texture coordinates computed in f64 on the CPU).
+
+use bevy::camera::{OrthographicProjection, Projection, ScalingMode};
+use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
+use bevy::math::DVec2;
+use bevy::prelude::*;
+use bevy_nature_harness::RenderHarness;
+use bevy_nature_harness::compare::RgbaImage;
+use bevy_terrain_clip::TerrainClipPlugin;
+use bevy_terrain_clip::clip::stack::finest_covering_layer;
+use bevy_terrain_clip::material::{ClipmapMaterial, flat_patch_mesh};
+use bevy_terrain_clip::source::{ProceduralTileSource, address_texel};
+use bevy_terrain_clip::stack_gpu::ClipStackTexture;
+use std::sync::Arc;
+
+const SIZE: u32 = 96;
+/// World size of the virtual texture (m): level 11 (2048 texels) has 2 m texels.
+const TEXTURE_M: f64 = 4096.0;
+/// World width of the view (m): wider than the coarsest window (level 8, 128 texels of 16 m),
+/// so the base level shows at the edges.
+const VIEW_M: f64 = 3000.0;
+
+fn render_and_compare(origin: DVec2) -> Option<(f64, usize)> {
+    let mut harness = RenderHarness::for_test("clipmap_render", SIZE, SIZE)?;
+    harness.app_mut().add_plugins(TerrainClipPlugin);
+    let source = Arc::new(ProceduralTileSource::new(64, 6, address_texel));
+    let center_uv = [0.37, 0.61];
+    let center = origin + DVec2::new(center_uv[0], center_uv[1]) * TEXTURE_M;
+    let uv_of = move |p: DVec2| (p - origin) / TEXTURE_M;
+    let entity = {
+        let world = harness.world_mut();
+        let mut clip = {
+            let mut images = world.resource_mut::<Assets<Image>>();
+            let mut clip = ClipStackTexture::new(source, 128, 32, 64, center_uv, &mut images);
+            clip.set_linear_filtering(false, &mut images);
+            clip
+        };
+        let material = clip.material(
+            StandardMaterial {
+                unlit: true,
+                ..default()
+            },
+            &mut world.resource_mut::<Assets<ClipmapMaterial>>(),
+        );
+        let mesh = world.resource_mut::<Assets<Mesh>>().add(flat_patch_mesh(
+            center - DVec2::splat(1800.0),
+            3600.0,
+            16,
+            center,
+            uv_of,
+        ));
+        world.spawn((
+            Mesh3d(mesh),
+            MeshMaterial3d(material),
+            Transform::from_xyz(center.x as f32, 0.0, center.y as f32),
+        ));
+        world.spawn((
+            Camera3d::default(),
+            Msaa::Off,
+            Tonemapping::None,
+            DebandDither::Disabled,
+            Projection::Orthographic(OrthographicProjection {
+                scaling_mode: ScalingMode::Fixed {
+                    width: VIEW_M as f32,
+                    height: VIEW_M as f32,
+                },
+                ..OrthographicProjection::default_3d()
+            }),
+            Transform::from_xyz(center.x as f32, 50.0, center.y as f32).looking_at(
+                Vec3::new(center.x as f32, 0.0, center.y as f32),
+                Vec3::NEG_Z,
+            ),
+        ));
+        world.spawn(clip).id()
+    };
+    harness.wait_until_ready().unwrap();
+    for _ in 0..200 {
+        harness.step();
+        if harness
+            .world_mut()
+            .get::<ClipStackTexture>(entity)
+            .unwrap()
+            .stack
+            .layers
+            .iter()
+            .all(|l| l.complete())
+        {
+            break;
+        }
+    }
+    for _ in 0..3 {
+        harness.step();
+    }
+    let image = harness.render().unwrap();
+    let clip = harness.world_mut().get::<ClipStackTexture>(entity).unwrap();
+    // Camera: right = +x, up = −z; pixel (px, py) centre is at this world point.
+    let mut matching = 0usize;
+    let mut layers_seen = std::collections::BTreeSet::new();
+    let mut expected = RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]);
+    for py in 0..SIZE {
+        for px in 0..SIZE {
+            let world = center
+                + DVec2::new(
+                    ((px as f64 + 0.5) / SIZE as f64 - 0.5) * VIEW_M,
+                    ((py as f64 + 0.5) / SIZE as f64 - 0.5) * VIEW_M,
+                );
+            let uv = uv_of(world);
+            let (layer, level, texel) = finest_covering_layer(&clip.stack, [uv.x, uv.y]);
+            layers_seen.insert(layer);
+            let want = address_texel(level, texel[0] as u64, texel[1] as u64);
+            expected.set_pixel(px, py, want);
+            let got = image.pixel(px, py);
+            if (0..3).all(|c| (got[c] as i32 - want[c] as i32).abs() <= 2) {
+                matching += 1;
+            }
+        }
+    }
+    let dir = bevy_nature_harness::artifacts_dir().join("clipmap_render");
+    image
+        .save_png(dir.join(format!("gpu_{}.png", origin.x as u64)))
+        .ok();
+    expected
+        .save_png(dir.join(format!("cpu_{}.png", origin.x as u64)))
+        .ok();
+    let fraction = matching as f64 / (SIZE * SIZE) as f64;
+    eprintln!(
+        "origin {origin:?}: {:.2} % of pixels match the CPU reference; layers in view {layers_seen:?}",
+        fraction * 100.0
+    );
+    Some((fraction, layers_seen.len()))
+}
+
+#[test]
+fn terrain_material_samples_what_the_cpu_reference_picks() {
+    let Some((near_origin, layers)) = render_and_compare(DVec2::ZERO) else {
+        return;
+    };
+    assert!(
+        layers >= 3,
+        "the view should cross layer boundaries ({layers} layers)"
+    );
+    assert!(near_origin >= 0.99, "{:.4} of pixels match", near_origin);
+    let (far, _) = render_and_compare(DVec2::new(1.0e6, 1.0e6)).unwrap();
+    assert!(far >= 0.99, "{far:.4} of pixels match at 10^6 m");
+}
