@@ -191,6 +191,69 @@ pub fn address_texel(level: u32, x: u64, y: u64) -> [u8; 4] {
     ]
 }
 
+/// Procedural aerial imagery: fields, forest and water from value-noise octaves, each level
+/// carrying only the octaves its texels resolve (wavelength ≥ 2 texels), plus a faint 1 km grid
+/// (`texture_m` = world size of the whole texture) so motion and scale read well.
+pub fn imagery_texel(level: u32, x: u64, y: u64, texture_m: f64) -> [u8; 4] {
+    fn hash(ix: i64, iy: i64, octave: u32) -> f64 {
+        let mut h = (ix as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (iy as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+            ^ (octave as u64).wrapping_mul(0x1656_67B1_9E37_79F9);
+        h ^= h >> 29;
+        h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        h ^= h >> 32;
+        (h >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn noise(u: f64, v: f64, octave: u32) -> f64 {
+        let (x0, y0) = (u.floor(), v.floor());
+        let (fx, fy) = (u - x0, v - y0);
+        let (sx, sy) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
+        let (ix, iy) = (x0 as i64, y0 as i64);
+        let a = hash(ix, iy, octave) + sx * (hash(ix + 1, iy, octave) - hash(ix, iy, octave));
+        let b = hash(ix, iy + 1, octave)
+            + sx * (hash(ix + 1, iy + 1, octave) - hash(ix, iy + 1, octave));
+        a + sy * (b - a)
+    }
+    let texels = (1u64 << level) as f64;
+    let (u, v) = ((x as f64 + 0.5) / texels, (y as f64 + 0.5) / texels);
+    let (mut value, mut amplitude, mut total) = (0.0, 1.0, 0.0);
+    let mut detail = 0.0;
+    for octave in 0..20u32 {
+        let frequency = 128.0 * 2f64.powi(octave as i32);
+        if frequency * 2.0 > texels {
+            break;
+        }
+        let n = noise(u * frequency, v * frequency, octave);
+        if octave < 5 {
+            value += n * amplitude;
+            total += amplitude;
+        } else {
+            detail += (n - 0.5) * amplitude;
+        }
+        amplitude *= 0.55;
+    }
+    let h = if total > 0.0 { value / total } else { 0.5 };
+    let d = detail * 0.6;
+    let (r, g, b) = if h < 0.38 {
+        (0.16, 0.32 + d * 0.2, 0.45 + d * 0.2)
+    } else if h < 0.55 {
+        (0.42 + d, 0.52 + d, 0.25 + d * 0.5)
+    } else if h < 0.7 {
+        (0.2 + d * 0.5, 0.36 + d, 0.16 + d * 0.5)
+    } else {
+        (0.55 + d, 0.5 + d, 0.4 + d)
+    };
+    // A faint grid line every kilometre, where texels are fine enough to show it.
+    let metres_per_texel = texture_m / texels;
+    let on_grid = |t: f64| {
+        let m = t * texture_m;
+        metres_per_texel <= 20.0 && (m.rem_euclid(1000.0)) < metres_per_texel.max(1.5)
+    };
+    let grid = if on_grid(u) || on_grid(v) { 0.12 } else { 0.0 };
+    let q = |c: f64| ((c + grid).clamp(0.0, 1.0) * 255.0).round() as u8;
+    [q(r), q(g), q(b), 255]
+}
+
 impl ProceduralTileSource {
     /// A source of `levels` levels of `tile_size` tiles whose texels come from `texel`.
     pub fn new(
@@ -307,6 +370,19 @@ mod tests {
             "{e}"
         );
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn imagery_is_continuous_across_levels() {
+        // The same world point at two levels: coarse octaves agree, so colours are close.
+        let fine = imagery_texel(12, 2048 * 2 + 1, 1000 * 2 + 1, 8000.0);
+        let coarse = imagery_texel(11, 2048, 1000, 8000.0);
+        let diff: i32 = (0..3)
+            .map(|c| (fine[c] as i32 - coarse[c] as i32).abs())
+            .max()
+            .unwrap();
+        assert!(diff < 60, "{fine:?} vs {coarse:?}");
+        assert_eq!(fine[3], 255);
     }
 
     #[test]

@@ -37,6 +37,58 @@ pub struct SubtileWrite {
     pub texels: Arc<Vec<u8>>,
 }
 
+/// Where a virtual texture lies in the world: its north-west corner and side, in f64 metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TextureMapping {
+    /// World (x, z) of virtual-texture coordinates (0, 0).
+    pub origin_m: bevy::math::DVec2,
+    /// World size of the whole texture (m).
+    pub size_m: f64,
+}
+
+impl TextureMapping {
+    /// The mapping a pyramid manifest describes.
+    pub fn from_manifest(m: &crate::pyramid::PyramidManifest) -> Self {
+        Self {
+            origin_m: bevy::math::DVec2::new(m.origin_m[0], m.origin_m[1]),
+            size_m: m.metres_per_texel * 2f64.powi(m.virtual_levels() as i32 - 1),
+        }
+    }
+
+    /// Virtual-texture coordinates of a world point.
+    pub fn uv_of(&self, world: bevy::math::DVec2) -> bevy::math::DVec2 {
+        (world - self.origin_m) / self.size_m
+    }
+}
+
+/// Moves every mapped stack's centre of detail under the active 3D camera (the camera's point
+/// straight below, on the texture).
+pub fn follow_camera(
+    cameras: Query<(&Camera, &GlobalTransform), With<Camera3d>>,
+    mut stacks: Query<&mut ClipStackTexture>,
+) {
+    let Some((_, camera)) = cameras
+        .iter()
+        .filter(|(c, _)| c.is_active)
+        .min_by_key(|(c, _)| c.order)
+    else {
+        return;
+    };
+    let p = camera.translation();
+    if !p.is_finite() {
+        return;
+    }
+    for mut clip in &mut stacks {
+        if let Some(mapping) = clip.mapping {
+            let uv = mapping.uv_of(bevy::math::DVec2::new(p.x as f64, p.z as f64));
+            let uv = [uv.x.clamp(0.0, 1.0), uv.y.clamp(0.0, 1.0)];
+            if clip.center_uv != uv {
+                clip.center_uv = uv;
+            }
+        }
+    }
+}
+
 /// A virtual texture streamed into a clip stack texture array.
 #[derive(Component)]
 pub struct ClipStackTexture {
@@ -55,6 +107,8 @@ pub struct ClipStackTexture {
     pub center_uv: [f64; 2],
     /// Work allowed per frame: subtiles, bytes, or milliseconds of the streaming system.
     pub budget: UpdateBudget,
+    /// Where the texture lies in the world; with one, the centre of detail follows the camera.
+    pub mapping: Option<TextureMapping>,
     writes: Vec<SubtileWrite>,
 }
 
@@ -99,6 +153,7 @@ impl ClipStackTexture {
             materials: Vec::new(),
             center_uv,
             budget: UpdateBudget::Subtiles(16),
+            mapping: None,
             writes: Vec::new(),
         }
     }
@@ -441,7 +496,12 @@ pub(crate) fn build(app: &mut App) {
     ] {
         app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
     }
-    app.add_systems(PostUpdate, stream_clip_stacks);
+    app.add_systems(
+        PostUpdate,
+        (follow_camera, stream_clip_stacks)
+            .chain()
+            .after(bevy::transform::TransformSystems::Propagate),
+    );
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };

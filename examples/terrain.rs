@@ -1,0 +1,188 @@
+//! A flight at 250 m/s over a 262 km × 262 km terrain textured from a clip stack: a virtual
+//! texture of 20 levels (2^19 texels of 0.5 m), procedural aerial imagery generated tile by tile
+//! on the IO task pool, or a tile pyramid on disk (`--pyramid DIR`, built with
+//! `cargo run -p bevy_terrain_clip --bin pyramid_build`).
+//!
+//! ```text
+//! cargo run --release --example terrain            # windowed: the panel shows terrain/* counters
+//! cargo run --example terrain -- --headless --frames 60 --stats terrain.json
+//! cargo run --example terrain -- --pyramid path/to/pyramid
+//! ```
+
+use bevy::math::DVec2;
+use bevy::prelude::*;
+use bevy_nature::terrain_clip::material::{ClipmapMaterial, flat_patch_mesh};
+use bevy_nature::terrain_clip::source::{
+    DiskTileSource, ProceduralTileSource, TileSource, imagery_texel,
+};
+use bevy_nature::terrain_clip::stack_gpu::{ClipStackTexture, TextureMapping};
+use bevy_nature::terrain_clip::{ClipmapSettings, UpdateBudget};
+use bevy_nature_harness::{ExampleArgs, ExampleRunner};
+use std::sync::Arc;
+
+/// Side of the terrain patch drawn around the camera (m), rebuilt as the camera moves on.
+const PATCH_M: f64 = 24_000.0;
+
+#[derive(Resource, Clone)]
+struct Terrain {
+    source: Arc<dyn TileSource>,
+    mapping: TextureMapping,
+}
+
+#[derive(Component)]
+struct Patch {
+    center: DVec2,
+}
+
+fn main() -> AppExit {
+    let mut pyramid = None;
+    let mut rest = Vec::new();
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
+        if arg == "--pyramid" {
+            pyramid = Some(args.next().unwrap_or_default());
+        } else {
+            rest.push(arg);
+        }
+    }
+    let terrain = match pyramid {
+        Some(dir) => match DiskTileSource::open(&dir) {
+            Ok(source) => Terrain {
+                mapping: TextureMapping::from_manifest(&source.manifest),
+                source: Arc::new(source),
+            },
+            Err(e) => {
+                eprintln!("{e}");
+                std::process::exit(1)
+            }
+        },
+        None => {
+            // 12 pyramid levels of 256² tiles: virtual levels 0..20, the finest 2^19 texels.
+            let size_m = 0.5 * 2f64.powi(19);
+            Terrain {
+                source: Arc::new(ProceduralTileSource::new(256, 12, move |l, x, y| {
+                    imagery_texel(l, x, y, size_m)
+                })),
+                mapping: TextureMapping {
+                    origin_m: DVec2::ZERO,
+                    size_m,
+                },
+            }
+        }
+    };
+    let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
+        eprintln!("{e} [--pyramid DIR]");
+        std::process::exit(2)
+    });
+    ExampleRunner::with_args("terrain", args)
+        .inspect_resource::<ClipmapSettings>()
+        .run(move |app| {
+            app.add_plugins(bevy_nature::NaturePlugins)
+                .insert_resource(ClearColor(Color::srgb(0.62, 0.74, 0.9)))
+                .insert_resource(ClipmapSettings {
+                    budget: UpdateBudget::Subtiles(16),
+                    ..default()
+                })
+                .insert_resource(terrain)
+                .add_systems(Startup, setup)
+                .add_systems(Update, (fly, follow_patch));
+        })
+}
+
+fn start() -> DVec2 {
+    DVec2::new(0.25, 0.3) * 0.5 * 2f64.powi(19)
+}
+
+fn setup(
+    mut commands: Commands,
+    terrain: Res<Terrain>,
+    settings: Res<ClipmapSettings>,
+    mut images: ResMut<Assets<Image>>,
+    mut materials: ResMut<Assets<ClipmapMaterial>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+) {
+    let center = start();
+    let uv = terrain.mapping.uv_of(center);
+    let mut clip = ClipStackTexture::from_settings(
+        terrain.source.clone(),
+        &settings,
+        [uv.x, uv.y],
+        &mut images,
+    );
+    clip.mapping = Some(terrain.mapping);
+    let material = clip.material(
+        StandardMaterial {
+            perceptual_roughness: 1.0,
+            ..default()
+        },
+        &mut materials,
+    );
+    commands.spawn((Name::new("clip stack"), clip));
+    let mapping = terrain.mapping;
+    commands.spawn((
+        Name::new("terrain patch"),
+        Patch { center },
+        Mesh3d(meshes.add(flat_patch_mesh(
+            center - DVec2::splat(PATCH_M / 2.0),
+            PATCH_M,
+            64,
+            center,
+            move |p| mapping.uv_of(p),
+        ))),
+        MeshMaterial3d(material),
+        Transform::from_xyz(center.x as f32, 0.0, center.y as f32),
+    ));
+    commands.spawn((
+        DirectionalLight {
+            illuminance: 9000.0,
+            ..default()
+        },
+        Transform::default().looking_to(Vec3::new(-0.3, -1.0, -0.2), Vec3::Y),
+    ));
+    commands.insert_resource(GlobalAmbientLight {
+        brightness: 600.0,
+        ..default()
+    });
+    commands.spawn((
+        Camera3d::default(),
+        Transform::from_xyz(center.x as f32, 300.0, center.y as f32),
+    ));
+}
+
+/// 250 m/s along the diagonal, 300 m up, looking ahead and down.
+fn fly(time: Res<Time>, mut cameras: Query<&mut Transform, With<Camera3d>>) {
+    let along = DVec2::new(1.0, 1.0).normalize() * 250.0 * time.elapsed_secs_f64();
+    let p = start() + along;
+    for mut t in &mut cameras {
+        *t = Transform::from_xyz(p.x as f32, 300.0, p.y as f32)
+            .looking_to(Vec3::new(0.7, -0.35, 0.7), Vec3::Y);
+    }
+}
+
+/// Rebuilds the patch around the camera once it is a kilometre off centre.
+fn follow_patch(
+    terrain: Res<Terrain>,
+    cameras: Query<&Transform, With<Camera3d>>,
+    mut patches: Query<(&mut Patch, &mut Mesh3d, &mut Transform), Without<Camera3d>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+) {
+    let Some(camera) = cameras.iter().next() else {
+        return;
+    };
+    let here = DVec2::new(camera.translation.x as f64, camera.translation.z as f64);
+    for (mut patch, mut mesh, mut transform) in &mut patches {
+        if patch.center.distance(here) < 1000.0 {
+            continue;
+        }
+        let mapping = terrain.mapping;
+        patch.center = here;
+        mesh.0 = meshes.add(flat_patch_mesh(
+            here - DVec2::splat(PATCH_M / 2.0),
+            PATCH_M,
+            64,
+            here,
+            move |p| mapping.uv_of(p),
+        ));
+        *transform = Transform::from_xyz(here.x as f32, 0.0, here.y as f32);
+    }
+}
