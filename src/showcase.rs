@@ -41,6 +41,10 @@ pub struct ShowcaseOptions {
     pub box_offset: Vec3,
     /// Multisampling of the camera (tests turn it off: the software rasteriser pays for it).
     pub msaa: bool,
+    /// The ground textured from a clip stack of procedural aerial imagery streamed tile by tile
+    /// (a 131 km virtual texture of 0.5 m texels). Tests turn it off: what a frame shows then
+    /// depends on how far streaming got, so two renders of the scene could differ.
+    pub terrain: bool,
     /// A backdrop forest of [`ForestTree`](bevy_foliage::ForestTree)s behind the scene, drawn by
     /// the forest LoD manager from shared LoD-cache extractions.
     pub forest: bool,
@@ -53,6 +57,7 @@ impl Default for ShowcaseOptions {
             box_offset: Vec3::ZERO,
             msaa: true,
             forest: true,
+            terrain: true,
         }
     }
 }
@@ -70,26 +75,39 @@ pub fn build_showcase(app: &mut App, options: ShowcaseOptions) {
 #[derive(Component)]
 pub struct ShowcaseCamera;
 
-fn spawn_showcase(mut commands: Commands, options: Res<ShowcaseOptions>, mut trees: TreeAssets) {
+fn spawn_showcase(
+    mut commands: Commands,
+    options: Res<ShowcaseOptions>,
+    mut trees: TreeAssets,
+    mut images: ResMut<Assets<Image>>,
+    mut clip_materials: ResMut<Assets<bevy_terrain_clip::material::ClipmapMaterial>>,
+) {
+    use layout::*;
+    if options.terrain {
+        spawn_terrain(&mut commands, &mut trees, &mut images, &mut clip_materials);
+    } else {
+        let TreeAssets {
+            meshes, materials, ..
+        } = &mut trees;
+        commands.spawn((
+            Name::new("ground"),
+            Mesh3d(
+                meshes.add(
+                    Plane3d::default()
+                        .mesh()
+                        .size(GROUND_SIZE * 6.0, GROUND_SIZE * 6.0),
+                ),
+            ),
+            MeshMaterial3d(materials.add(StandardMaterial {
+                base_color: Color::srgb(0.6, 0.6, 0.55),
+                perceptual_roughness: 0.9,
+                ..default()
+            })),
+        ));
+    }
     let TreeAssets {
         meshes, materials, ..
     } = &mut trees;
-    use layout::*;
-    commands.spawn((
-        Name::new("ground"),
-        Mesh3d(
-            meshes.add(
-                Plane3d::default()
-                    .mesh()
-                    .size(GROUND_SIZE * 6.0, GROUND_SIZE * 6.0),
-            ),
-        ),
-        MeshMaterial3d(materials.add(StandardMaterial {
-            base_color: Color::srgb(0.6, 0.6, 0.55),
-            perceptual_roughness: 0.9,
-            ..default()
-        })),
-    ));
     commands.spawn((
         Name::new("box"),
         Mesh3d(meshes.add(Cuboid::from_length(BOX_SIZE))),
@@ -182,4 +200,48 @@ fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets) {
             children![(Mesh3d(bark_mesh.clone()), MeshMaterial3d(bark.clone()))],
         ));
     }
+}
+
+/// A 3 km ground patch textured from a clip stack of procedural aerial imagery whose centre of
+/// detail follows the camera.
+fn spawn_terrain(
+    commands: &mut Commands,
+    trees: &mut TreeAssets,
+    images: &mut Assets<Image>,
+    clip_materials: &mut Assets<bevy_terrain_clip::material::ClipmapMaterial>,
+) {
+    use bevy::math::DVec2;
+    use bevy_terrain_clip::material::flat_patch_mesh;
+    use bevy_terrain_clip::source::{ProceduralTileSource, imagery_texel};
+    use bevy_terrain_clip::stack_gpu::{ClipStackTexture, TextureMapping};
+    // 10 pyramid levels of 256² tiles: virtual levels 0..18, the finest 2^17 texels of 0.5 m.
+    let size_m = 0.5 * 2f64.powi(17);
+    let source = std::sync::Arc::new(ProceduralTileSource::new(256, 10, move |l, x, y| {
+        imagery_texel(l, x, y, size_m)
+    }));
+    let mapping = TextureMapping {
+        origin_m: DVec2::splat(-size_m / 2.0),
+        size_m,
+    };
+    let mut clip = ClipStackTexture::new(source, 1024, 128, 128, [0.5, 0.5], images);
+    clip.mapping = Some(mapping);
+    let material = clip.material(
+        StandardMaterial {
+            perceptual_roughness: 0.95,
+            ..default()
+        },
+        clip_materials,
+    );
+    commands.spawn((Name::new("terrain clip stack"), clip));
+    commands.spawn((
+        Name::new("ground (clipmap terrain)"),
+        Mesh3d(trees.meshes.add(flat_patch_mesh(
+            DVec2::splat(-1500.0),
+            3000.0,
+            48,
+            DVec2::ZERO,
+            move |p| mapping.uv_of(p),
+        ))),
+        MeshMaterial3d(material),
+    ));
 }

@@ -13,6 +13,8 @@ const H: u32 = 128;
 fn test_options() -> ShowcaseOptions {
     ShowcaseOptions {
         msaa: false,
+        // Streamed terrain makes a frame depend on how far streaming got: plain ground here.
+        terrain: false,
         ..default()
     }
 }
