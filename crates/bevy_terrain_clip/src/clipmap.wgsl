@@ -19,7 +19,8 @@ struct ClipmapParams {
     base_level: u32,
     layer_count: u32,
     clip_size: f32,
-    pad: u32,
+    // Mip levels per layer to sample (1: mip 0 only).
+    mips: u32,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var layers: texture_2d_array<f32>;
@@ -28,23 +29,29 @@ struct ClipmapParams {
 @group(#{MATERIAL_BIND_GROUP}) @binding(103) var base_sampler: sampler;
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var<uniform> clipmap: ClipmapParams;
 
-fn sample_clip_stack(uv: vec2<f32>) -> vec4<f32> {
+// `footprint` is the pixel's size in virtual-texture coordinates (taken outside the loop, in
+// uniform control flow); in layer i it spans footprint * 2^level texels, which picks the mip.
+fn sample_clip_stack(uv: vec2<f32>, footprint: f32) -> vec4<f32> {
     for (var i = i32(clipmap.layer_count) - 1; i >= 0; i -= 1) {
         let level = clipmap.base_level + 1u + u32(i);
-        let t = uv * exp2(f32(level));
+        let scale = exp2(f32(level));
+        let t = uv * scale;
         let c = clipmap.coverage[i];
         if all(t >= c.xy) && all(t < c.zw) {
-            return textureSampleLevel(layers, layers_sampler, t / clipmap.clip_size, i, 0.0);
+            let lod = clamp(log2(max(footprint * scale, 1e-8)), 0.0, f32(clipmap.mips - 1u));
+            return textureSampleLevel(layers, layers_sampler, t / clipmap.clip_size, i, lod);
         }
     }
-    return textureSampleLevel(base, base_sampler, uv, 0.0);
+    let base_lod = select(0.0, max(log2(max(footprint * exp2(f32(clipmap.base_level)), 1e-8)), 0.0), clipmap.mips > 1u);
+    return textureSampleLevel(base, base_sampler, uv, base_lod);
 }
 
 @fragment
 fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> FragmentOutput {
     var pbr_input = pbr_input_from_standard_material(in, is_front);
 #ifdef VERTEX_UVS_A
-    pbr_input.material.base_color = pbr_input.material.base_color * sample_clip_stack(in.uv);
+    let footprint = max(length(dpdx(in.uv)), length(dpdy(in.uv)));
+    pbr_input.material.base_color = pbr_input.material.base_color * sample_clip_stack(in.uv, footprint);
 #endif
     pbr_input.material.base_color = alpha_discard(pbr_input.material, pbr_input.material.base_color);
     var out: FragmentOutput;

@@ -27,8 +27,8 @@ pub struct ClipmapParams {
     pub layer_count: u32,
     /// Clip size c.
     pub clip_size: f32,
-    /// Padding.
-    pub pad: u32,
+    /// Mip levels per layer sampled (1: mip 0 only, nearest).
+    pub mips: u32,
 }
 
 impl Default for ClipmapParams {
@@ -38,7 +38,7 @@ impl Default for ClipmapParams {
             base_level: 0,
             layer_count: 0,
             clip_size: 1.0,
-            pad: 0,
+            mips: 1,
         }
     }
 }
@@ -77,6 +77,11 @@ pub fn clipmap_params(clip: &ClipStackTexture) -> ClipmapParams {
         base_level: clip.stack.base_level,
         layer_count: clip.stack.layers.len().min(MAX_LAYERS) as u32,
         clip_size: clip.stack.clip_size as f32,
+        mips: if clip.linear_filtering {
+            clip.layer_mips
+        } else {
+            1
+        },
         ..default()
     };
     let shrink = if clip.linear_filtering { 1.0 } else { 0.0 };

@@ -31,6 +31,10 @@ use std::sync::Arc;
 pub struct SubtileWrite {
     /// Array layer.
     pub layer: u32,
+    /// Mip level of the layer.
+    pub mip: u32,
+    /// Side of the written square (the subtile size halved per mip).
+    pub size: u32,
     /// Texel origin of the slot in the layer.
     pub origin: [u32; 2],
     /// `s × s` RGBA8 texels.
@@ -100,8 +104,10 @@ pub struct ClipStackTexture {
     pub layers: Handle<Image>,
     /// The base level `l_b` (`c × c`, full mip chain), loaded when the stack is made.
     pub base: Handle<Image>,
-    /// Layers sampled bilinearly (coverage shrinks by a texel); otherwise nearest.
+    /// Layers sampled trilinearly (coverage shrinks by a texel); otherwise nearest, mip 0.
     pub linear_filtering: bool,
+    /// Mip levels per layer.
+    pub layer_mips: u32,
     materials: Vec<Handle<crate::material::ClipmapMaterial>>,
     /// Centre of detail in virtual-texture coordinates (f64; set it from the camera).
     pub center_uv: [f64; 2],
@@ -123,6 +129,30 @@ impl ClipStackTexture {
         center_uv: [f64; 2],
         images: &mut Assets<Image>,
     ) -> Self {
+        Self::new_with_mips(
+            source,
+            clip_size,
+            subtile_size,
+            cache_tiles,
+            center_uv,
+            1,
+            images,
+        )
+    }
+
+    /// Like [`new`](Self::new), with `mips` mip levels per layer (1 ..= log2(subtile) + 1): mip
+    /// j of a layer holds the same window one level coarser per step, refreshed with every
+    /// subtile upload, for trilinear filtering.
+    pub fn new_with_mips(
+        source: Arc<dyn TileSource>,
+        clip_size: u32,
+        subtile_size: u32,
+        cache_tiles: usize,
+        center_uv: [f64; 2],
+        mips: u32,
+        images: &mut Assets<Image>,
+    ) -> Self {
+        let mips = mips.clamp(1, subtile_size.trailing_zeros() + 1);
         let levels = source.levels() + source.tile_size().trailing_zeros();
         let stack = ClipStack::new(levels, clip_size, subtile_size, center_uv);
         let layer_count = stack.layers.len().max(1) as u32;
@@ -137,6 +167,7 @@ impl ClipStackTexture {
             RenderAssetUsages::RENDER_WORLD,
         );
         image.sampler = repeat_sampler(true);
+        image.texture_descriptor.mip_level_count = mips;
         image.texture_descriptor.usage |=
             TextureUsages::COPY_DST | TextureUsages::COPY_SRC | TextureUsages::TEXTURE_BINDING;
         image.texture_view_descriptor = Some(TextureViewDescriptor {
@@ -150,6 +181,7 @@ impl ClipStackTexture {
             layers: images.add(image),
             base,
             linear_filtering: true,
+            layer_mips: mips,
             materials: Vec::new(),
             center_uv,
             budget: UpdateBudget::Subtiles(16),
@@ -169,12 +201,13 @@ impl ClipStackTexture {
         for fix in fixes {
             warn!("ClipmapSettings: {fix}");
         }
-        let mut clip = Self::new(
+        let mut clip = Self::new_with_mips(
             source,
             settings.clip_size,
             settings.subtile_size,
             settings.cache_tiles as usize,
             center_uv,
+            settings.layer_mips,
             images,
         );
         clip.budget = settings.budget;
@@ -267,22 +300,6 @@ pub fn base_level_image(source: &dyn TileSource, clip_size: u32) -> Image {
             }
         }
     }
-    let halve = |data: &[u8], side: u32| -> Vec<u8> {
-        let h = side / 2;
-        let mut out = vec![0u8; (h * h * 4) as usize];
-        for y in 0..h {
-            for x in 0..h {
-                for c in 0..4 {
-                    let at = |dx: u32, dy: u32| {
-                        data[(((2 * y + dy) * side + 2 * x + dx) * 4 + c) as usize] as u32
-                    };
-                    out[((y * h + x) * 4 + c) as usize] =
-                        ((at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1) + 2) / 4) as u8;
-                }
-            }
-        }
-        out
-    };
     let (mut level, mut size) = (texels, side);
     while size > clip_size {
         level = halve(&level, size);
@@ -310,6 +327,25 @@ pub fn base_level_image(source: &dyn TileSource, clip_size: u32) -> Image {
     image.data = Some(data);
     image.sampler = repeat_sampler(true);
     image
+}
+
+/// The 2×2 box filter of a `side × side` RGBA8 square (rounded means of the stored bytes).
+pub fn halve(texels: &[u8], side: u32) -> Vec<u8> {
+    let h = (side / 2).max(1);
+    let mut out = vec![0u8; (h * h * 4) as usize];
+    for y in 0..h {
+        for x in 0..h {
+            for c in 0..4 {
+                let at = |dx: u32, dy: u32| {
+                    texels[(((2 * y + dy).min(side - 1) * side + (2 * x + dx).min(side - 1)) * 4
+                        + c) as usize] as u32
+                };
+                out[((y * h + x) * 4 + c) as usize] =
+                    ((at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1) + 2) / 4) as u8;
+            }
+        }
+    }
+    out
 }
 
 /// The tile holding an upload's subtile, for a source of `tile_size` tiles.
@@ -398,11 +434,25 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
                 upload.subtile[0].rem_euclid(n as i64) as u32,
                 upload.subtile[1].rem_euclid(n as i64) as u32,
             ];
-            clip.writes.push(SubtileWrite {
-                layer: upload.layer as u32 - 1,
-                origin: [slot[0] * s, slot[1] * s],
-                texels: Arc::new(texels),
-            });
+            // Mip 0, then each mip the 2×2 box filter of the one before.
+            let (mut texels, mut size) = (texels, s);
+            for mip in 0..clip.layer_mips {
+                let next = (mip + 1 < clip.layer_mips && size > 1).then(|| halve(&texels, size));
+                clip.writes.push(SubtileWrite {
+                    layer: upload.layer as u32 - 1,
+                    mip,
+                    size,
+                    origin: [(slot[0] * s) >> mip, (slot[1] * s) >> mip],
+                    texels: Arc::new(texels),
+                });
+                match next {
+                    Some(n) => {
+                        texels = n;
+                        size /= 2;
+                    }
+                    None => break,
+                }
+            }
         }
         quality = quality.min(clip.stack.quality() as f64 * 100.0);
         uploaded += clip.writes.len();
@@ -433,7 +483,7 @@ pub const TILE_LATENCY_MS: DiagnosticPath = DiagnosticPath::const_new("terrain/t
 
 /// This frame's subtile writes (render world).
 #[derive(Resource, Default)]
-struct ExtractedClipWrites(Vec<(AssetId<Image>, u32, SubtileWrite)>);
+struct ExtractedClipWrites(Vec<(AssetId<Image>, SubtileWrite)>);
 
 fn extract_clip_writes(
     mut extracted: ResMut<ExtractedClipWrites>,
@@ -442,9 +492,7 @@ fn extract_clip_writes(
     extracted.0.clear();
     for clip in &stacks {
         for write in &clip.writes {
-            extracted
-                .0
-                .push((clip.layers.id(), clip.stack.subtile_size, write.clone()));
+            extracted.0.push((clip.layers.id(), write.clone()));
         }
     }
 }
@@ -454,7 +502,7 @@ fn write_subtiles(
     images: Res<RenderAssets<GpuImage>>,
     queue: Res<RenderQueue>,
 ) {
-    for (image, s, write) in &extracted.0 {
+    for (image, write) in &extracted.0 {
         let Some(gpu) = images.get(*image) else {
             warn!("clip stack texture not prepared yet: a subtile upload was dropped");
             continue;
@@ -462,7 +510,7 @@ fn write_subtiles(
         queue.write_texture(
             TexelCopyTextureInfo {
                 texture: &gpu.texture,
-                mip_level: 0,
+                mip_level: write.mip,
                 origin: Origin3d {
                     x: write.origin[0],
                     y: write.origin[1],
@@ -473,12 +521,12 @@ fn write_subtiles(
             &write.texels,
             TexelCopyBufferLayout {
                 offset: 0,
-                bytes_per_row: Some(s * 4),
-                rows_per_image: Some(*s),
+                bytes_per_row: Some(write.size * 4),
+                rows_per_image: Some(write.size),
             },
             Extent3d {
-                width: *s,
-                height: *s,
+                width: write.size,
+                height: write.size,
                 depth_or_array_layers: 1,
             },
         );

@@ -1,7 +1,8 @@
 //! The clip stack's texture array on the GPU against the pyramid: after streaming settles, every
 //! texel of every layer read back from the GPU equals the texel of the virtual texture that the
 //! layer's toroidal slot holds (computed on the CPU from the source), before and after the
-//! centre moves across the toroidal wrap. Runs on the adapter at hand (software Vulkan in CI;
+//! centre moves across the toroidal wrap; and mip 1 of every slot is the box filter of its
+//! subtile. Runs on the adapter at hand (software Vulkan in CI;
 //! with `CI=true` a missing adapter fails the test).
 
 use bevy::prelude::*;
@@ -16,7 +17,7 @@ use bevy::render::texture::GpuImage;
 use bevy_nature_harness::RenderHarness;
 use bevy_nature_harness::headless::read_buffer_now;
 use bevy_terrain_clip::source::{ProceduralTileSource, address_texel};
-use bevy_terrain_clip::stack_gpu::ClipStackTexture;
+use bevy_terrain_clip::stack_gpu::{ClipStackTexture, halve};
 use bevy_terrain_clip::stack_gpu::{QUALITY, SUBTILES_UPLOADED};
 use bevy_terrain_clip::{ClipmapSettings, TerrainClipPlugin, UpdateBudget};
 use std::sync::Arc;
@@ -24,7 +25,13 @@ use std::sync::Arc;
 const CLIP: u32 = 128;
 const SUBTILE: u32 = 32;
 
-fn read_layers(harness: &mut RenderHarness, image: AssetId<Image>, layers: u32) -> Vec<u8> {
+fn read_layers(
+    harness: &mut RenderHarness,
+    image: AssetId<Image>,
+    layers: u32,
+    mip: u32,
+) -> Vec<u8> {
+    let side = CLIP >> mip;
     let render_world = harness.app().get_sub_app(RenderApp).unwrap().world();
     let device = render_world.resource::<RenderDevice>();
     let queue = render_world.resource::<RenderQueue>();
@@ -32,7 +39,7 @@ fn read_layers(harness: &mut RenderHarness, image: AssetId<Image>, layers: u32) 
         .resource::<RenderAssets<GpuImage>>()
         .get(image)
         .expect("texture array prepared");
-    let size = (CLIP * CLIP * 4 * layers) as u64;
+    let size = (side * side * 4 * layers) as u64;
     let buffer = device.create_buffer(&BufferDescriptor {
         label: Some("clip_stack_readback"),
         size,
@@ -43,7 +50,7 @@ fn read_layers(harness: &mut RenderHarness, image: AssetId<Image>, layers: u32) 
     encoder.copy_texture_to_buffer(
         TexelCopyTextureInfo {
             texture: &gpu.texture,
-            mip_level: 0,
+            mip_level: mip,
             origin: Origin3d::ZERO,
             aspect: TextureAspect::All,
         },
@@ -51,13 +58,13 @@ fn read_layers(harness: &mut RenderHarness, image: AssetId<Image>, layers: u32) 
             buffer: &buffer,
             layout: TexelCopyBufferLayout {
                 offset: 0,
-                bytes_per_row: Some(CLIP * 4),
-                rows_per_image: Some(CLIP),
+                bytes_per_row: Some(side * 4),
+                rows_per_image: Some(side),
             },
         },
         Extent3d {
-            width: CLIP,
-            height: CLIP,
+            width: side,
+            height: side,
             depth_or_array_layers: layers,
         },
     );
@@ -78,7 +85,7 @@ fn settle_and_compare(
         harness.step();
         frames += 1;
         let clip = harness.world_mut().get::<ClipStackTexture>(entity).unwrap();
-        uploaded += clip.writes().len();
+        uploaded += clip.writes().iter().filter(|w| w.mip == 0).count();
         if clip.stack.layers.iter().all(|l| l.complete()) && clip.writes().is_empty() && frames > 1
         {
             break;
@@ -112,10 +119,36 @@ fn settle_and_compare(
             )
         })
         .collect();
-    let data = read_layers(harness, image, layers.len() as u32);
+    let data = read_layers(harness, image, layers.len() as u32, 0);
+    let mip1 = read_layers(harness, image, layers.len() as u32, 1);
+    let half = SUBTILE / 2;
     let mut checked = 0u32;
     for (layer, (level, slots)) in layers.iter().enumerate() {
         for (subtile, origin) in slots {
+            // Mip 1 of the slot: the 2×2 box filter of the subtile's texels.
+            let mut full = Vec::with_capacity((SUBTILE * SUBTILE * 4) as usize);
+            for y in 0..SUBTILE as i64 {
+                for x in 0..SUBTILE as i64 {
+                    full.extend_from_slice(&texel(
+                        *level,
+                        (subtile[0] * SUBTILE as i64 + x) as u64,
+                        (subtile[1] * SUBTILE as i64 + y) as u64,
+                    ));
+                }
+            }
+            let expected_mip1 = halve(&full, SUBTILE);
+            for y in 0..half {
+                for x in 0..half {
+                    let (tx, ty) = (origin[0] / 2 + x, origin[1] / 2 + y);
+                    let i = (((layer as u32 * (CLIP / 2) + ty) * (CLIP / 2) + tx) * 4) as usize;
+                    let j = ((y * half + x) * 4) as usize;
+                    assert_eq!(
+                        &mip1[i..i + 4],
+                        &expected_mip1[j..j + 4],
+                        "mip 1 of layer {layer} at {tx},{ty}"
+                    );
+                }
+            }
             for y in 0..SUBTILE {
                 for x in 0..SUBTILE {
                     let (tx, ty) = (origin[0] + x, origin[1] + y);
@@ -219,20 +252,22 @@ fn several_virtual_textures_stream_at_once() {
     let (imagery, overlay) = {
         let world = harness.world_mut();
         let mut images = world.resource_mut::<Assets<Image>>();
-        let imagery = ClipStackTexture::new(
+        let imagery = ClipStackTexture::new_with_mips(
             Arc::new(ProceduralTileSource::new(64, 6, address_texel)),
             CLIP,
             SUBTILE,
             64,
             [0.2, 0.8],
+            2,
             &mut images,
         );
-        let overlay = ClipStackTexture::new(
+        let overlay = ClipStackTexture::new_with_mips(
             Arc::new(ProceduralTileSource::new(64, 6, overlay_texel)),
             CLIP,
             SUBTILE,
             64,
             [0.7, 0.3],
+            2,
             &mut images,
         );
         drop(images);
