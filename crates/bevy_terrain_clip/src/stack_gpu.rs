@@ -383,6 +383,24 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
         for key in wanted {
             clip.cache.get(key);
         }
+        // Subtiles whose tile is known not to exist settle as absent (coarser layers show there),
+        // so the layer can complete and the finer ones start.
+        for (i, layer) in clip.stack.layers.iter_mut().enumerate() {
+            for subtile in layer.invalid_in_ring_order() {
+                let key = tile_key(
+                    &SubtileUpload {
+                        layer: i + 1,
+                        level: layer.level,
+                        subtile,
+                    },
+                    tile_size,
+                    s,
+                );
+                if clip.cache.is_absent(key) {
+                    layer.set_state(subtile, crate::clip::layer::SlotState::Absent);
+                }
+            }
+        }
         let cache = &mut clip.cache;
         let subtile_bytes = (s * s * 4) as u64;
         let plan = match clip.budget {

@@ -279,3 +279,85 @@ fn several_virtual_textures_stream_at_once() {
     let (b, _) = settle_and_compare(&mut harness, overlay, overlay_texel);
     assert_eq!((a, b), (4 * CLIP * CLIP, 4 * CLIP * CLIP));
 }
+
+/// A source with a hole: the finest pyramid level's tile (x, y) = (23, 19) loads as absent (no
+/// file), like a partial level's edge.
+struct Holey(ProceduralTileSource);
+
+impl bevy_terrain_clip::source::TileSource for Holey {
+    fn tile_size(&self) -> u32 {
+        self.0.tile_size
+    }
+    fn levels(&self) -> u32 {
+        self.0.levels
+    }
+    fn may_exist(&self, key: bevy_terrain_clip::cache::TileKey) -> bool {
+        self.0.may_exist(key)
+    }
+    fn load(
+        &self,
+        key: bevy_terrain_clip::cache::TileKey,
+    ) -> bevy::tasks::BoxedFuture<
+        'static,
+        Result<Option<bevy_terrain_clip::source::TileData>, bevy_terrain_clip::source::TileError>,
+    > {
+        if key.z == 5 && key.x == 23 && key.y == 19 {
+            return Box::pin(async { Ok(None) });
+        }
+        self.0.load(key)
+    }
+}
+
+#[test]
+fn a_missing_tile_falls_back_to_coarser_layers_without_stalling() {
+    let Some(mut harness) = RenderHarness::for_test("clip_stack_gpu_hole", 16, 16) else {
+        return;
+    };
+    harness.app_mut().add_plugins(TerrainClipPlugin);
+    // Centre on the hole: level 11 (2048 texels, 32 tiles a side) texel (23.5·64, 19.5·64).
+    let center = [23.5 * 64.0 / 2048.0, 19.5 * 64.0 / 2048.0];
+    let entity = {
+        let world = harness.world_mut();
+        let mut images = world.resource_mut::<Assets<Image>>();
+        let clip = ClipStackTexture::new(
+            Arc::new(Holey(ProceduralTileSource::new(64, 6, address_texel))),
+            CLIP,
+            SUBTILE,
+            64,
+            center,
+            &mut images,
+        );
+        drop(images);
+        world.spawn(clip).id()
+    };
+    harness.world_mut().spawn(Camera3d::default());
+    harness.wait_until_ready().unwrap();
+    for _ in 0..100 {
+        harness.step();
+    }
+    let clip = harness.world_mut().get::<ClipStackTexture>(entity).unwrap();
+    // Every layer settled: the absent tile did not hold the stack back.
+    assert!(clip.stack.layers.iter().all(|l| l.complete()));
+    let finest = clip.stack.layers.last().unwrap();
+    let absent = finest
+        .slots()
+        .iter()
+        .filter(|s| s.state == bevy_terrain_clip::clip::layer::SlotState::Absent)
+        .count();
+    // The hole is one 64² tile: 2 × 2 subtiles of 32.
+    assert_eq!(absent, 4);
+    // Where the hole is, the finest layer is not used: the shader's choice falls back.
+    let (layer, level, _) =
+        bevy_terrain_clip::clip::stack::finest_covering_layer(&clip.stack, center);
+    assert!(
+        layer < clip.stack.layers.len(),
+        "fell back from the finest layer"
+    );
+    assert!(level < 11);
+    // Coarser layers are complete and valid there.
+    assert!(
+        clip.stack.layers[..clip.stack.layers.len() - 1]
+            .iter()
+            .all(|l| l.valid_fraction() == 1.0)
+    );
+}

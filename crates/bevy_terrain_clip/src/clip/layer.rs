@@ -20,6 +20,9 @@ pub enum SlotState {
     Pending,
     /// Holds its subtile's data.
     Valid,
+    /// Its subtile does not exist in the pyramid (outside a partial level): nothing to fetch,
+    /// and the shader falls back to a coarser layer there.
+    Absent,
 }
 
 /// One slot of the layer texture.
@@ -167,17 +170,20 @@ impl LayerState {
         invalid
     }
 
-    /// Whether every slot is valid.
+    /// Whether every slot is settled: valid, or absent from the pyramid (so the next finer layer
+    /// may start).
     pub fn complete(&self) -> bool {
-        self.slots.iter().all(|s| s.state == SlotState::Valid)
+        self.slots
+            .iter()
+            .all(|s| matches!(s.state, SlotState::Valid | SlotState::Absent))
     }
 
-    /// Fraction of valid slots.
+    /// Fraction of valid slots (absent ones count as valid: there is nothing to hold).
     pub fn valid_fraction(&self) -> f32 {
         let valid = self
             .slots
             .iter()
-            .filter(|s| s.state == SlotState::Valid)
+            .filter(|s| matches!(s.state, SlotState::Valid | SlotState::Absent))
             .count();
         valid as f32 / self.slots.len() as f32
     }
@@ -295,6 +301,23 @@ mod tests {
         // Data for a subtile that left the window is refused.
         layer.recenter([80, 80]);
         assert!(!layer.set_state([50, 50], SlotState::Valid));
+    }
+
+    #[test]
+    fn absent_subtiles_settle_the_layer_but_bound_its_coverage() {
+        let mut layer = LayerState::new(10, 8, 1 << 10, [50, 50]);
+        for s in layer.invalid_in_ring_order() {
+            let state = if s == [52, 50] {
+                SlotState::Absent
+            } else {
+                SlotState::Valid
+            };
+            layer.set_state(s, state);
+        }
+        assert!(layer.complete(), "nothing left to fetch");
+        assert!(layer.invalid_in_ring_order().is_empty());
+        // Ring 2 holds the absent subtile: the shader may use this layer only within ring 1.
+        assert_eq!(layer.coverage_ring(), Some(1));
     }
 
     #[test]
