@@ -108,7 +108,7 @@ impl DiskTileSource {
     }
 }
 
-/// Decodes tile bytes (PNG) into RGBA8, checking the size.
+/// Decodes tile bytes (PNG, JPEG or WebP, recognised by content) into RGBA8, checking the size.
 pub fn decode_tile(bytes: &[u8], path: &Path, tile_size: u32) -> Result<TileData, TileError> {
     let image = image::load_from_memory(bytes)
         .map_err(|e| TileError::Decode(path.to_path_buf(), e.to_string()))?
@@ -383,6 +383,41 @@ mod tests {
             .unwrap();
         assert!(diff < 60, "{fine:?} vs {coarse:?}");
         assert_eq!(fine[3], 255);
+    }
+
+    #[test]
+    fn jpeg_and_webp_tiles_decode() {
+        let size = 16;
+        let image = image::RgbaImage::from_fn(size, size, |x, y| {
+            image::Rgba([(x * 16) as u8, (y * 16) as u8, 128, 255])
+        });
+        let rgb = image::DynamicImage::ImageRgba8(image.clone()).to_rgb8();
+        let mut jpeg = Vec::new();
+        rgb.write_to(
+            &mut std::io::Cursor::new(&mut jpeg),
+            image::ImageFormat::Jpeg,
+        )
+        .unwrap();
+        let mut webp = Vec::new();
+        image
+            .write_to(
+                &mut std::io::Cursor::new(&mut webp),
+                image::ImageFormat::WebP,
+            )
+            .unwrap();
+        let path = Path::new("t");
+        // JPEG is lossy: within a few levels; WebP (lossless here) exact.
+        let j = decode_tile(&jpeg, path, size).unwrap();
+        assert!(
+            j.rgba
+                .iter()
+                .zip(image.as_raw())
+                .all(|(a, b)| (*a as i32 - *b as i32).abs() <= 12)
+        );
+        assert_eq!(
+            decode_tile(&webp, path, size).unwrap().rgba,
+            *image.as_raw()
+        );
     }
 
     #[test]
