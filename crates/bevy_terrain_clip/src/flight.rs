@@ -13,7 +13,7 @@
 //! alone: GPU upload time is represented by the subtile budget (the paper's 1 ms per frame).
 
 use crate::cache::{LruCache, TileKey, TileRequests};
-use crate::clip::stack::{ClipStack, SubtileUpload};
+use crate::clip::stack::{ClipStack, SubtileUpload, tile_of};
 use std::collections::HashMap;
 
 /// A disk: each tile takes `latency_ms` plus its size over the bandwidth, one at a time.
@@ -101,16 +101,6 @@ pub struct FlightReport {
     pub upload_mb_s: f64,
     /// Disk traffic (MB/s).
     pub disk_mb_s: f64,
-}
-
-/// The tile holding `upload`'s subtile (subtiles are no larger than tiles).
-pub fn tile_of(upload: &SubtileUpload, tile_size: u32, subtile_size: u32) -> TileKey {
-    let per_tile = (tile_size / subtile_size) as i64;
-    TileKey {
-        z: upload.level - tile_size.trailing_zeros(),
-        x: upload.subtile[0].div_euclid(per_tile) as u32,
-        y: upload.subtile[1].div_euclid(per_tile) as u32,
-    }
 }
 
 /// Flies `config` and reports table 1's figures.

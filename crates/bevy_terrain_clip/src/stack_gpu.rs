@@ -9,7 +9,7 @@
 //! layer lives at array texel `t mod c`, so the material samples with Repeat addressing.
 
 use crate::cache::TileKey;
-use crate::clip::stack::{ClipStack, SubtileUpload};
+use crate::clip::stack::{ClipStack, SubtileUpload, tile_of};
 use crate::settings::{ClipmapSettings, UpdateBudget};
 use crate::source::TileSource;
 use crate::tile_cache::TileCache;
@@ -348,11 +348,6 @@ pub fn halve(texels: &[u8], side: u32) -> Vec<u8> {
     out
 }
 
-/// The tile holding an upload's subtile, for a source of `tile_size` tiles.
-fn tile_key(upload: &SubtileUpload, tile_size: u32, subtile_size: u32) -> TileKey {
-    crate::flight::tile_of(upload, tile_size, subtile_size)
-}
-
 /// Recentres every clip stack, polls its tile cache and queues this frame's subtile uploads.
 pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnostics: Diagnostics) {
     let (mut quality, mut uploaded, mut loaded, mut latency, mut failed) =
@@ -365,39 +360,21 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
         clip.cache.poll();
         let tile_size = clip.cache.source().tile_size();
         let s = clip.stack.subtile_size;
-        // Ask for every missing subtile's tile (the queue serves the coarsest first).
-        let mut wanted = Vec::new();
-        for (i, layer) in clip.stack.layers.iter().enumerate() {
-            for subtile in layer.invalid_in_ring_order() {
-                wanted.push(tile_key(
-                    &SubtileUpload {
-                        layer: i + 1,
-                        level: layer.level,
-                        subtile,
-                    },
-                    tile_size,
-                    s,
-                ));
-            }
-        }
-        for key in wanted {
-            clip.cache.get(key);
-        }
-        // Subtiles whose tile is known not to exist settle as absent (coarser layers show there),
-        // so the layer can complete and the finer ones start.
+        // One pass over every layer's missing subtiles: a subtile whose tile is known not to
+        // exist settles as absent (coarser layers show there, and the layer can complete so the
+        // finer ones start); the others ask for their tile (the queue serves the coarsest first).
         for (i, layer) in clip.stack.layers.iter_mut().enumerate() {
             for subtile in layer.invalid_in_ring_order() {
-                let key = tile_key(
-                    &SubtileUpload {
-                        layer: i + 1,
-                        level: layer.level,
-                        subtile,
-                    },
-                    tile_size,
-                    s,
-                );
+                let upload = SubtileUpload {
+                    layer: i + 1,
+                    level: layer.level,
+                    subtile,
+                };
+                let key = tile_of(&upload, tile_size, s);
                 if clip.cache.is_absent(key) {
                     layer.set_state(subtile, crate::clip::layer::SlotState::Absent);
+                } else {
+                    clip.cache.get(key);
                 }
             }
         }
@@ -406,11 +383,11 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
         let plan = match clip.budget {
             UpdateBudget::Subtiles(n) => clip
                 .stack
-                .plan_available(n, |u| cache.contains(tile_key(u, tile_size, s))),
+                .plan_available(n, |u| cache.contains(tile_of(u, tile_size, s))),
             UpdateBudget::Bytes(b) => clip
                 .stack
                 .plan_available((b / subtile_bytes).clamp(1, u32::MAX as u64) as u32, |u| {
-                    cache.contains(tile_key(u, tile_size, s))
+                    cache.contains(tile_of(u, tile_size, s))
                 }),
             UpdateBudget::Millis(ms) => {
                 // One subtile at a time until the time is spent (at least one per frame).
@@ -419,7 +396,7 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
                 loop {
                     let next = clip
                         .stack
-                        .plan_available(1, |u| cache.contains(tile_key(u, tile_size, s)));
+                        .plan_available(1, |u| cache.contains(tile_of(u, tile_size, s)));
                     if next.is_empty() {
                         break;
                     }
@@ -433,7 +410,7 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
         };
         let n = clip.stack.clip_size / s;
         for upload in plan {
-            let key = tile_key(&upload, tile_size, s);
+            let key = tile_of(&upload, tile_size, s);
             let Some(tile) = clip.cache.get(key) else {
                 continue;
             };

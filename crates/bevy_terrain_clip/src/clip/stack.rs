@@ -183,6 +183,16 @@ pub fn center_subtile(uv: [f64; 2], level: u32, subtile_size: u32) -> Subtile {
     ]
 }
 
+/// The tile holding `upload`'s subtile (subtiles are no larger than tiles).
+pub fn tile_of(upload: &SubtileUpload, tile_size: u32, subtile_size: u32) -> crate::cache::TileKey {
+    let per_tile = (tile_size / subtile_size) as i64;
+    crate::cache::TileKey {
+        z: upload.level - tile_size.trailing_zeros(),
+        x: upload.subtile[0].div_euclid(per_tile) as u32,
+        y: upload.subtile[1].div_euclid(per_tile) as u32,
+    }
+}
+
 /// CPU reference of the shader's choice: the finest windowed layer whose coverage holds virtual
 /// coordinates `uv`, as `(layer index, level, level texel)`; layer 0 (the base level, always
 /// resident) otherwise.
