@@ -7,6 +7,7 @@
 //! cargo run --release --example terrain            # windowed: the panel shows terrain/* counters
 //! cargo run --example terrain -- --headless --frames 60 --stats terrain.json
 //! cargo run --example terrain -- --pyramid path/to/pyramid
+//! cargo run --example terrain -- --headless --budget-ms 1 --stats t.json  # time budget
 //! ```
 
 use bevy::math::DVec2;
@@ -36,11 +37,22 @@ struct Patch {
 
 fn main() -> AppExit {
     let mut pyramid = None;
+    let mut budget = UpdateBudget::Subtiles(16);
     let mut rest = Vec::new();
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         if arg == "--pyramid" {
             pyramid = Some(args.next().unwrap_or_default());
+        } else if arg == "--budget-ms" || arg == "--budget-subtiles" {
+            let value = args.next().unwrap_or_default();
+            budget = match (arg.as_str(), value.parse::<f32>()) {
+                ("--budget-ms", Ok(ms)) => UpdateBudget::Millis(ms),
+                (_, Ok(n)) => UpdateBudget::Subtiles(n as u32),
+                _ => {
+                    eprintln!("{arg} takes a number, not '{value}'");
+                    std::process::exit(2)
+                }
+            };
         } else {
             rest.push(arg);
         }
@@ -71,7 +83,7 @@ fn main() -> AppExit {
         }
     };
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
-        eprintln!("{e} [--pyramid DIR]");
+        eprintln!("{e} [--pyramid DIR] [--budget-ms F | --budget-subtiles N]");
         std::process::exit(2)
     });
     ExampleRunner::with_args("terrain", args)
@@ -80,7 +92,7 @@ fn main() -> AppExit {
             app.add_plugins(bevy_nature::NaturePlugins)
                 .insert_resource(ClearColor(Color::srgb(0.62, 0.74, 0.9)))
                 .insert_resource(ClipmapSettings {
-                    budget: UpdateBudget::Subtiles(16),
+                    budget,
                     ..default()
                 })
                 .insert_resource(terrain)

@@ -3,6 +3,12 @@
 //! level's tiles, and every coarser tile is the 2×2 box filter of its four children — the exact
 //! average for a halving, which is what a mip chain of the whole image would hold.
 //!
+//! Two texel formats: 8-bit RGBA imagery ([`image::RgbaImage`]) and 16-bit heightmaps
+//! ([`image::ImageBuffer`] of [`image::Luma<u16>`], written as 16-bit grayscale PNG tiles, the
+//! manifest saying `"texel": "height16"`). Heights beyond the image's edges are 0. Averaging
+//! heights is the right prefilter for a geometry LoD (a coarser level is the mean surface), and
+//! the sums are taken in 32 bits so no precision is lost before the one rounding per level.
+//!
 //! Tiles are built depth-first (a few tiles in memory at a time, whatever the image size) and
 //! written atomically (temporary file, then rename), the manifest last. An interrupted build
 //! resumes: tiles already on disk that decode at the right size are reused, anything else
@@ -10,9 +16,88 @@
 //! files as an uninterrupted one.
 
 use crate::cache::TileKey;
-use crate::pyramid::{MANIFEST, PyramidManifest, TileScheme};
+use crate::pyramid::{MANIFEST, PyramidManifest, TexelFormat, TileScheme};
 use crate::source::decode_tile;
+use image::{ImageBuffer, Pixel, PixelWithColorType};
 use std::path::{Path, PathBuf};
+
+/// A texel type a pyramid can be built of: 8-bit RGBA imagery or 16-bit heights.
+pub trait PyramidTexel: Pixel<Subpixel = Self::Channel> + PixelWithColorType + 'static {
+    /// The channel type (`u8` or `u16`).
+    type Channel: Copy + Into<u32> + TryFrom<u32> + Default;
+    /// What the manifest records.
+    const FORMAT: TexelFormat;
+    /// Decodes a tile written earlier, if it is one of this format at `tile_size`.
+    fn decode(
+        bytes: &[u8],
+        path: &Path,
+        tile_size: u32,
+    ) -> Option<ImageBuffer<Self, Vec<Self::Channel>>>;
+    /// PNG bytes of a tile.
+    fn encode(tile: &ImageBuffer<Self, Vec<Self::Channel>>) -> image::ImageResult<Vec<u8>>;
+}
+
+fn png_bytes<P: Pixel + PixelWithColorType>(
+    tile: &ImageBuffer<P, Vec<P::Subpixel>>,
+) -> image::ImageResult<Vec<u8>>
+where
+    [P::Subpixel]: image::EncodableLayout,
+{
+    let mut bytes = Vec::new();
+    tile.write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )?;
+    Ok(bytes)
+}
+
+impl PyramidTexel for image::Rgba<u8> {
+    type Channel = u8;
+    const FORMAT: TexelFormat = TexelFormat::Rgba8;
+    fn decode(bytes: &[u8], path: &Path, tile_size: u32) -> Option<image::RgbaImage> {
+        let tile = decode_tile(bytes, path, tile_size).ok()?;
+        image::RgbaImage::from_raw(tile_size, tile_size, tile.rgba)
+    }
+    fn encode(tile: &image::RgbaImage) -> image::ImageResult<Vec<u8>> {
+        png_bytes(tile)
+    }
+}
+
+impl PyramidTexel for image::Luma<u16> {
+    type Channel = u16;
+    const FORMAT: TexelFormat = TexelFormat::Height16;
+    fn decode(bytes: &[u8], _path: &Path, tile_size: u32) -> Option<ImageBuffer<Self, Vec<u16>>> {
+        // Only a 16-bit grayscale tile counts: an 8-bit one would lose the heights' precision.
+        match image::load_from_memory(bytes).ok()? {
+            image::DynamicImage::ImageLuma16(tile)
+                if tile.width() == tile_size && tile.height() == tile_size =>
+            {
+                Some(tile)
+            }
+            _ => None,
+        }
+    }
+    fn encode(tile: &ImageBuffer<Self, Vec<u16>>) -> image::ImageResult<Vec<u8>> {
+        png_bytes(tile)
+    }
+}
+
+/// The 2×2 box filter of four texels, rounded to nearest.
+fn box_filter<P: PyramidTexel>(texels: [&P; 4]) -> P {
+    let n = P::CHANNEL_COUNT as usize;
+    let mut sum = [0u32; 4];
+    for t in texels {
+        for (c, v) in t.channels().iter().enumerate() {
+            sum[c] += (*v).into();
+        }
+    }
+    let mut out = [P::Channel::default(); 4];
+    for c in 0..n {
+        // The mean of four channel values fits the channel.
+        out[c] = P::Channel::try_from((sum[c] + 2) / 4).unwrap_or_default();
+    }
+    *P::from_slice(&out[..n])
+}
 
 /// How to build.
 #[derive(Clone, Debug, PartialEq)]
@@ -76,8 +161,8 @@ pub struct BuildReport {
     pub reused: usize,
 }
 
-struct Builder<'a> {
-    image: &'a image::RgbaImage,
+struct Builder<'a, P: PyramidTexel> {
+    image: &'a ImageBuffer<P, Vec<P::Channel>>,
     dir: &'a Path,
     manifest: PyramidManifest,
     report: BuildReport,
@@ -106,26 +191,23 @@ fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), BuildError> {
     std::fs::rename(&tmp, path).map_err(io)
 }
 
-fn encode_png(tile: &image::RgbaImage, path: &Path) -> Result<Vec<u8>, BuildError> {
-    let mut bytes = Vec::new();
-    tile.write_to(
-        &mut std::io::Cursor::new(&mut bytes),
-        image::ImageFormat::Png,
-    )
-    .map_err(|e| BuildError::Io(path.to_path_buf(), std::io::Error::other(e)))?;
-    Ok(bytes)
+fn encode_png<P: PyramidTexel>(
+    tile: &ImageBuffer<P, Vec<P::Channel>>,
+    path: &Path,
+) -> Result<Vec<u8>, BuildError> {
+    P::encode(tile).map_err(|e| BuildError::Io(path.to_path_buf(), std::io::Error::other(e)))
 }
 
-impl Builder<'_> {
-    /// The tile at `path` if it is on disk and decodes at the right size.
-    fn on_disk(&self, path: &Path) -> Option<image::RgbaImage> {
-        let t = self.manifest.tile_size;
+type Tile<P> = ImageBuffer<P, Vec<<P as PyramidTexel>::Channel>>;
+
+impl<P: PyramidTexel> Builder<'_, P> {
+    /// The tile at `path` if it is on disk and decodes at the right size and format.
+    fn on_disk(&self, path: &Path) -> Option<Tile<P>> {
         let bytes = std::fs::read(path).ok()?;
-        let tile = decode_tile(&bytes, path, t).ok()?;
-        image::RgbaImage::from_raw(t, t, tile.rgba)
+        P::decode(&bytes, path, self.manifest.tile_size)
     }
 
-    fn reuse(&mut self, tile: image::RgbaImage) -> image::RgbaImage {
+    fn reuse(&mut self, tile: Tile<P>) -> Tile<P> {
         self.report.reused += 1;
         (self.progress)(self.report.reused + self.report.written, self.report.tiles);
         tile
@@ -133,7 +215,7 @@ impl Builder<'_> {
 
     /// Builds (or reuses) tile `key` and returns its texels. Children are always visited first,
     /// so a resumed build checks every tile, not only the ones under a missing parent.
-    fn tile(&mut self, key: TileKey) -> Result<image::RgbaImage, BuildError> {
+    fn tile(&mut self, key: TileKey) -> Result<Tile<P>, BuildError> {
         let t = self.manifest.tile_size;
         let path = self.manifest.tile_path(self.dir, key);
         let finest = self.manifest.levels - 1;
@@ -141,7 +223,7 @@ impl Builder<'_> {
             if let Some(tile) = self.on_disk(&path) {
                 return Ok(self.reuse(tile));
             }
-            let mut tile = image::RgbaImage::new(t, t);
+            let mut tile = Tile::<P>::new(t, t);
             for y in 0..t {
                 for x in 0..t {
                     let (sx, sy) = (key.x * t + x, key.y * t + y);
@@ -164,23 +246,14 @@ impl Builder<'_> {
             if let Some(tile) = self.on_disk(&path) {
                 return Ok(self.reuse(tile));
             }
-            let mut tile = image::RgbaImage::new(t, t);
+            let mut tile = Tile::<P>::new(t, t);
             let half = t / 2;
             for ((dx, dy), child) in &children {
                 for y in 0..half {
                     for x in 0..half {
-                        let mut sum = [0u32; 4];
-                        for (ox, oy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                            let p = child.get_pixel(2 * x + ox, 2 * y + oy).0;
-                            for c in 0..4 {
-                                sum[c] += p[c] as u32;
-                            }
-                        }
-                        tile.put_pixel(
-                            dx * half + x,
-                            dy * half + y,
-                            image::Rgba(sum.map(|s| ((s + 2) / 4) as u8)),
-                        );
+                        let texel = |ox, oy| child.get_pixel(2 * x + ox, 2 * y + oy);
+                        let mean = box_filter([texel(0, 0), texel(1, 0), texel(0, 1), texel(1, 1)]);
+                        tile.put_pixel(dx * half + x, dy * half + y, mean);
                     }
                 }
             }
@@ -196,11 +269,12 @@ impl Builder<'_> {
     }
 }
 
-/// Builds (or resumes building) the pyramid of `image` in `dir`. `progress(done, total)` is
+/// Builds (or resumes building) the pyramid of `image` in `dir`: an [`image::RgbaImage`] gives
+/// imagery, an `ImageBuffer<Luma<u16>, _>` a heightmap pyramid. `progress(done, total)` is
 /// called after every tile; `stop_after` interrupts the build after that many newly written
 /// tiles (for tests of resuming).
-pub fn build_pyramid(
-    image: &image::RgbaImage,
+pub fn build_pyramid<P: PyramidTexel>(
+    image: &ImageBuffer<P, Vec<P::Channel>>,
     dir: &Path,
     settings: &BuildSettings,
     progress: &dyn Fn(usize, usize),
@@ -216,6 +290,7 @@ pub fn build_pyramid(
         origin_m: settings.origin_m,
         metres_per_texel: settings.metres_per_texel,
         partial_levels: Vec::new(),
+        texel: P::FORMAT,
     };
     let problems = manifest.problems();
     if !problems.is_empty() {
@@ -315,6 +390,63 @@ mod tests {
                 "{got:?} vs {expected:?}"
             );
         }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_16_bit_heightmap_builds_a_16_bit_pyramid() {
+        let dir = std::env::temp_dir().join(format!("pyramid_height_{}", std::process::id()));
+        std::fs::remove_dir_all(&dir).ok();
+        // Heights using all 16 bits: any 8-bit step would show as an error of ≥ 257.
+        let heights = ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(130, 100, |x, y| {
+            image::Luma([(x * 503 + y * 97 + (x * y) % 13) as u16])
+        });
+        let settings = BuildSettings {
+            tile_size: 32,
+            ..Default::default()
+        };
+        let report = build_pyramid(&heights, &dir, &settings, &|_, _| {}, None).unwrap();
+        // 130 × 100 in 32² tiles: a 256² square, 4 levels.
+        assert_eq!((report.levels, report.tiles), (4, 85));
+        let manifest: PyramidManifest =
+            serde_json::from_slice(&std::fs::read(dir.join(MANIFEST)).unwrap()).unwrap();
+        assert_eq!(manifest.texel, TexelFormat::Height16);
+        let load = |z: u32, x: u32, y: u32| {
+            let path = dir.join(format!("{z}/{x}/{y}.png"));
+            <image::Luma<u16>>::decode(&std::fs::read(&path).unwrap(), &path, 32)
+                .expect("a 16-bit grayscale tile")
+        };
+        // Finest level: the heights themselves, exactly; 0 beyond the image.
+        assert_eq!(
+            load(3, 2, 1).get_pixel(5, 7).0[0],
+            heights.get_pixel(69, 39).0[0]
+        );
+        assert_eq!(load(3, 7, 7).get_pixel(0, 0).0[0], 0);
+        // Level 1 texel (3, 2) is the mean of the 4×4 block at (12, 8) within one step.
+        let mut sum = 0u32;
+        for y in 8..12 {
+            for x in 12..16 {
+                sum += heights.get_pixel(x, y).0[0] as u32;
+            }
+        }
+        let got = load(1, 0, 0).get_pixel(3, 2).0[0] as f64;
+        assert!(
+            (got - sum as f64 / 16.0).abs() <= 1.0,
+            "{got} vs {}",
+            sum as f64 / 16.0
+        );
+        // An imagery build does not mistake these tiles for its own: they are rebuilt.
+        let as_rgba = <image::Rgba<u8>>::decode(
+            &std::fs::read(dir.join("3/2/1.png")).unwrap(),
+            Path::new("x"),
+            32,
+        );
+        assert!(
+            as_rgba.is_some(),
+            "gray tiles still decode as imagery (shown as gray)"
+        );
+        let again = build_pyramid(&heights, &dir, &settings, &|_, _| {}, None).unwrap();
+        assert_eq!((again.written, again.reused), (0, 85));
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -16,7 +16,8 @@
 //!   "levels": 12,
 //!   "origin_m": [500000.0, 4000000.0],
 //!   "metres_per_texel": 0.25,
-//!   "partial_levels": [{ "z": 11, "min": [300, 410], "max": [420, 530] }]
+//!   "partial_levels": [{ "z": 11, "min": [300, 410], "max": [420, 530] }],
+//!   "texel": "rgba8"
 //! }
 //! ```
 //! `origin_m` is the world (x, z) of the texture's north-west corner, in f64 (real projected
@@ -50,6 +51,17 @@ pub struct PartialLevel {
     pub max: [u32; 2],
 }
 
+/// What a pyramid's texels are.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TexelFormat {
+    /// 8-bit RGBA imagery (what the clip stack streams).
+    #[default]
+    Rgba8,
+    /// 16-bit single-channel heights (16-bit grayscale PNG tiles), for terrain geometry.
+    Height16,
+}
+
 /// A pyramid's manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PyramidManifest {
@@ -70,6 +82,9 @@ pub struct PyramidManifest {
     /// Levels with only some tiles.
     #[serde(default)]
     pub partial_levels: Vec<PartialLevel>,
+    /// Texel format (`rgba8` when absent).
+    #[serde(default)]
+    pub texel: TexelFormat,
 }
 
 /// Why a manifest was rejected.
@@ -217,6 +232,7 @@ mod tests {
                 min: [4, 8],
                 max: [12, 16],
             }],
+            texel: TexelFormat::Rgba8,
         }
     }
 

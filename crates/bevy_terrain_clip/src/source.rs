@@ -329,6 +329,7 @@ mod tests {
             origin_m: [0.0, 0.0],
             metres_per_texel: 1.0,
             partial_levels: Vec::new(),
+            texel: Default::default(),
         };
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(

@@ -25,6 +25,32 @@ use bevy::render::renderer::RenderQueue;
 use bevy::render::texture::GpuImage;
 use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderSystems};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// The render world's cost of writing subtiles, shared with the main world so a
+/// [`UpdateBudget::Millis`] budget covers the whole upload: cutting and mip-filtering subtiles
+/// (main world, timed as it goes) and `write_texture` (render world, timed last frame and charged
+/// per subtile from its running mean).
+#[derive(Resource, Clone, Default)]
+pub struct UploadCost(Arc<UploadCostInner>);
+
+#[derive(Default)]
+struct UploadCostInner {
+    /// Nanoseconds spent in `write_texture` by the last render frame.
+    last_write_ns: AtomicU64,
+    /// Subtiles (all mips of one slot) written by the last render frame.
+    last_subtiles: AtomicU64,
+}
+
+impl UploadCost {
+    /// The last render frame's `write_texture` time (ms) and the subtiles it wrote.
+    pub fn last_write(&self) -> (f64, u64) {
+        (
+            self.0.last_write_ns.load(Ordering::Relaxed) as f64 / 1.0e6,
+            self.0.last_subtiles.load(Ordering::Relaxed),
+        )
+    }
+}
 
 /// One subtile's texels on their way to the GPU.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -116,6 +142,8 @@ pub struct ClipStackTexture {
     /// Where the texture lies in the world; with one, the centre of detail follows the camera.
     pub mapping: Option<TextureMapping>,
     writes: Vec<SubtileWrite>,
+    /// Running mean of the main world's cost of cutting one subtile and its mips (ms).
+    prepare_ms_per_subtile: f64,
 }
 
 impl ClipStackTexture {
@@ -187,6 +215,7 @@ impl ClipStackTexture {
             budget: UpdateBudget::Subtiles(16),
             mapping: None,
             writes: Vec::new(),
+            prepare_ms_per_subtile: 0.0,
         }
     }
 
@@ -349,9 +378,26 @@ pub fn halve(texels: &[u8], side: u32) -> Vec<u8> {
 }
 
 /// Recentres every clip stack, polls its tile cache and queues this frame's subtile uploads.
-pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnostics: Diagnostics) {
+pub fn stream_clip_stacks(
+    mut stacks: Query<&mut ClipStackTexture>,
+    cost: Res<UploadCost>,
+    mut write_ms_per_subtile: Local<Option<f64>>,
+    mut diagnostics: Diagnostics,
+) {
     let (mut quality, mut uploaded, mut loaded, mut latency, mut failed) =
         (f64::INFINITY, 0usize, 0u64, 0.0f64, 0u64);
+    // Running mean of the render world's write time per subtile (learned from the frames that
+    // wrote some); charged to the millisecond budget for every subtile planned.
+    let (write_ms, written) = cost.last_write();
+    if written > 0 {
+        let sample = write_ms / written as f64;
+        *write_ms_per_subtile = Some(match *write_ms_per_subtile {
+            Some(mean) => 0.9 * mean + 0.1 * sample,
+            None => sample,
+        });
+    }
+    let write_estimate_ms = write_ms_per_subtile.unwrap_or(0.0);
+    let mut prepare_ms = 0.0f64;
     for mut clip in &mut stacks {
         let started = std::time::Instant::now();
         let clip = &mut *clip;
@@ -390,9 +436,12 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
                     cache.contains(tile_of(u, tile_size, s))
                 }),
             UpdateBudget::Millis(ms) => {
-                // One subtile at a time until the time is spent (at least one per frame).
+                // One subtile at a time until the time is spent (at least one per frame): the
+                // time so far, the cutting and mip filtering of the planned subtiles (measured
+                // per subtile below, so estimated from the last frame's mean) and their
+                // render-world writes.
                 let mut plan = Vec::new();
-                let limit = std::time::Duration::from_secs_f32(ms.max(0.0) / 1000.0);
+                let per_subtile = write_estimate_ms + clip.prepare_ms_per_subtile;
                 loop {
                     let next = clip
                         .stack
@@ -401,7 +450,9 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
                         break;
                     }
                     plan.extend(next);
-                    if started.elapsed() >= limit {
+                    let spent =
+                        started.elapsed().as_secs_f64() * 1000.0 + plan.len() as f64 * per_subtile;
+                    if spent >= ms.max(0.0) as f64 {
                         break;
                     }
                 }
@@ -409,6 +460,8 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
             }
         };
         let n = clip.stack.clip_size / s;
+        let prepare_started = std::time::Instant::now();
+        let planned = plan.len();
         for upload in plan {
             let key = tile_of(&upload, tile_size, s);
             let Some(tile) = clip.cache.get(key) else {
@@ -449,8 +502,18 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
                 }
             }
         }
+        if planned > 0 {
+            let ms = prepare_started.elapsed().as_secs_f64() * 1000.0;
+            prepare_ms += ms;
+            let sample = ms / planned as f64;
+            clip.prepare_ms_per_subtile = if clip.prepare_ms_per_subtile > 0.0 {
+                0.9 * clip.prepare_ms_per_subtile + 0.1 * sample
+            } else {
+                sample
+            };
+        }
         quality = quality.min(clip.stack.quality() as f64 * 100.0);
-        uploaded += clip.writes.len();
+        uploaded += planned;
         loaded += clip.cache.stats.loaded;
         failed += clip.cache.stats.failed;
         latency = latency.max(clip.cache.stats.latency_avg_ms);
@@ -461,12 +524,29 @@ pub fn stream_clip_stacks(mut stacks: Query<&mut ClipStackTexture>, mut diagnost
         diagnostics.add_measurement(&TILES_LOADED, || loaded as f64);
         diagnostics.add_measurement(&TILES_FAILED, || failed as f64);
         diagnostics.add_measurement(&TILE_LATENCY_MS, || latency);
+        // This frame's cutting and filtering plus the last render frame's writes.
+        diagnostics.add_measurement(&UPLOAD_MS, || prepare_ms + write_ms);
+        let per_subtile = write_estimate_ms
+            + stacks
+                .iter()
+                .map(|c| c.prepare_ms_per_subtile)
+                .fold(0.0, f64::max);
+        if per_subtile > 0.0 {
+            diagnostics.add_measurement(&UPLOAD_MS_PER_SUBTILE, || per_subtile);
+        }
     }
 }
 
 /// Share of the clip stack holding valid data (%, the worst stack).
 pub const QUALITY: DiagnosticPath = DiagnosticPath::const_new("terrain/stack_valid_percent");
-/// Subtiles uploaded this frame.
+/// CPU time of texture updates (ms): this frame's subtile cutting and mip filtering plus the
+/// last render frame's `write_texture` calls, all clip stacks together.
+pub const UPLOAD_MS: DiagnosticPath = DiagnosticPath::const_new("terrain/upload_ms");
+/// Running mean CPU cost of one subtile's update (ms): cutting, mip filtering and writing.
+/// `1 / this` is how many subtiles a [`UpdateBudget::Millis`]`(1.0)` budget buys.
+pub const UPLOAD_MS_PER_SUBTILE: DiagnosticPath =
+    DiagnosticPath::const_new("terrain/upload_ms_per_subtile");
+/// Subtiles uploaded this frame (each with its mips).
 pub const SUBTILES_UPLOADED: DiagnosticPath =
     DiagnosticPath::const_new("terrain/subtiles_uploaded");
 /// Tiles loaded since start.
@@ -496,7 +576,10 @@ fn write_subtiles(
     extracted: Res<ExtractedClipWrites>,
     images: Res<RenderAssets<GpuImage>>,
     queue: Res<RenderQueue>,
+    cost: Res<UploadCost>,
 ) {
+    let started = std::time::Instant::now();
+    let subtiles = extracted.0.iter().filter(|(_, w)| w.mip == 0).count();
     for (image, write) in &extracted.0 {
         let Some(gpu) = images.get(*image) else {
             warn!("clip stack texture not prepared yet: a subtile upload was dropped");
@@ -526,6 +609,12 @@ fn write_subtiles(
             },
         );
     }
+    cost.0
+        .last_write_ns
+        .store(started.elapsed().as_nanos() as u64, Ordering::Relaxed);
+    cost.0
+        .last_subtiles
+        .store(subtiles as u64, Ordering::Relaxed);
 }
 
 /// Registers the clip stack streaming.
@@ -536,6 +625,8 @@ pub(crate) fn build(app: &mut App) {
         TILES_LOADED,
         TILES_FAILED,
         TILE_LATENCY_MS,
+        UPLOAD_MS,
+        UPLOAD_MS_PER_SUBTILE,
     ] {
         app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
     }
@@ -545,10 +636,13 @@ pub(crate) fn build(app: &mut App) {
             .chain()
             .after(bevy::transform::TransformSystems::Propagate),
     );
+    let cost = UploadCost::default();
+    app.insert_resource(cost.clone());
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
     render_app
+        .insert_resource(cost)
         .init_resource::<ExtractedClipWrites>()
         .add_systems(ExtractSchedule, extract_clip_writes)
         .add_systems(

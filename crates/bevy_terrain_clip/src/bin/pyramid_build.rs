@@ -3,8 +3,10 @@
 //!
 //! ```text
 //! cargo run --release -p bevy_terrain_clip --bin pyramid_build -- IMAGE.png OUT_DIR
-//!     [--tile 512] [--scheme xyz|tms] [--origin X,Z] [--metres-per-texel F]
+//!     [--tile 512] [--scheme xyz|tms] [--origin X,Z] [--metres-per-texel F] [--height]
 //! ```
+//! A 16-bit grayscale image (or any image with `--height`) builds a 16-bit heightmap pyramid;
+//! anything else builds 8-bit RGBA imagery.
 
 use bevy_terrain_clip::builder::{BuildSettings, build_pyramid};
 use bevy_terrain_clip::pyramid::TileScheme;
@@ -12,7 +14,7 @@ use std::io::Write;
 
 fn usage(message: &str) -> ! {
     eprintln!(
-        "{message}\nusage: pyramid_build IMAGE OUT_DIR [--tile N] [--scheme xyz|tms] [--origin X,Z] [--metres-per-texel F]"
+        "{message}\nusage: pyramid_build IMAGE OUT_DIR [--tile N] [--scheme xyz|tms] [--origin X,Z] [--metres-per-texel F] [--height]"
     );
     std::process::exit(2)
 }
@@ -20,6 +22,7 @@ fn usage(message: &str) -> ! {
 fn main() {
     let mut positional = Vec::new();
     let mut settings = BuildSettings::default();
+    let mut force_height = false;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         let mut value = || {
@@ -52,6 +55,7 @@ fn main() {
                     .parse()
                     .unwrap_or_else(|_| usage("--metres-per-texel takes a number"))
             }
+            "--height" => force_height = true,
             _ if arg.starts_with("--") => usage(&format!("unknown flag {arg}")),
             _ => positional.push(arg),
         }
@@ -60,17 +64,23 @@ fn main() {
         usage("expected IMAGE and OUT_DIR");
     };
     let image = match image::open(image_path) {
-        Ok(i) => i.to_rgba8(),
+        Ok(i) => i,
         Err(e) => {
             eprintln!("{image_path}: {e}");
             std::process::exit(1)
         }
     };
+    let height = force_height || matches!(image, image::DynamicImage::ImageLuma16(_));
     eprintln!(
-        "{image_path}: {}×{}, tiles of {}",
+        "{image_path}: {}×{}, tiles of {}, {}",
         image.width(),
         image.height(),
-        settings.tile_size
+        settings.tile_size,
+        if height {
+            "16-bit heights"
+        } else {
+            "RGBA imagery"
+        }
     );
     let started = std::time::Instant::now();
     let progress = |done: usize, total: usize| {
@@ -82,13 +92,13 @@ fn main() {
             std::io::stderr().flush().ok();
         }
     };
-    match build_pyramid(
-        &image,
-        std::path::Path::new(out_dir),
-        &settings,
-        &progress,
-        None,
-    ) {
+    let out_dir = std::path::Path::new(out_dir);
+    let built = if height {
+        build_pyramid(&image.to_luma16(), out_dir, &settings, &progress, None)
+    } else {
+        build_pyramid(&image.to_rgba8(), out_dir, &settings, &progress, None)
+    };
+    match built {
         Ok(r) => {
             eprintln!();
             println!(
