@@ -16,6 +16,7 @@
 use bevy::prelude::*;
 
 pub mod settings;
+pub mod ssss;
 
 pub use settings::ScreenSpaceSoftShadows;
 

@@ -5,12 +5,14 @@ use bevy::prelude::*;
 /// Turns Screen Space Soft Shadows on for the light it is put on.
 ///
 /// The penumbra width in screen space follows eq. 6.2,
-/// `w = (d_receiver − d_blocker) · light_size / (d_blocker · d_observer)`, clamped to
-/// `[min_kernel_px, max_kernel_px]`.
+/// `w = (d_receiver − d_blocker) · light_size / (d_blocker · d_observer)`; the blur kernel's reach
+/// (2.5 σ, σ = w/4) is clamped to `[min_kernel_px, max_kernel_px]`.
 #[derive(Component, Clone, Debug, PartialEq, Reflect)]
 #[reflect(Component, Default, Debug, PartialEq)]
 pub struct ScreenSpaceSoftShadows {
-    /// Size of the light source (m): larger lights give wider penumbrae. Must be positive.
+    /// Size of the light source: for a directional light its angular diameter (radians; the Sun
+    /// is 0.0093), for a spot light its diameter (m). Larger lights give wider penumbrae. Must be
+    /// positive.
     pub light_size: f32,
     /// Largest blocker–receiver distance (m) the min filter of the shadow map searches for
     /// blockers: it bounds the widest outer penumbra.
@@ -22,23 +24,34 @@ pub struct ScreenSpaceSoftShadows {
     /// Samples whose view depth differs from the centre pixel's by more than this fraction are
     /// rejected, so penumbrae do not bleed across depth discontinuities.
     pub depth_rejection: f32,
+    /// Taps a side of each blur pass at most: 2 / 5 / 11 are the thesis' 5×5 / 11×11 / 23×23
+    /// kernels. Wider penumbrae spread the same taps further apart.
+    pub taps_per_side: u32,
+    /// Lazy shadowing (§6.3.2): a rejected sample is re-tested against the shadow map at the
+    /// point it would be on the centre pixel's tangent plane, instead of being dropped — this
+    /// removes light leaks around blockers that hide their own shadow from the camera.
+    pub lazy_shadowing: bool,
 }
 
 impl Default for ScreenSpaceSoftShadows {
     fn default() -> Self {
         Self {
-            light_size: 0.5,
+            light_size: 0.05,
             max_occluder_distance: 10.0,
             min_kernel_px: 0.0,
             max_kernel_px: 23.0,
             depth_rejection: 0.05,
+            taps_per_side: 5,
+            lazy_shadowing: true,
         }
     }
 }
 
 impl ScreenSpaceSoftShadows {
     /// The smallest light size accepted; zero or negative sizes are clamped to it.
-    pub const MIN_LIGHT_SIZE: f32 = 1e-3;
+    pub const MIN_LIGHT_SIZE: f32 = 1e-4;
+    /// The most taps a side a blur pass takes.
+    pub const MAX_TAPS_PER_SIDE: u32 = 32;
 
     /// Returns valid settings and the corrections made (non-finite values become defaults,
     /// non-positive sizes are clamped, an inverted kernel range is reordered).
@@ -85,6 +98,15 @@ impl ScreenSpaceSoftShadows {
             1e-4,
             d.depth_rejection,
         );
+        if !(1..=Self::MAX_TAPS_PER_SIDE).contains(&out.taps_per_side) {
+            let clamped = out.taps_per_side.clamp(1, Self::MAX_TAPS_PER_SIDE);
+            fixes.push(format!(
+                "taps_per_side = {} is outside 1..={}: clamped to {clamped}",
+                out.taps_per_side,
+                Self::MAX_TAPS_PER_SIDE
+            ));
+            out.taps_per_side = clamped;
+        }
         if out.min_kernel_px > out.max_kernel_px {
             fixes.push(format!(
                 "min_kernel_px {} > max_kernel_px {}: swapped",
@@ -131,7 +153,7 @@ mod tests {
             ..default()
         }
         .sanitized();
-        assert_eq!(s.light_size, 0.5);
+        assert_eq!(s.light_size, ScreenSpaceSoftShadows::default().light_size);
         assert_eq!(fixes.len(), 1);
     }
 
@@ -147,6 +169,14 @@ mod tests {
         assert!(s.min_kernel_px <= s.max_kernel_px);
         assert_eq!((s.min_kernel_px, s.max_kernel_px), (1.0, 30.0));
         assert!(ScreenSpaceSoftShadows::default().sanitized().1.is_empty());
+        for (taps, fixed) in [(0, 1), (1000, ScreenSpaceSoftShadows::MAX_TAPS_PER_SIDE)] {
+            let (s, fixes) = ScreenSpaceSoftShadows {
+                taps_per_side: taps,
+                ..default()
+            }
+            .sanitized();
+            assert_eq!((s.taps_per_side, fixes.len()), (fixed, 1));
+        }
     }
 
     #[test]

@@ -1,0 +1,170 @@
+//! CPU reference of the screen-space part of SSSS (§6.2.3, §6.3.2): the hard shadow blurred by a
+//! horizontal then a vertical Gaussian pass, each pixel with its own kernel (eq. 6.2 scaled by the
+//! kernel axes of its normal), samples rejected across depth discontinuities — or, with lazy
+//! shadowing, replaced by a shadow-map test of the point the sample would be on the centre
+//! pixel's tangent plane. The WGSL passes compute exactly this; the render test compares them.
+
+use super::kernel::{gaussian, tap_offsets};
+
+/// The screen-space inputs of the blur, row-major, `width × height`.
+#[derive(Clone, Debug, Default)]
+pub struct ScreenBuffers {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Hard-shadow visibility (1 lit, 0 shadowed).
+    pub hard: Vec<f32>,
+    /// Linear eye distance (view-space depth, m); `0` where nothing was drawn.
+    pub depth: Vec<f32>,
+    /// Kernel standard deviation in pixels along x and y (0 where the pixel is masked out).
+    pub sigma: Vec<[f32; 2]>,
+}
+
+/// Settings of one blur.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BlurSettings {
+    /// Taps a side per pass at most.
+    pub taps_per_side: u32,
+    /// A sample is rejected when its depth differs from the centre's by more than this fraction
+    /// of the centre's depth.
+    pub depth_rejection: f32,
+}
+
+/// Whether a sample at depth `sample` may be blended into a pixel at depth `centre`.
+pub fn accepts(centre: f32, sample: f32, depth_rejection: f32) -> bool {
+    sample > 0.0 && (sample - centre).abs() <= depth_rejection * centre
+}
+
+/// One pass. `lazy(sample, centre)` gives the visibility to use for a rejected sample (lazy
+/// shadowing), or `None` to drop it.
+pub fn blur_pass(
+    input: &[f32],
+    buffers: &ScreenBuffers,
+    settings: BlurSettings,
+    horizontal: bool,
+    lazy: &dyn Fn(usize, usize) -> Option<f32>,
+) -> Vec<f32> {
+    let (w, h) = (buffers.width, buffers.height);
+    let mut out = input.to_vec();
+    for y in 0..h {
+        for x in 0..w {
+            let centre = y * w + x;
+            let z = buffers.depth[centre];
+            let sigma = buffers.sigma[centre][if horizontal { 0 } else { 1 }];
+            if z <= 0.0 || sigma <= 0.0 {
+                continue;
+            }
+            let (n, step) = tap_offsets(sigma, settings.taps_per_side);
+            let (mut sum, mut weights) = (0.0f32, 0.0f32);
+            for i in -(n as i32)..=n as i32 {
+                let offset = (i as f32 * step).round() as i32;
+                let (sx, sy) = if horizontal {
+                    (x as i32 + offset, y as i32)
+                } else {
+                    (x as i32, y as i32 + offset)
+                };
+                if sx < 0 || sy < 0 || sx >= w as i32 || sy >= h as i32 {
+                    continue;
+                }
+                let sample = sy as usize * w + sx as usize;
+                let value = if accepts(z, buffers.depth[sample], settings.depth_rejection) {
+                    input[sample]
+                } else if let Some(v) = lazy(sample, centre) {
+                    v
+                } else {
+                    continue;
+                };
+                let weight = gaussian(offset as f32, sigma);
+                sum += weight * value;
+                weights += weight;
+            }
+            if weights > 0.0 {
+                out[centre] = sum / weights;
+            }
+        }
+    }
+    out
+}
+
+/// The soft shadow: the horizontal pass, then the vertical pass on its result.
+pub fn soft_shadow(
+    buffers: &ScreenBuffers,
+    settings: BlurSettings,
+    lazy: &dyn Fn(usize, usize) -> Option<f32>,
+) -> Vec<f32> {
+    let horizontal = blur_pass(&buffers.hard, buffers, settings, true, lazy);
+    blur_pass(&horizontal, buffers, settings, false, lazy)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plane(w: usize, h: usize, sigma: f32) -> ScreenBuffers {
+        ScreenBuffers {
+            width: w,
+            height: h,
+            // A vertical shadow edge: shadowed left of x = w/2.
+            hard: (0..w * h)
+                .map(|i| if i % w < w / 2 { 0.0 } else { 1.0 })
+                .collect(),
+            depth: vec![10.0; w * h],
+            sigma: vec![[sigma, sigma]; w * h],
+        }
+    }
+
+    const SETTINGS: BlurSettings = BlurSettings {
+        taps_per_side: 11,
+        depth_rejection: 0.05,
+    };
+
+    #[test]
+    fn a_hard_edge_becomes_the_gaussian_cdf() {
+        let (w, h, sigma) = (64, 8, 3.0f32);
+        let soft = soft_shadow(&plane(w, h, sigma), SETTINGS, &|_, _| None);
+        for x in 20..44 {
+            // Pixel x is lit when x ≥ 32: the discrete CDF of the kernel at x − 32 + ½.
+            let d = x as f32 - 31.5;
+            let expected = 0.5 * (1.0 + erf(d / (sigma * std::f32::consts::SQRT_2)));
+            let got = soft[4 * w + x];
+            assert!((got - expected).abs() < 0.04, "x {x}: {got} vs {expected}");
+        }
+        // Rows are identical (the vertical pass leaves a vertical edge alone).
+        for x in 0..w {
+            assert!((soft[w + x] - soft[5 * w + x]).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn samples_across_a_depth_discontinuity_are_rejected_or_lazily_shadowed() {
+        let (w, h) = (32, 4);
+        let mut b = plane(w, h, 4.0);
+        // Left half: a near object in shadow; right half: far ground, lit.
+        for i in 0..w * h {
+            b.depth[i] = if i % w < w / 2 { 5.0 } else { 50.0 };
+        }
+        let soft = soft_shadow(&b, SETTINGS, &|_, _| None);
+        assert_eq!(soft[w + 15], 0.0, "no light bleeds onto the near object");
+        assert_eq!(soft[w + 16], 1.0, "no shadow bleeds onto the far ground");
+        // Lazy shadowing: rejected samples re-tested (here: all in shadow) darken the ground.
+        let lazy = soft_shadow(&b, SETTINGS, &|_, _| Some(0.0));
+        assert!(lazy[w + 16] < 0.7, "{}", lazy[w + 16]);
+    }
+
+    #[test]
+    fn masked_pixels_keep_their_hard_shadow() {
+        let soft = soft_shadow(&plane(16, 4, 0.0), SETTINGS, &|_, _| None);
+        assert_eq!(soft, plane(16, 4, 0.0).hard);
+    }
+
+    fn erf(x: f32) -> f32 {
+        let t = 1.0 / (1.0 + 0.3275911 * x.abs());
+        let y = 1.0
+            - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t
+                + 0.254829592)
+                * t
+                * (-x * x).exp();
+        y.copysign(x)
+    }
+}

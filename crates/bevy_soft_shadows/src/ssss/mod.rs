@@ -1,0 +1,15 @@
+//! Screen Space Soft Shadows (Gumbau 2011, ch. 6; spec S1) — the algorithm in plain Rust, the
+//! CPU reference of every GPU pass:
+//!
+//! 1. [`min_filter`]: the shadow map dilated by a separable nearest-depth filter (§6.2.1), so
+//!    outer-penumbra pixels find their blocker.
+//! 2. [`penumbra`]: the blocker–receiver distance gives the penumbra's width (eq. 6.1), divided
+//!    by the eye distance for screen space (eq. 6.2); a Gaussian of σ = width/4 stands in for the
+//!    area light, its axes shortened by the surface's slant.
+//! 3. [`kernel`] and [`blur`]: the hard shadow blurred by a horizontal then a vertical pass, with
+//!    depth rejection and lazy shadowing (§6.2.3, §6.3.2).
+
+pub mod blur;
+pub mod kernel;
+pub mod min_filter;
+pub mod penumbra;
