@@ -15,6 +15,7 @@
 
 use bevy::prelude::*;
 
+pub mod reference;
 pub mod settings;
 pub mod ssss;
 
