@@ -499,6 +499,43 @@ impl RenderHarness {
         result
     }
 
+    /// Reads back a 2D [`Image`] asset's texture after the next frame: `height` rows of
+    /// `width · bytes_per_texel` bytes (the copy's 256-byte row padding removed).
+    pub fn read_image(
+        &mut self,
+        image: Handle<Image>,
+        width: u32,
+        height: u32,
+        bytes_per_texel: u32,
+    ) -> Result<Vec<u8>, HarnessError> {
+        self.finish_setup();
+        let slot: Arc<Mutex<Option<Vec<u8>>>> = Arc::default();
+        let sink = slot.clone();
+        let entity = self
+            .app
+            .world_mut()
+            .spawn(Readback::texture(image))
+            .observe(move |done: On<ReadbackComplete>| {
+                *sink.lock().unwrap() = Some(done.data.clone());
+            })
+            .id();
+        let result = self.step_until(&slot, 30);
+        self.app.world_mut().despawn(entity);
+        let padded = result?;
+        let row = (width * bytes_per_texel) as usize;
+        let stride = row.div_ceil(256) * 256;
+        if height > 1 && padded.len() < stride * (height as usize - 1) + row {
+            return Err(HarnessError::Readback(format!(
+                "image readback of {} bytes is too short for {width}×{height}",
+                padded.len()
+            )));
+        }
+        let stride = if height > 1 { stride } else { row };
+        Ok((0..height as usize)
+            .flat_map(|y| padded[y * stride..y * stride + row].iter().copied())
+            .collect())
+    }
+
     /// Reads back a buffer that lives in the render world (e.g. one a render system created).
     /// `find` picks the buffer from the render world; `None` means "not created yet" and the
     /// harness steps another frame. Copies it into a mappable staging buffer and waits.

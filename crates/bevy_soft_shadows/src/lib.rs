@@ -29,6 +29,7 @@ impl Plugin for SoftShadowsPlugin {
     fn build(&self, app: &mut App) {
         app.register_type::<ScreenSpaceSoftShadows>()
             .add_systems(PreUpdate, settings::sanitize_soft_shadow_settings);
+        ssss::build(app);
     }
 }
 

@@ -4,7 +4,7 @@
 //! shadowing, replaced by a shadow-map test of the point the sample would be on the centre
 //! pixel's tangent plane. The WGSL passes compute exactly this; the render test compares them.
 
-use super::kernel::{gaussian, tap_offsets};
+use super::kernel::{gaussian, tap_offset, tap_offsets};
 
 /// The screen-space inputs of the blur, row-major, `width × height`.
 #[derive(Clone, Debug, Default)]
@@ -58,7 +58,7 @@ pub fn blur_pass(
             let (n, step) = tap_offsets(sigma, settings.taps_per_side);
             let (mut sum, mut weights) = (0.0f32, 0.0f32);
             for i in -(n as i32)..=n as i32 {
-                let offset = (i as f32 * step).round() as i32;
+                let offset = tap_offset(i, step);
                 let (sx, sy) = if horizontal {
                     (x as i32 + offset, y as i32)
                 } else {

@@ -26,6 +26,13 @@ pub fn tap_offsets(sigma_px: f32, per_side: u32) -> (u32, f32) {
     }
 }
 
+/// The pixel offset of tap `i` at spacing `step`: `sign(i)·⌊|i|·step + ½⌋`, symmetric and the
+/// same in WGSL (whose `round` rounds halves to even, unlike Rust's).
+pub fn tap_offset(i: i32, step: f32) -> i32 {
+    let magnitude = ((i.unsigned_abs() as f32) * step + 0.5).floor() as i32;
+    if i < 0 { -magnitude } else { magnitude }
+}
+
 /// Unnormalised Gaussian weight at `offset`.
 pub fn gaussian(offset: f32, sigma_px: f32) -> f32 {
     if sigma_px <= 0.0 {
@@ -39,7 +46,7 @@ pub fn gaussian_taps(sigma_px: f32, per_side: u32) -> Vec<Tap> {
     let (n, step) = tap_offsets(sigma_px, per_side);
     let mut taps: Vec<Tap> = (-(n as i32)..=n as i32)
         .map(|i| {
-            let offset = (i as f32 * step).round() as i32;
+            let offset = tap_offset(i, step);
             Tap {
                 offset,
                 weight: gaussian(offset as f32, sigma_px),

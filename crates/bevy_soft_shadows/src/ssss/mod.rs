@@ -13,3 +13,12 @@ pub mod blur;
 pub mod kernel;
 pub mod min_filter;
 pub mod penumbra;
+
+pub mod receiver;
+pub mod render;
+
+/// Registers SSSS (main and render world).
+pub(crate) fn build(app: &mut bevy::prelude::App) {
+    receiver::build(app);
+    render::build(app);
+}

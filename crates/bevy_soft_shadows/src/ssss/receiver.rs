@@ -1,0 +1,196 @@
+//! The main-world side of SSSS: the screen-sized textures the passes write, the material that
+//! feeds the soft visibility into Bevy's lighting, and the plugin glue that turns it on for a
+//! scene (prepasses on the cameras, receivers on the meshes).
+
+use crate::settings::ScreenSpaceSoftShadows;
+use bevy::asset::{RenderAssetUsages, embedded_asset};
+use bevy::core_pipeline::prepass::{DepthPrepass, NormalPrepass};
+use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+use bevy::render::extract_component::ExtractComponent;
+use bevy::render::render_resource::{
+    AsBindGroup, Extent3d, TextureDimension, TextureFormat, TextureUsages,
+};
+use bevy::shader::ShaderRef;
+
+/// The soft visibility of the SSSS light, per pixel, for the receiving materials.
+#[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
+pub struct SoftShadowReceiver {
+    /// The SSSS output (R32Float, the camera's size; −1 where SSSS is inactive).
+    #[texture(100, sample_type = "float", filterable = false)]
+    pub visibility: Handle<Image>,
+}
+
+/// A `StandardMaterial` receiving Screen Space Soft Shadows from the directional light.
+pub type SoftShadowMaterial = ExtendedMaterial<StandardMaterial, SoftShadowReceiver>;
+
+const SHADER: &str = "embedded://bevy_soft_shadows/ssss/receiver.wgsl";
+
+impl MaterialExtension for SoftShadowReceiver {
+    fn fragment_shader() -> ShaderRef {
+        ShaderRef::Path(SHADER.into())
+    }
+}
+
+/// Marks a camera whose view runs the SSSS passes (added automatically to every 3D camera
+/// while a light has [`ScreenSpaceSoftShadows`], with the depth and normal prepasses it needs).
+#[derive(Component, Clone, Copy, Default, Debug, ExtractComponent)]
+pub struct SoftShadowCamera;
+
+/// Keeps a mesh on its `StandardMaterial` (no soft shadows) when receivers are converted
+/// automatically.
+#[derive(Component, Clone, Copy, Default, Debug, Reflect)]
+#[reflect(Component, Default)]
+pub struct NoSoftShadowReceiver;
+
+/// The screen-sized textures of the SSSS passes, sized to the first [`SoftShadowCamera`]'s
+/// target. Readable for tests and debugging views.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct SsssTextures {
+    /// Per pixel (hard shadow, σx, σy, eye depth) — the distance map of §6.2.2 (Rgba32Float).
+    pub distance: Handle<Image>,
+    /// The hard shadow after the horizontal pass (R32Float).
+    pub horizontal: Handle<Image>,
+    /// The soft visibility after the vertical pass (R32Float), read by the receivers.
+    pub visibility: Handle<Image>,
+    /// Their size in pixels.
+    pub size: UVec2,
+}
+
+fn screen_image(size: UVec2, format: TextureFormat) -> Image {
+    let mut image = Image::new_uninit(
+        Extent3d {
+            width: size.x.max(1),
+            height: size.y.max(1),
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        format,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.texture_descriptor.usage =
+        TextureUsages::TEXTURE_BINDING | TextureUsages::RENDER_ATTACHMENT | TextureUsages::COPY_SRC;
+    image
+}
+
+/// Whether any light has SSSS on.
+#[derive(Resource, Clone, Copy, Default, Debug, PartialEq, Eq)]
+pub struct SsssActive(pub bool);
+
+/// Adds the prepasses and the camera marker, and (re)sizes the textures to the camera.
+fn prepare_cameras_and_textures(
+    mut commands: Commands,
+    lights: Query<(), (With<ScreenSpaceSoftShadows>, With<DirectionalLight>)>,
+    cameras: Query<(Entity, &Camera, Has<SoftShadowCamera>), With<Camera3d>>,
+    mut textures: ResMut<SsssTextures>,
+    mut images: ResMut<Assets<Image>>,
+    mut active: ResMut<SsssActive>,
+) {
+    let any = !lights.is_empty();
+    if active.0 != any {
+        active.0 = any;
+    }
+    if !any {
+        return;
+    }
+    let mut size = None;
+    for (entity, camera, marked) in &cameras {
+        if !marked {
+            info!(
+                "Screen Space Soft Shadows: adding depth and normal prepasses to camera {entity}"
+            );
+            commands
+                .entity(entity)
+                .insert((SoftShadowCamera, DepthPrepass, NormalPrepass));
+        }
+        if size.is_none() && camera.is_active {
+            size = camera.physical_target_size();
+        }
+    }
+    let Some(size) = size else { return };
+    if textures.size == size && images.contains(&textures.visibility) {
+        return;
+    }
+    textures.size = size;
+    let mut put = |handle: &mut Handle<Image>, format| {
+        let image = screen_image(size, format);
+        // The default handle names Bevy's default image: never overwrite that one.
+        let ours = *handle != Handle::default() && images.contains(handle.id());
+        if ours {
+            if let Some(mut existing) = images.get_mut(handle.id()) {
+                *existing = image;
+            }
+        } else {
+            *handle = images.add(image);
+        }
+    };
+    put(&mut textures.distance, TextureFormat::Rgba32Float);
+    put(&mut textures.horizontal, TextureFormat::R32Float);
+    put(&mut textures.visibility, TextureFormat::R32Float);
+}
+
+/// Whether [`SoftShadowsPlugin`](crate::SoftShadowsPlugin) converts meshes' `StandardMaterial`s
+/// into [`SoftShadowMaterial`]s while SSSS is on (default: yes; opt a mesh out with
+/// [`NoSoftShadowReceiver`]).
+#[derive(Resource, Clone, Copy, Debug, PartialEq, Eq, Reflect)]
+#[reflect(Resource)]
+pub struct ConvertStandardMaterials(pub bool);
+
+impl Default for ConvertStandardMaterials {
+    fn default() -> Self {
+        Self(true)
+    }
+}
+
+/// Swaps `StandardMaterial`s for [`SoftShadowMaterial`]s sharing their parameters (one receiver
+/// material per standard material).
+#[allow(clippy::type_complexity)]
+fn convert_receivers(
+    mut commands: Commands,
+    convert: Res<ConvertStandardMaterials>,
+    active: Res<SsssActive>,
+    textures: Res<SsssTextures>,
+    meshes: Query<(Entity, &MeshMaterial3d<StandardMaterial>), Without<NoSoftShadowReceiver>>,
+    standard: Res<Assets<StandardMaterial>>,
+    mut receivers: ResMut<Assets<SoftShadowMaterial>>,
+    mut converted: Local<HashMap<AssetId<StandardMaterial>, Handle<SoftShadowMaterial>>>,
+) {
+    if !convert.0 || !active.0 || textures.size == UVec2::ZERO {
+        return;
+    }
+    for (entity, material) in &meshes {
+        let Some(base) = standard.get(&material.0) else {
+            continue;
+        };
+        let handle = converted
+            .entry(material.0.id())
+            .or_insert_with(|| {
+                receivers.add(SoftShadowMaterial {
+                    base: base.clone(),
+                    extension: SoftShadowReceiver {
+                        visibility: textures.visibility.clone(),
+                    },
+                })
+            })
+            .clone();
+        commands
+            .entity(entity)
+            .remove::<MeshMaterial3d<StandardMaterial>>()
+            .insert(MeshMaterial3d(handle));
+    }
+}
+
+/// Registers the main-world side.
+pub(crate) fn build(app: &mut App) {
+    embedded_asset!(app, "receiver.wgsl");
+    app.add_plugins(MaterialPlugin::<SoftShadowMaterial>::default())
+        .init_resource::<SsssTextures>()
+        .init_resource::<SsssActive>()
+        .init_resource::<ConvertStandardMaterials>()
+        .register_type::<NoSoftShadowReceiver>()
+        .add_systems(
+            PostUpdate,
+            (prepare_cameras_and_textures, convert_receivers).chain(),
+        );
+}

@@ -1,0 +1,477 @@
+//! The render-world side of SSSS: the dilation of the shadow map (two compute dispatches), the
+//! distance map and the two blur passes (fullscreen passes binding Bevy's mesh view group), run
+//! as one system in the `Core3d` schedule after the prepass and the shadow passes and before the
+//! main pass, where the receivers read the result. GPU time is recorded as the `ssss` span
+//! (`render/ssss/elapsed_gpu` with `RenderDiagnosticsPlugin`).
+
+use super::receiver::{SoftShadowCamera, SsssActive, SsssTextures};
+use crate::settings::ScreenSpaceSoftShadows;
+use bevy::asset::{embedded_asset, load_embedded_asset};
+use bevy::core_pipeline::{Core3d, Core3dSystems, FullscreenShader};
+use bevy::pbr::{
+    GpuLights, LATE_SHADOW_PASS, LightMeta, MeshPipeline, MeshPipelineKey, MeshPipelineSystems,
+    MeshViewBindGroup, ViewKeyCache, ViewLightsUniformOffset, ViewShadowBindings,
+    per_view_shadow_pass,
+};
+use bevy::prelude::*;
+use bevy::render::diagnostic::RecordDiagnostics;
+use bevy::render::render_asset::RenderAssets;
+use bevy::render::render_resource::binding_types::{
+    texture_2d, texture_2d_array, texture_storage_2d_array, uniform_buffer,
+};
+use bevy::render::render_resource::*;
+use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery};
+use bevy::render::texture::{CachedTexture, GpuImage, TextureCache};
+use bevy::render::view::ExtractedView;
+use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems};
+use bevy::shader::ShaderDefVal;
+
+/// The settings as the shaders see them (`ssss_types.wgsl`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, ShaderType)]
+pub struct SsssUniform {
+    /// Angular diameter of the light (rad).
+    pub light_size: f32,
+    /// Blocker search distance (m).
+    pub max_occluder_distance: f32,
+    /// Kernel reach limits (px).
+    pub min_kernel_px: f32,
+    /// Kernel reach limits (px).
+    pub max_kernel_px: f32,
+    /// Depth rejection threshold (fraction of the eye depth).
+    pub depth_rejection: f32,
+    /// Taps a side per blur pass.
+    pub taps_per_side: u32,
+    /// Lazy shadowing on (1) or off (0).
+    pub lazy_shadowing: u32,
+    /// 1 while a light has SSSS.
+    pub enabled: u32,
+}
+
+impl SsssUniform {
+    /// The uniform for (sanitised) settings.
+    pub fn new(s: &ScreenSpaceSoftShadows) -> Self {
+        Self {
+            light_size: s.light_size,
+            max_occluder_distance: s.max_occluder_distance,
+            min_kernel_px: s.min_kernel_px,
+            max_kernel_px: s.max_kernel_px,
+            depth_rejection: s.depth_rejection,
+            taps_per_side: s.taps_per_side,
+            lazy_shadowing: s.lazy_shadowing as u32,
+            enabled: 1,
+        }
+    }
+}
+
+#[derive(Resource, Default)]
+struct ExtractedSsss {
+    uniform: SsssUniform,
+    textures: SsssTextures,
+}
+
+fn extract_ssss(
+    mut extracted: ResMut<ExtractedSsss>,
+    lights: Extract<Query<&ScreenSpaceSoftShadows, With<DirectionalLight>>>,
+    textures: Extract<Res<SsssTextures>>,
+    active: Extract<Res<SsssActive>>,
+) {
+    extracted.textures = textures.clone();
+    extracted.uniform = match lights.iter().next() {
+        Some(settings) if active.0 => SsssUniform::new(&settings.sanitized().0),
+        _ => SsssUniform::default(),
+    };
+}
+
+#[derive(Resource, Default)]
+struct SsssUniformBuffer(UniformBuffer<SsssUniform>);
+
+fn prepare_uniform(
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    extracted: Res<ExtractedSsss>,
+    mut buffer: ResMut<SsssUniformBuffer>,
+) {
+    buffer.0.set(extracted.uniform);
+    buffer.0.write_buffer(&device, &queue);
+}
+
+/// Which fullscreen pass a pipeline runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum SsssPass {
+    Distance,
+    BlurHorizontal,
+    BlurVertical,
+}
+
+#[derive(Resource)]
+struct SsssPipelines {
+    mesh_pipeline: MeshPipeline,
+    fullscreen: FullscreenShader,
+    shader: Handle<Shader>,
+    screen_layout: BindGroupLayoutDescriptor,
+    dilate_layout: BindGroupLayoutDescriptor,
+    dilate_horizontal: CachedComputePipelineId,
+    dilate_vertical: CachedComputePipelineId,
+}
+
+fn init_pipelines(
+    mut commands: Commands,
+    mesh_pipeline: Res<MeshPipeline>,
+    fullscreen: Res<FullscreenShader>,
+    pipeline_cache: Res<PipelineCache>,
+    asset_server: Res<AssetServer>,
+) {
+    let unfiltered = TextureSampleType::Float { filterable: false };
+    let dilate_layout = BindGroupLayoutDescriptor::new(
+        "ssss_dilate_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::COMPUTE,
+            (
+                texture_2d_array(TextureSampleType::Depth),
+                texture_2d_array(unfiltered),
+                texture_storage_2d_array(TextureFormat::R32Float, StorageTextureAccess::WriteOnly),
+                uniform_buffer::<GpuLights>(true),
+                uniform_buffer::<SsssUniform>(false),
+            ),
+        ),
+    );
+    let screen_layout = BindGroupLayoutDescriptor::new(
+        "ssss_screen_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::FRAGMENT,
+            (
+                texture_2d_array(unfiltered),
+                uniform_buffer::<SsssUniform>(false),
+                texture_2d(unfiltered),
+                texture_2d(unfiltered),
+            ),
+        ),
+    );
+    let dilate_shader = load_embedded_asset!(asset_server.as_ref(), "min_filter.wgsl");
+    let queue = |entry: &'static str| {
+        pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
+            label: Some(format!("ssss_dilate_{entry}").into()),
+            layout: vec![dilate_layout.clone()],
+            shader: dilate_shader.clone(),
+            entry_point: Some(entry.into()),
+            ..default()
+        })
+    };
+    let dilate_horizontal = queue("horizontal");
+    let dilate_vertical = queue("vertical");
+    commands.insert_resource(SsssPipelines {
+        mesh_pipeline: mesh_pipeline.clone(),
+        fullscreen: fullscreen.clone(),
+        shader: load_embedded_asset!(asset_server.as_ref(), "ssss.wgsl"),
+        screen_layout,
+        dilate_layout,
+        dilate_horizontal,
+        dilate_vertical,
+    });
+}
+
+impl SpecializedRenderPipeline for SsssPipelines {
+    type Key = (MeshPipelineKey, SsssPass);
+
+    fn specialize(&self, (key, pass): Self::Key) -> RenderPipelineDescriptor {
+        // Only the defs that decide which view bindings the shader declares (and their types),
+        // plus the shadow filter of the hard shadow: 2×2 hardware PCF, the thesis' hard shadow.
+        let mut shader_defs: Vec<ShaderDefVal> = vec![
+            "DEPTH_PREPASS".into(),
+            "NORMAL_PREPASS".into(),
+            "SHADOW_FILTER_METHOD_HARDWARE_2X2".into(),
+        ];
+        if key.msaa_samples() > 1 {
+            shader_defs.push("MULTISAMPLED".into());
+        }
+        let layout = self.mesh_pipeline.get_view_layout(key.into());
+        let (entry, format, label) = match pass {
+            SsssPass::Distance => ("distance", TextureFormat::Rgba32Float, "ssss_distance"),
+            SsssPass::BlurHorizontal => ("blur_horizontal", TextureFormat::R32Float, "ssss_blur_h"),
+            SsssPass::BlurVertical => ("blur_vertical", TextureFormat::R32Float, "ssss_blur_v"),
+        };
+        RenderPipelineDescriptor {
+            label: Some(label.into()),
+            layout: vec![
+                layout.main_layout,
+                layout.binding_array_layout,
+                self.screen_layout.clone(),
+            ],
+            vertex: self.fullscreen.to_vertex_state(),
+            fragment: Some(FragmentState {
+                shader: self.shader.clone(),
+                shader_defs,
+                entry_point: Some(entry.into()),
+                targets: vec![Some(ColorTargetState {
+                    format,
+                    blend: None,
+                    write_mask: ColorWrites::ALL,
+                })],
+            }),
+            ..default()
+        }
+    }
+}
+
+#[derive(Component)]
+struct SsssViewPipelines {
+    distance: CachedRenderPipelineId,
+    blur_horizontal: CachedRenderPipelineId,
+    blur_vertical: CachedRenderPipelineId,
+}
+
+fn prepare_pipelines(
+    mut commands: Commands,
+    pipeline_cache: Res<PipelineCache>,
+    view_key_cache: Res<ViewKeyCache>,
+    pipelines: Res<SsssPipelines>,
+    mut specialized: ResMut<SpecializedRenderPipelines<SsssPipelines>>,
+    views: Query<(Entity, &ExtractedView), With<SoftShadowCamera>>,
+) {
+    for (entity, view) in &views {
+        let Some(key) = view_key_cache.get(&view.retained_view_entity) else {
+            continue;
+        };
+        let mut get = |pass| specialized.specialize(&pipeline_cache, &pipelines, (*key, pass));
+        let ids = SsssViewPipelines {
+            distance: get(SsssPass::Distance),
+            blur_horizontal: get(SsssPass::BlurHorizontal),
+            blur_vertical: get(SsssPass::BlurVertical),
+        };
+        commands.entity(entity).insert(ids);
+    }
+}
+
+/// The dilated shadow map and its horizontal half-step, as large as the shadow texture array.
+#[derive(Component)]
+struct SsssDilation {
+    rows: CachedTexture,
+    dilated: CachedTexture,
+    size: Extent3d,
+}
+
+fn prepare_dilation(
+    mut commands: Commands,
+    device: Res<RenderDevice>,
+    mut cache: ResMut<TextureCache>,
+    views: Query<(Entity, &ViewShadowBindings), With<SoftShadowCamera>>,
+) {
+    for (entity, shadows) in &views {
+        let texture = &shadows.directional_light_depth_texture;
+        let size = Extent3d {
+            width: texture.width(),
+            height: texture.height(),
+            depth_or_array_layers: texture.depth_or_array_layers(),
+        };
+        let mut get = |label: &'static str| {
+            cache.get(
+                &device,
+                TextureDescriptor {
+                    label: Some(label),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: TextureDimension::D2,
+                    format: TextureFormat::R32Float,
+                    usage: TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                },
+            )
+        };
+        let rows = get("ssss_dilation_rows");
+        let dilated = get("ssss_dilated_shadow_map");
+        commands.entity(entity).insert(SsssDilation {
+            rows,
+            dilated,
+            size,
+        });
+    }
+}
+
+fn array_view(texture: &Texture) -> TextureView {
+    texture.create_view(&TextureViewDescriptor {
+        dimension: Some(TextureViewDimension::D2Array),
+        ..default()
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn ssss(
+    view: ViewQuery<
+        (
+            &MeshViewBindGroup,
+            &ViewShadowBindings,
+            &ViewLightsUniformOffset,
+            &SsssViewPipelines,
+            &SsssDilation,
+        ),
+        With<SoftShadowCamera>,
+    >,
+    pipelines: Res<SsssPipelines>,
+    pipeline_cache: Res<PipelineCache>,
+    extracted: Res<ExtractedSsss>,
+    uniform: Res<SsssUniformBuffer>,
+    light_meta: Res<LightMeta>,
+    images: Res<RenderAssets<GpuImage>>,
+    mut ctx: RenderContext,
+) {
+    let (mesh_view, shadows, lights_offset, ids, dilation) = view.into_inner();
+    let (
+        Some(dilate_h),
+        Some(dilate_v),
+        Some(distance_pipeline),
+        Some(blur_h_pipeline),
+        Some(blur_v_pipeline),
+        Some(uniform_binding),
+        Some(lights_binding),
+        Some(distance),
+        Some(horizontal),
+        Some(visibility),
+    ) = (
+        pipeline_cache.get_compute_pipeline(pipelines.dilate_horizontal),
+        pipeline_cache.get_compute_pipeline(pipelines.dilate_vertical),
+        pipeline_cache.get_render_pipeline(ids.distance),
+        pipeline_cache.get_render_pipeline(ids.blur_horizontal),
+        pipeline_cache.get_render_pipeline(ids.blur_vertical),
+        uniform.0.binding(),
+        light_meta.view_gpu_lights.binding(),
+        images.get(&extracted.textures.distance),
+        images.get(&extracted.textures.horizontal),
+        images.get(&extracted.textures.visibility),
+    )
+    else {
+        return;
+    };
+    let device = ctx.render_device().clone();
+    let rows_view = array_view(&dilation.rows.texture);
+    let dilated_view = array_view(&dilation.dilated.texture);
+    let dilate_layout = pipeline_cache.get_bind_group_layout(&pipelines.dilate_layout);
+    let dilate_group = |input: &TextureView, output: &TextureView| {
+        device.create_bind_group(
+            "ssss_dilate",
+            &dilate_layout,
+            &BindGroupEntries::sequential((
+                &shadows.directional_light_depth_texture_view,
+                input,
+                output,
+                lights_binding.clone(),
+                uniform_binding.clone(),
+            )),
+        )
+    };
+    let rows_group = dilate_group(&dilated_view, &rows_view);
+    let columns_group = dilate_group(&rows_view, &dilated_view);
+    let screen_layout = pipeline_cache.get_bind_group_layout(&pipelines.screen_layout);
+    let screen_group = |distances: &TextureView, blur_in: &TextureView| {
+        device.create_bind_group(
+            "ssss_screen",
+            &screen_layout,
+            &BindGroupEntries::sequential((
+                &dilated_view,
+                uniform_binding.clone(),
+                distances,
+                blur_in,
+            )),
+        )
+    };
+    // The distance pass may not sample its own target: it binds the horizontal texture there
+    // (unused by its shader).
+    let distance_group = screen_group(&horizontal.texture_view, &horizontal.texture_view);
+    let blur_h_group = screen_group(&distance.texture_view, &distance.texture_view);
+    let blur_v_group = screen_group(&distance.texture_view, &horizontal.texture_view);
+
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let time_span = diagnostics.time_span(ctx.command_encoder(), "ssss");
+    {
+        let encoder = ctx.command_encoder();
+        let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
+            label: Some("ssss_dilate"),
+            timestamp_writes: None,
+        });
+        let groups = [
+            dilation.size.width.div_ceil(8),
+            dilation.size.height.div_ceil(8),
+            dilation.size.depth_or_array_layers,
+        ];
+        pass.set_pipeline(dilate_h);
+        pass.set_bind_group(0, &rows_group, &[lights_offset.offset]);
+        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        pass.set_pipeline(dilate_v);
+        pass.set_bind_group(0, &columns_group, &[lights_offset.offset]);
+        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+    }
+    for (label, pipeline, group, target) in [
+        (
+            "ssss_distance",
+            distance_pipeline,
+            &distance_group,
+            distance,
+        ),
+        ("ssss_blur_h", blur_h_pipeline, &blur_h_group, horizontal),
+        ("ssss_blur_v", blur_v_pipeline, &blur_v_group, visibility),
+    ] {
+        let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+            label: Some(label),
+            color_attachments: &[Some(RenderPassColorAttachment {
+                view: &target.texture_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: Operations {
+                    load: LoadOp::Clear(Default::default()),
+                    store: StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_render_pipeline(pipeline);
+        pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
+        pass.set_bind_group(1, &mesh_view.binding_array, &[]);
+        pass.set_bind_group(2, group, &[]);
+        pass.draw(0..3, 0..1);
+    }
+    time_span.end(ctx.command_encoder());
+}
+
+/// Registers the render-world side.
+pub(crate) fn build(app: &mut App) {
+    embedded_asset!(app, "ssss_types.wgsl");
+    embedded_asset!(app, "min_filter.wgsl");
+    embedded_asset!(app, "ssss.wgsl");
+    app.add_plugins(bevy::render::extract_component::ExtractComponentPlugin::<
+        SoftShadowCamera,
+    >::default());
+    // The shared WGSL types are imported by path: load them so the import resolves.
+    let types: Handle<Shader> = load_embedded_asset!(app, "ssss_types.wgsl");
+    app.insert_resource(SsssTypesShader(types));
+    let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+        return;
+    };
+    render_app
+        .init_resource::<ExtractedSsss>()
+        .init_resource::<SsssUniformBuffer>()
+        .init_resource::<SpecializedRenderPipelines<SsssPipelines>>()
+        .add_systems(RenderStartup, init_pipelines.after(MeshPipelineSystems))
+        .add_systems(ExtractSchedule, extract_ssss)
+        .add_systems(
+            Render,
+            (
+                prepare_pipelines.in_set(RenderSystems::Prepare),
+                (prepare_uniform, prepare_dilation).in_set(RenderSystems::PrepareResources),
+            ),
+        )
+        .add_systems(
+            Core3d,
+            ssss.after(Core3dSystems::Prepass)
+                .after(per_view_shadow_pass::<LATE_SHADOW_PASS>)
+                .before(Core3dSystems::MainPass),
+        );
+}
+
+/// Keeps the shared WGSL module loaded.
+#[derive(Resource)]
+#[allow(dead_code)]
+struct SsssTypesShader(Handle<Shader>);

@@ -1,0 +1,193 @@
+// Screen Space Soft Shadows, steps 2–4 (Gumbau 2011, §6.2.2–6.3.2), as fullscreen passes that
+// bind Bevy's mesh view group (view, lights, shadow maps, prepass depth and normals):
+//
+// - `distance`: per pixel the hard shadow (Bevy's own lookup), the blocker found in the dilated
+//   shadow map, the penumbra width by eq. 6.1 (light at infinity) and eq. 6.2 (in pixels), and
+//   the kernel's σ along x and y from the surface normal; written as (hard, σx, σy, eye depth).
+// - `blur_horizontal`, `blur_vertical`: the separable Gaussian with depth rejection and lazy
+//   shadowing.
+//
+// CPU references: `ssss::penumbra`, `ssss::kernel`, `ssss::blur`.
+#import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
+#import bevy_pbr::{
+    mesh_view_bindings as view_bindings,
+    mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
+    prepass_utils::{prepass_depth, prepass_normal},
+    shadows::{fetch_directional_shadow, get_cascade_index, world_to_directional_light_local},
+    view_transformations::{frag_coord_to_ndc, position_ndc_to_world, position_world_to_view, depth_ndc_to_view_z},
+}
+#import bevy_soft_shadows::ssss_types::{SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS}
+
+@group(2) @binding(0) var dilated: texture_2d_array<f32>;
+@group(2) @binding(1) var<uniform> ssss: SsssUniform;
+@group(2) @binding(2) var distances: texture_2d<f32>;
+@group(2) @binding(3) var blur_in: texture_2d<f32>;
+
+fn ssss_light() -> u32 {
+    for (var i = 0u; i < view_bindings::lights.n_directional_lights; i += 1u) {
+        if (view_bindings::lights.directional_lights[i].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            return i;
+        }
+    }
+    return NO_LIGHT;
+}
+
+fn view_z_of(world: vec3<f32>) -> f32 {
+    return position_world_to_view(world).z;
+}
+
+// Pixels per metre at unit eye distance (perspective) or everywhere (orthographic).
+fn pixels_per_unit() -> f32 {
+    return view_bindings::view.clip_from_view[1][1] * 0.5 * view_bindings::view.viewport.w;
+}
+
+fn is_orthographic() -> bool {
+    return view_bindings::view.clip_from_view[3][3] == 1.0;
+}
+
+@fragment
+fn distance(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    let frag = vec4(in.position.xy, 0.0, 1.0);
+    let depth = prepass_depth(frag, 0u);
+    let i = ssss_light();
+    if depth <= 0.0 || i == NO_LIGHT || ssss.enabled == 0u {
+        return vec4(1.0, 0.0, 0.0, 0.0);
+    }
+    let ndc = vec3(frag_coord_to_ndc(frag).xy, depth);
+    let world = position_ndc_to_world(ndc);
+    let normal = normalize(prepass_normal(frag, 0u));
+    let view_z = view_z_of(world);
+    let eye_depth = -view_z;
+    let hard = fetch_directional_shadow(i, vec4(world, 1.0), normal, view_z, in.position.xy);
+
+    // Blocker: the dilated map at the receiver's texel (reverse Z: larger is nearer the light).
+    let light = &view_bindings::lights.directional_lights[i];
+    let cascade = get_cascade_index(i, view_z);
+    if cascade >= (*light).num_cascades {
+        return vec4(hard, 0.0, 0.0, eye_depth);
+    }
+    let local = world_to_directional_light_local(i, cascade, vec4(world, 1.0));
+    if local.w == 0.0 {
+        return vec4(hard, 0.0, 0.0, eye_depth);
+    }
+    let size = vec2<f32>(textureDimensions(dilated));
+    let texel = vec2<i32>(clamp(local.xy * size, vec2(0.0), size - 1.0));
+    let layer = i32((*light).depth_texture_base_index + cascade);
+    let blocker = textureLoad(dilated, texel, layer, 0).r;
+    // Light-space depth per metre along the light (orthographic cascade: constant).
+    let m = (*light).cascades[cascade].clip_from_world;
+    let depth_per_metre = length(vec3(m[0].z, m[1].z, m[2].z));
+    let gap = (blocker - local.z) / max(depth_per_metre, 1e-8);
+    // Eq. 6.1 for a light at infinity, then eq. 6.2 (divided by the eye distance).
+    let world_width = max(gap, 0.0) * 2.0 * tan(0.5 * ssss.light_size);
+    var px = world_width * pixels_per_unit();
+    if !is_orthographic() {
+        px = px / max(eye_depth, 1e-4);
+    }
+    var sigma = 0.25 * px;
+    if sigma > 0.0 {
+        let reach = clamp(KERNEL_REACH_SIGMAS * sigma, ssss.min_kernel_px, ssss.max_kernel_px);
+        sigma = reach / KERNEL_REACH_SIGMAS;
+    }
+    // The kernel's axes: the screen extents of a disk on the surface (`penumbra::kernel_axes`).
+    let n = normalize((view_bindings::view.view_from_world * vec4(normal, 0.0)).xyz);
+    let axes = sqrt(max(vec2(1.0) - n.xy * n.xy, vec2(0.0)));
+    return vec4(hard, sigma * axes, eye_depth);
+}
+
+fn tap_offset(i: i32, step: f32) -> i32 {
+    let magnitude = i32(floor(f32(abs(i)) * step + 0.5));
+    return select(magnitude, -magnitude, i < 0);
+}
+
+// Lazy shadowing (§6.3.2): the hard shadow at the point where the sample pixel's view ray meets
+// the centre pixel's tangent plane; negative when there is no such point.
+fn lazy_shadow(sample_px: vec2<i32>, centre_world: vec3<f32>, normal: vec3<f32>, light: u32) -> f32 {
+    let frag = vec4(vec2<f32>(sample_px) + 0.5, 0.0, 1.0);
+    let ndc_xy = frag_coord_to_ndc(frag).xy;
+    let near = position_ndc_to_world(vec3(ndc_xy, 1.0));
+    let mid = position_ndc_to_world(vec3(ndc_xy, 0.5));
+    let dir = normalize(mid - near);
+    let denom = dot(dir, normal);
+    if abs(denom) < 1e-4 {
+        return -1.0;
+    }
+    let t = dot(centre_world - near, normal) / denom;
+    if t <= 0.0 {
+        return -1.0;
+    }
+    let p = near + t * dir;
+    return fetch_directional_shadow(light, vec4(p, 1.0), normal, view_z_of(p), frag.xy);
+}
+
+fn blur(in: FullscreenVertexOutput, direction: vec2<i32>, sigma_channel: u32) -> f32 {
+    let centre = vec2<i32>(in.position.xy);
+    let d = textureLoad(distances, centre, 0);
+    let own = textureLoad(blur_in, centre, 0).r;
+    if ssss.enabled == 0u {
+        return -1.0;
+    }
+    let sigma = d[sigma_channel];
+    let z = d.w;
+    if z <= 0.0 || sigma <= 0.0 {
+        return own;
+    }
+    let size = vec2<i32>(textureDimensions(distances));
+    // Tap layout (`kernel::tap_offsets`): one per pixel while the kernel fits, spread beyond.
+    let reach = ceil(KERNEL_REACH_SIGMAS * sigma);
+    let per_side = f32(ssss.taps_per_side);
+    var n = i32(reach);
+    var step = 1.0;
+    if reach > per_side {
+        n = i32(ssss.taps_per_side);
+        step = reach / per_side;
+    }
+    // The centre's surface, for lazy shadowing.
+    let light = ssss_light();
+    var centre_world = vec3(0.0);
+    var normal = vec3(0.0, 1.0, 0.0);
+    if ssss.lazy_shadowing != 0u {
+        let frag = vec4(in.position.xy, 0.0, 1.0);
+        let depth = prepass_depth(frag, 0u);
+        centre_world = position_ndc_to_world(vec3(frag_coord_to_ndc(frag).xy, depth));
+        normal = normalize(prepass_normal(frag, 0u));
+    }
+    var sum = 0.0;
+    var weights = 0.0;
+    for (var i = -n; i <= n; i += 1) {
+        let offset = tap_offset(i, step);
+        let p = centre + direction * offset;
+        if any(p < vec2(0)) || any(p >= size) {
+            continue;
+        }
+        let sample_depth = textureLoad(distances, p, 0).w;
+        var value = 0.0;
+        if sample_depth > 0.0 && abs(sample_depth - z) <= ssss.depth_rejection * z {
+            value = textureLoad(blur_in, p, 0).r;
+        } else if ssss.lazy_shadowing != 0u && light != NO_LIGHT {
+            value = lazy_shadow(p, centre_world, normal, light);
+            if value < 0.0 {
+                continue;
+            }
+        } else {
+            continue;
+        }
+        let w = exp(-f32(offset * offset) / (2.0 * sigma * sigma));
+        sum += w * value;
+        weights += w;
+    }
+    if weights > 0.0 {
+        return sum / weights;
+    }
+    return own;
+}
+
+@fragment
+fn blur_horizontal(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    return vec4(blur(in, vec2(1, 0), 1u), 0.0, 0.0, 1.0);
+}
+
+@fragment
+fn blur_vertical(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    return vec4(blur(in, vec2(0, 1), 2u), 0.0, 0.0, 1.0);
+}

@@ -1,0 +1,20 @@
+#define_import_path bevy_soft_shadows::ssss_types
+
+// Mirrors `ssss::render::SsssUniform`.
+struct SsssUniform {
+    // Angular diameter of the directional light (rad).
+    light_size: f32,
+    max_occluder_distance: f32,
+    min_kernel_px: f32,
+    max_kernel_px: f32,
+    depth_rejection: f32,
+    taps_per_side: u32,
+    lazy_shadowing: u32,
+    // 1 while a light has SSSS; 0 makes the passes write "inactive" (-1) for the receivers.
+    enabled: u32,
+}
+
+const MAX_DILATION_TEXELS: u32 = 64u;
+const NO_LIGHT: u32 = 0xffffffffu;
+// Kernel reach in standard deviations (`ssss::kernel::KERNEL_REACH_SIGMAS`).
+const KERNEL_REACH_SIGMAS: f32 = 2.5;

@@ -1,0 +1,144 @@
+//! The pole scene shared by the soft-shadow render tests: a 1 m wide, 4 m tall pole on a white
+//! ground under a directional light 45° up from +x, seen from straight above (image right = +x,
+//! down = +z), the shadow falling towards −x. Across the shadow's side edge at z = 0.5, `s`
+//! metres behind the pole, the blocker is `Δ = s·√2` from the ground along the light.
+#![allow(dead_code)]
+
+use bevy::camera::{OrthographicProjection, Projection, ScalingMode};
+use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
+use bevy::light::{
+    CascadeShadowConfigBuilder, DirectionalLightShadowMap, GlobalAmbientLight,
+    ShadowFilteringMethod,
+};
+use bevy::prelude::*;
+use bevy_nature_harness::RenderHarness;
+use bevy_nature_harness::compare::RgbaImage;
+use bevy_soft_shadows::reference::{LinearAverage, jittered_directions, srgb_to_linear};
+
+pub const SIZE: u32 = 160;
+/// World width of the view (m): x from −4.5 to 0.5, z from −2.5 to 2.5.
+pub const VIEW_M: f32 = 5.0;
+pub const CENTRE: Vec3 = Vec3::new(-2.0, 0.0, 0.0);
+/// Angular diameter of the light (rad).
+pub const THETA: f32 = 0.15;
+pub const JITTERS: usize = 48;
+
+#[derive(Component)]
+pub struct Sun;
+
+pub fn sun_direction() -> Vec3 {
+    // From the ground towards the light: 45° up, from +x, so the shadow falls towards −x.
+    Vec3::new(1.0, 1.0, 0.0).normalize()
+}
+
+pub fn setup(harness: &mut RenderHarness) {
+    let world = harness.world_mut();
+    world.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    world.insert_resource(DirectionalLightShadowMap { size: 2048 });
+    let (ground, pole) = {
+        let mut meshes = world.resource_mut::<Assets<Mesh>>();
+        (
+            meshes.add(Plane3d::default().mesh().size(40.0, 40.0)),
+            meshes.add(Cuboid::new(0.2, 4.0, 1.0)),
+        )
+    };
+    let material = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::srgb(0.8, 0.8, 0.8),
+            perceptual_roughness: 1.0,
+            reflectance: 0.0,
+            ..default()
+        });
+    world.spawn((Mesh3d(ground), MeshMaterial3d(material.clone())));
+    world.spawn((
+        Mesh3d(pole),
+        MeshMaterial3d(material),
+        Transform::from_xyz(0.0, 2.0, 0.0),
+    ));
+    world.spawn((
+        Sun,
+        DirectionalLight {
+            illuminance: 3000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        CascadeShadowConfigBuilder {
+            num_cascades: 1,
+            minimum_distance: 0.1,
+            maximum_distance: 14.0,
+            first_cascade_far_bound: 14.0,
+            ..default()
+        }
+        .build(),
+        Transform::default().looking_to(-sun_direction(), Vec3::Y),
+    ));
+    world.spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Tonemapping::None,
+        DebandDither::Disabled,
+        ShadowFilteringMethod::Hardware2x2,
+        Projection::Orthographic(OrthographicProjection {
+            scaling_mode: ScalingMode::Fixed {
+                width: VIEW_M,
+                height: VIEW_M,
+            },
+            ..OrthographicProjection::default_3d()
+        }),
+        Transform::from_translation(CENTRE + Vec3::Y * 10.0).looking_at(CENTRE, Vec3::NEG_Z),
+    ));
+}
+
+pub fn aim_sun(harness: &mut RenderHarness, direction_to_light: Vec3) {
+    let world = harness.world_mut();
+    let mut q = world.query_filtered::<&mut Transform, With<Sun>>();
+    for mut t in q.iter_mut(world) {
+        *t = Transform::default().looking_to(-direction_to_light, Vec3::Y);
+    }
+}
+
+/// Pixel column of world x, pixel row of world z (image right = +x, down = +z).
+pub fn pixel_of(x: f32, z: f32) -> (u32, u32) {
+    let m_per_px = VIEW_M / SIZE as f32;
+    (
+        ((x - (CENTRE.x - VIEW_M / 2.0)) / m_per_px) as u32,
+        ((z - (CENTRE.z - VIEW_M / 2.0)) / m_per_px) as u32,
+    )
+}
+
+/// Visibility down the column at world x, from the pole's middle (z = 0) outwards across its
+/// edge at z = 0.5, relative to the lit ground.
+pub fn profile(linear: &[f32], x: f32, lit: f32) -> Vec<f32> {
+    let (col, row0) = pixel_of(x, 0.0);
+    let (_, row1) = pixel_of(x, 1.4);
+    (row0..row1)
+        .map(|row| linear[((row * SIZE + col) * 4 + 1) as usize] / lit)
+        .collect()
+}
+
+/// The render in linear light.
+pub fn to_linear(image: &RgbaImage) -> Vec<f32> {
+    image.data.iter().map(|&v| srgb_to_linear(v)).collect()
+}
+
+/// The area-light reference of the current scene: `JITTERS` renders with the sun jittered over
+/// its disk, averaged in linear light (the sun is aimed back at its centre afterwards).
+pub fn area_light_reference(harness: &mut RenderHarness) -> LinearAverage {
+    let mut average = LinearAverage::default();
+    for d in jittered_directions(sun_direction(), THETA, JITTERS) {
+        aim_sun(harness, d);
+        average.add(&harness.render().unwrap().data);
+    }
+    aim_sun(harness, sun_direction());
+    average
+}
+
+/// Linear green of the lit ground, away from the shadow.
+pub fn lit(image: &[f32]) -> f32 {
+    let (lx, lz) = pixel_of(-1.5, 2.2);
+    image[((lz * SIZE + lx) * 4 + 1) as usize]
+}
