@@ -27,6 +27,7 @@ pub use bevy_soft_shadows as soft_shadows;
 pub use bevy_terrain_clip as terrain_clip;
 
 pub mod forest_scene;
+pub mod shadow_scene;
 pub mod showcase;
 
 /// All the suite's plugins. Each can be disabled or configured like any Bevy plugin group:

@@ -48,6 +48,10 @@ pub struct ShowcaseOptions {
     /// A backdrop forest of [`ForestTree`](bevy_foliage::ForestTree)s behind the scene, drawn by
     /// the forest LoD manager from shared LoD-cache extractions.
     pub forest: bool,
+    /// Screen Space Soft Shadows on the sun: penumbrae harden at contact and widen with the
+    /// distance to the blocker on every `StandardMaterial` surface (the box, the bark, the
+    /// ground when it is not clipmap-textured).
+    pub soft_shadows: bool,
 }
 
 impl Default for ShowcaseOptions {
@@ -58,6 +62,7 @@ impl Default for ShowcaseOptions {
             msaa: true,
             forest: true,
             terrain: true,
+            soft_shadows: true,
         }
     }
 }
@@ -128,7 +133,7 @@ fn spawn_showcase(
     if options.forest {
         spawn_backdrop_forest(&mut commands, &mut trees);
     }
-    commands.spawn((
+    let mut sun = commands.spawn((
         Name::new("sun"),
         DirectionalLight {
             illuminance: 10_000.0,
@@ -137,6 +142,14 @@ fn spawn_showcase(
         },
         Transform::default().looking_to(SUN_DIRECTION, Vec3::Y),
     ));
+    if options.soft_shadows {
+        // A sun of 3° (six times the real one), so the penumbrae read at this scale.
+        sun.insert(bevy_soft_shadows::ScreenSpaceSoftShadows {
+            light_size: 0.05,
+            max_occluder_distance: 8.0,
+            ..default()
+        });
+    }
     commands.insert_resource(GlobalAmbientLight {
         brightness: 300.0,
         ..default()

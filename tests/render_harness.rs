@@ -209,3 +209,38 @@ fn example_runner_headless_writes_screenshot_and_stats() {
     assert!(median > 0.0 && p95 >= median, "median {median} p95 {p95}");
     assert!(json["diagnostics"].is_object() && json["gpu_pass_ms"].is_object());
 }
+
+/// The main scene shows Screen Space Soft Shadows: the sun has them, the camera runs the passes
+/// (with the prepasses they need) and the plain `StandardMaterial` surfaces became receivers.
+#[test]
+fn showcase_has_screen_space_soft_shadows() {
+    use bevy_nature::soft_shadows::ScreenSpaceSoftShadows;
+    use bevy_nature::soft_shadows::ssss::receiver::{SoftShadowCamera, SoftShadowMaterial};
+    let Some((_, mut harness)) = render_showcase("showcase_ssss", test_options()) else {
+        return;
+    };
+    harness.run_frames(2).unwrap();
+    let world = harness.world_mut();
+    assert_eq!(
+        world
+            .query::<&ScreenSpaceSoftShadows>()
+            .iter(world)
+            .count(),
+        1
+    );
+    let cameras = world
+        .query_filtered::<(), (With<ShowcaseCamera>, With<SoftShadowCamera>)>()
+        .iter(world)
+        .count();
+    assert_eq!(cameras, 1, "the showcase camera runs the SSSS passes");
+    let receivers = world
+        .query::<&MeshMaterial3d<SoftShadowMaterial>>()
+        .iter(world)
+        .count();
+    let standard = world
+        .query::<&MeshMaterial3d<StandardMaterial>>()
+        .iter(world)
+        .count();
+    assert!(receivers >= 2, "ground and box receive soft shadows: {receivers}");
+    assert_eq!(standard, 0, "no StandardMaterial left unconverted");
+}

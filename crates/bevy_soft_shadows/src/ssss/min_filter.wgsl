@@ -1,10 +1,12 @@
-// Screen Space Soft Shadows, step 1 (Gumbau 2011, §6.2.1): the directional shadow map dilated by
-// a separable filter keeping the depth nearest the light over a square of 2r + 1 texels. Bevy's
-// shadow maps are reverse Z, so "nearest the light" is the maximum. r covers half the penumbra
-// of a blocker `max_occluder_distance` in front of the receiver, in the texels of each cascade:
-// r = ⌈max_occluder_distance · tan(θ/2) / texel_size⌉. CPU reference: `ssss::min_filter::dilate`.
+// Screen Space Soft Shadows, step 1 (Gumbau 2011, §6.2.1): the "coarse", dilated shadow map.
+// Each coarse texel first keeps the depth nearest the light over a block of BLOCK × BLOCK shadow
+// map texels (the thesis' coarser map), then a separable filter keeps the nearest over a square
+// of 2R + 1 coarse texels. Bevy's shadow maps are reverse Z, so "nearest the light" is the
+// maximum. The reach covers half the penumbra of a blocker `max_occluder_distance` in front of
+// the receiver, in the texels of each cascade: r = ⌈max_occluder_distance · tan(θ/2) / texel⌉,
+// R = ⌈r / BLOCK⌉. CPU reference: `ssss::min_filter::coarse_dilate`.
 #import bevy_pbr::mesh_view_types::{Lights, DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT}
-#import bevy_soft_shadows::ssss_types::{SsssUniform, MAX_DILATION_TEXELS, NO_LIGHT}
+#import bevy_soft_shadows::ssss_types::{SsssUniform, MAX_DILATION_TEXELS, NO_LIGHT, DILATION_BLOCK}
 
 @group(0) @binding(0) var shadow_depth: texture_depth_2d_array;
 @group(0) @binding(1) var rows_in: texture_2d_array<f32>;
@@ -21,33 +23,54 @@ fn ssss_light() -> u32 {
     return NO_LIGHT;
 }
 
-// Dilation radius for one layer of the shadow texture array (0 for layers of other lights).
+// Coarse dilation radius R for one layer of the shadow texture array; -1 for layers of other
+// lights (left alone).
 fn radius_of_layer(layer: u32) -> i32 {
     let i = ssss_light();
     if i == NO_LIGHT {
-        return 0;
+        return -1;
     }
     let light = &lights.directional_lights[i];
     let base = (*light).depth_texture_base_index;
     if layer < base || layer >= base + (*light).num_cascades {
-        return 0;
+        return -1;
     }
     let texel = (*light).cascades[layer - base].texel_size;
     let half_width = ssss.max_occluder_distance * tan(0.5 * ssss.light_size);
-    return i32(clamp(ceil(half_width / max(texel, 1e-6)), 0.0, f32(MAX_DILATION_TEXELS)));
+    let r = clamp(ceil(half_width / max(texel, 1e-6)), 0.0, f32(MAX_DILATION_TEXELS));
+    return i32(ceil(r / f32(DILATION_BLOCK)));
+}
+
+// The nearest depth of each BLOCK × BLOCK block of the shadow map.
+@compute @workgroup_size(8, 8, 1)
+fn reduce(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = vec2<i32>(textureDimensions(dilated_out));
+    if i32(id.x) >= size.x || i32(id.y) >= size.y || radius_of_layer(id.z) < 0 {
+        return;
+    }
+    let fine = vec2<i32>(textureDimensions(shadow_depth)) - 1;
+    let origin = vec2<i32>(id.xy) * i32(DILATION_BLOCK);
+    var nearest = 0.0;
+    for (var y = 0; y < i32(DILATION_BLOCK); y += 1) {
+        for (var x = 0; x < i32(DILATION_BLOCK); x += 1) {
+            let p = min(origin + vec2(x, y), fine);
+            nearest = max(nearest, textureLoad(shadow_depth, p, id.z, 0));
+        }
+    }
+    textureStore(dilated_out, id.xy, id.z, vec4(nearest, 0.0, 0.0, 0.0));
 }
 
 @compute @workgroup_size(8, 8, 1)
 fn horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
-    let size = vec2<i32>(textureDimensions(shadow_depth));
-    if i32(id.x) >= size.x || i32(id.y) >= size.y {
+    let size = vec2<i32>(textureDimensions(rows_in));
+    let r = radius_of_layer(id.z);
+    if i32(id.x) >= size.x || i32(id.y) >= size.y || r < 0 {
         return;
     }
-    let r = radius_of_layer(id.z);
     var nearest = 0.0;
     for (var o = -r; o <= r; o += 1) {
         let x = clamp(i32(id.x) + o, 0, size.x - 1);
-        nearest = max(nearest, textureLoad(shadow_depth, vec2(x, i32(id.y)), id.z, 0));
+        nearest = max(nearest, textureLoad(rows_in, vec2(x, i32(id.y)), id.z, 0).r);
     }
     textureStore(dilated_out, id.xy, id.z, vec4(nearest, 0.0, 0.0, 0.0));
 }
@@ -55,14 +78,25 @@ fn horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(8, 8, 1)
 fn vertical(@builtin(global_invocation_id) id: vec3<u32>) {
     let size = vec2<i32>(textureDimensions(rows_in));
-    if i32(id.x) >= size.x || i32(id.y) >= size.y {
+    let r = radius_of_layer(id.z);
+    if i32(id.x) >= size.x || i32(id.y) >= size.y || r < 0 {
         return;
     }
-    let r = radius_of_layer(id.z);
     var nearest = 0.0;
     for (var o = -r; o <= r; o += 1) {
         let y = clamp(i32(id.y) + o, 0, size.y - 1);
         nearest = max(nearest, textureLoad(rows_in, vec2(i32(id.x), y), id.z, 0).r);
     }
     textureStore(dilated_out, id.xy, id.z, vec4(nearest, 0.0, 0.0, 0.0));
+}
+
+// Debug copy of the shadow map into a float texture that can be read back (tests compare the
+// dilated map with its CPU reference computed from it).
+@compute @workgroup_size(8, 8, 1)
+fn copy_shadow(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = vec2<i32>(textureDimensions(shadow_depth));
+    if i32(id.x) >= size.x || i32(id.y) >= size.y {
+        return;
+    }
+    textureStore(dilated_out, id.xy, id.z, vec4(textureLoad(shadow_depth, id.xy, id.z, 0), 0.0, 0.0, 0.0));
 }

@@ -130,6 +130,22 @@ fn prepare_cameras_and_textures(
     put(&mut textures.visibility, TextureFormat::R32Float);
 }
 
+/// SSSS replaces Bevy's PCSS for its light: the hard shadow it blurs is Bevy's shadow lookup,
+/// which PCSS would already have softened. A light with both gets PCSS switched off (warned).
+fn switch_off_pcss_under_ssss(
+    mut lights: Query<(Entity, &mut DirectionalLight), With<ScreenSpaceSoftShadows>>,
+) {
+    for (entity, mut light) in &mut lights {
+        if light.soft_shadow_size.is_some() {
+            warn!(
+                "light {entity} has both ScreenSpaceSoftShadows and PCSS (soft_shadow_size): \
+                 SSSS replaces PCSS, soft_shadow_size set to None"
+            );
+            light.soft_shadow_size = None;
+        }
+    }
+}
+
 /// Whether [`SoftShadowsPlugin`](crate::SoftShadowsPlugin) converts meshes' `StandardMaterial`s
 /// into [`SoftShadowMaterial`]s while SSSS is on (default: yes; opt a mesh out with
 /// [`NoSoftShadowReceiver`]).
@@ -145,7 +161,7 @@ impl Default for ConvertStandardMaterials {
 
 /// Swaps `StandardMaterial`s for [`SoftShadowMaterial`]s sharing their parameters (one receiver
 /// material per standard material).
-#[allow(clippy::type_complexity)]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn convert_receivers(
     mut commands: Commands,
     convert: Res<ConvertStandardMaterials>,
@@ -191,6 +207,11 @@ pub(crate) fn build(app: &mut App) {
         .register_type::<NoSoftShadowReceiver>()
         .add_systems(
             PostUpdate,
-            (prepare_cameras_and_textures, convert_receivers).chain(),
+            (
+                switch_off_pcss_under_ssss,
+                prepare_cameras_and_textures,
+                convert_receivers,
+            )
+                .chain(),
         );
 }

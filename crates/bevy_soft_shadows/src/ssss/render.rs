@@ -63,6 +63,17 @@ impl SsssUniform {
     }
 }
 
+/// Insert into the render world to get copies of layer 0 of the shadow map and of the coarse
+/// dilated map (both R32Float, row-major, rows padded to 256 bytes) in `fine` and `coarse`
+/// after the next frame — for tests of the dilation against its CPU reference.
+#[derive(Resource, Default, Clone)]
+pub struct SsssDilationReadback {
+    /// Layer 0 of the shadow map: buffer and (width, height).
+    pub fine: Option<(Buffer, UVec2)>,
+    /// Layer 0 of the coarse dilated map: buffer and (width, height).
+    pub coarse: Option<(Buffer, UVec2)>,
+}
+
 #[derive(Resource, Default)]
 struct ExtractedSsss {
     uniform: SsssUniform,
@@ -110,8 +121,10 @@ struct SsssPipelines {
     shader: Handle<Shader>,
     screen_layout: BindGroupLayoutDescriptor,
     dilate_layout: BindGroupLayoutDescriptor,
+    dilate_reduce: CachedComputePipelineId,
     dilate_horizontal: CachedComputePipelineId,
     dilate_vertical: CachedComputePipelineId,
+    copy_shadow: CachedComputePipelineId,
 }
 
 fn init_pipelines(
@@ -157,16 +170,20 @@ fn init_pipelines(
             ..default()
         })
     };
+    let dilate_reduce = queue("reduce");
     let dilate_horizontal = queue("horizontal");
     let dilate_vertical = queue("vertical");
+    let copy_shadow = queue("copy_shadow");
     commands.insert_resource(SsssPipelines {
         mesh_pipeline: mesh_pipeline.clone(),
         fullscreen: fullscreen.clone(),
         shader: load_embedded_asset!(asset_server.as_ref(), "ssss.wgsl"),
         screen_layout,
         dilate_layout,
+        dilate_reduce,
         dilate_horizontal,
         dilate_vertical,
+        copy_shadow,
     });
 }
 
@@ -242,7 +259,8 @@ fn prepare_pipelines(
     }
 }
 
-/// The dilated shadow map and its horizontal half-step, as large as the shadow texture array.
+/// The coarse dilated shadow map and its horizontal half-step: one texel per
+/// [`DILATION_BLOCK`](super::min_filter::DILATION_BLOCK)² block of the shadow texture array.
 #[derive(Component)]
 struct SsssDilation {
     rows: CachedTexture,
@@ -258,9 +276,10 @@ fn prepare_dilation(
 ) {
     for (entity, shadows) in &views {
         let texture = &shadows.directional_light_depth_texture;
+        let block = super::min_filter::DILATION_BLOCK as u32;
         let size = Extent3d {
-            width: texture.width(),
-            height: texture.height(),
+            width: texture.width().div_ceil(block),
+            height: texture.height().div_ceil(block),
             depth_or_array_layers: texture.depth_or_array_layers(),
         };
         let mut get = |label: &'static str| {
@@ -273,7 +292,9 @@ fn prepare_dilation(
                     sample_count: 1,
                     dimension: TextureDimension::D2,
                     format: TextureFormat::R32Float,
-                    usage: TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING,
+                    usage: TextureUsages::STORAGE_BINDING
+                        | TextureUsages::TEXTURE_BINDING
+                        | TextureUsages::COPY_SRC,
                     view_formats: &[],
                 },
             )
@@ -313,10 +334,12 @@ fn ssss(
     uniform: Res<SsssUniformBuffer>,
     light_meta: Res<LightMeta>,
     images: Res<RenderAssets<GpuImage>>,
+    readback: Option<ResMut<SsssDilationReadback>>,
     mut ctx: RenderContext,
 ) {
     let (mesh_view, shadows, lights_offset, ids, dilation) = view.into_inner();
     let (
+        Some(dilate_reduce),
         Some(dilate_h),
         Some(dilate_v),
         Some(distance_pipeline),
@@ -328,6 +351,7 @@ fn ssss(
         Some(horizontal),
         Some(visibility),
     ) = (
+        pipeline_cache.get_compute_pipeline(pipelines.dilate_reduce),
         pipeline_cache.get_compute_pipeline(pipelines.dilate_horizontal),
         pipeline_cache.get_compute_pipeline(pipelines.dilate_vertical),
         pipeline_cache.get_render_pipeline(ids.distance),
@@ -359,6 +383,9 @@ fn ssss(
             )),
         )
     };
+    // reduce: shadow map → dilated (blocks); horizontal: dilated → rows; vertical: rows →
+    // dilated. (`rows_in` of the reduce pass is unused.)
+    let reduce_group = dilate_group(&rows_view, &dilated_view);
     let rows_group = dilate_group(&dilated_view, &rows_view);
     let columns_group = dilate_group(&rows_view, &dilated_view);
     let screen_layout = pipeline_cache.get_bind_group_layout(&pipelines.screen_layout);
@@ -394,12 +421,17 @@ fn ssss(
             dilation.size.height.div_ceil(8),
             dilation.size.depth_or_array_layers,
         ];
+        let span = diagnostics.pass_span(&mut pass, "ssss_dilate");
+        pass.set_pipeline(dilate_reduce);
+        pass.set_bind_group(0, &reduce_group, &[lights_offset.offset]);
+        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
         pass.set_pipeline(dilate_h);
         pass.set_bind_group(0, &rows_group, &[lights_offset.offset]);
         pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
         pass.set_pipeline(dilate_v);
         pass.set_bind_group(0, &columns_group, &[lights_offset.offset]);
         pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        span.end(&mut pass);
     }
     for (label, pipeline, group, target) in [
         (
@@ -427,13 +459,109 @@ fn ssss(
             occlusion_query_set: None,
             multiview_mask: None,
         });
+        let span = diagnostics.pass_span(&mut pass, label);
         pass.set_render_pipeline(pipeline);
         pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
         pass.set_bind_group(1, &mesh_view.binding_array, &[]);
         pass.set_bind_group(2, group, &[]);
         pass.draw(0..3, 0..1);
+        span.end(&mut pass);
+    }
+    if let Some(mut readback) = readback {
+        copy_for_readback(
+            &mut ctx,
+            &pipelines,
+            &pipeline_cache,
+            &shadows.directional_light_depth_texture,
+            &dilation.dilated.texture,
+            |fine_view| dilate_group(&rows_view, fine_view),
+            lights_offset.offset,
+            &mut readback,
+        );
     }
     time_span.end(ctx.command_encoder());
+}
+
+/// Copies layer 0 of a texture into a new mappable-by-copy buffer.
+fn copy_layer0(ctx: &mut RenderContext, texture: &Texture, label: &'static str) -> (Buffer, UVec2) {
+    let (w, h) = (texture.width(), texture.height());
+    let stride = (w * 4).div_ceil(256) * 256;
+    let buffer = ctx.render_device().create_buffer(&BufferDescriptor {
+        label: Some(label),
+        size: (stride * h) as u64,
+        usage: BufferUsages::COPY_SRC | BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    ctx.command_encoder().copy_texture_to_buffer(
+        TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: Origin3d::ZERO,
+            aspect: TextureAspect::All,
+        },
+        TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(stride),
+                rows_per_image: Some(h),
+            },
+        },
+        Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
+    );
+    (buffer, UVec2::new(w, h))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn copy_for_readback(
+    ctx: &mut RenderContext,
+    pipelines: &SsssPipelines,
+    pipeline_cache: &PipelineCache,
+    shadow: &Texture,
+    dilated: &Texture,
+    group_for: impl Fn(&TextureView) -> BindGroup,
+    lights_offset: u32,
+    readback: &mut SsssDilationReadback,
+) {
+    let Some(copy) = pipeline_cache.get_compute_pipeline(pipelines.copy_shadow) else {
+        return;
+    };
+    let fine = ctx.render_device().create_texture(&TextureDescriptor {
+        label: Some("ssss_shadow_copy"),
+        size: Extent3d {
+            width: shadow.width(),
+            height: shadow.height(),
+            depth_or_array_layers: shadow.depth_or_array_layers(),
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: TextureDimension::D2,
+        format: TextureFormat::R32Float,
+        usage: TextureUsages::STORAGE_BINDING | TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let group = group_for(&array_view(&fine));
+    {
+        let mut pass = ctx
+            .command_encoder()
+            .begin_compute_pass(&ComputePassDescriptor {
+                label: Some("ssss_shadow_copy"),
+                timestamp_writes: None,
+            });
+        pass.set_pipeline(copy);
+        pass.set_bind_group(0, &group, &[lights_offset]);
+        pass.dispatch_workgroups(
+            shadow.width().div_ceil(8),
+            shadow.height().div_ceil(8),
+            shadow.depth_or_array_layers(),
+        );
+    }
+    readback.fine = Some(copy_layer0(ctx, &fine, "ssss_shadow_copy_buffer"));
+    readback.coarse = Some(copy_layer0(ctx, dilated, "ssss_dilated_copy_buffer"));
 }
 
 /// Registers the render-world side.

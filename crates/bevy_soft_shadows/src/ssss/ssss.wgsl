@@ -85,6 +85,12 @@ fn distance(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         px = px / max(eye_depth, 1e-4);
     }
     var sigma = 0.25 * px;
+    // The mask of §6.2.2: a kernel reaching less than a pixel would leave the hard shadow as it
+    // is (its ±1 px taps weigh < 4 %), so the blur skips the pixel. This also drops the tiny
+    // "blocker" gaps a surface finds in its own neighbourhood of the dilated map.
+    if KERNEL_REACH_SIGMAS * sigma < 1.0 {
+        sigma = 0.0;
+    }
     if sigma > 0.0 {
         let reach = clamp(KERNEL_REACH_SIGMAS * sigma, ssss.min_kernel_px, ssss.max_kernel_px);
         sigma = reach / KERNEL_REACH_SIGMAS;

@@ -15,6 +15,9 @@ struct SsssUniform {
 }
 
 const MAX_DILATION_TEXELS: u32 = 64u;
+// Side of the shadow-map blocks one coarse texel of the dilated map stands for
+// (`ssss::min_filter::DILATION_BLOCK`).
+const DILATION_BLOCK: u32 = 4u;
 const NO_LIGHT: u32 = 0xffffffffu;
 // Kernel reach in standard deviations (`ssss::kernel::KERNEL_REACH_SIGMAS`).
 const KERNEL_REACH_SIGMAS: f32 = 2.5;

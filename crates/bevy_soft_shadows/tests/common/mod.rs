@@ -32,6 +32,18 @@ pub fn sun_direction() -> Vec3 {
 }
 
 pub fn setup(harness: &mut RenderHarness) {
+    setup_scene(
+        harness,
+        Cuboid::new(0.2, 4.0, 1.0),
+        Vec3::new(0.0, 2.0, 0.0),
+        sun_direction(),
+        CENTRE,
+    );
+}
+
+/// The ground, one blocker (`shape` at `at`), the sun towards `sun` and the top-down camera
+/// centred on `centre`.
+pub fn setup_scene(harness: &mut RenderHarness, shape: Cuboid, at: Vec3, sun: Vec3, centre: Vec3) {
     let world = harness.world_mut();
     world.insert_resource(GlobalAmbientLight {
         brightness: 0.0,
@@ -42,7 +54,7 @@ pub fn setup(harness: &mut RenderHarness) {
         let mut meshes = world.resource_mut::<Assets<Mesh>>();
         (
             meshes.add(Plane3d::default().mesh().size(40.0, 40.0)),
-            meshes.add(Cuboid::new(0.2, 4.0, 1.0)),
+            meshes.add(shape),
         )
     };
     let material = world
@@ -57,7 +69,7 @@ pub fn setup(harness: &mut RenderHarness) {
     world.spawn((
         Mesh3d(pole),
         MeshMaterial3d(material),
-        Transform::from_xyz(0.0, 2.0, 0.0),
+        Transform::from_translation(at),
     ));
     world.spawn((
         Sun,
@@ -74,7 +86,7 @@ pub fn setup(harness: &mut RenderHarness) {
             ..default()
         }
         .build(),
-        Transform::default().looking_to(-sun_direction(), Vec3::Y),
+        Transform::default().looking_to(-sun, Vec3::Y),
     ));
     world.spawn((
         Camera3d::default(),
@@ -89,7 +101,7 @@ pub fn setup(harness: &mut RenderHarness) {
             },
             ..OrthographicProjection::default_3d()
         }),
-        Transform::from_translation(CENTRE + Vec3::Y * 10.0).looking_at(CENTRE, Vec3::NEG_Z),
+        Transform::from_translation(centre + Vec3::Y * 10.0).looking_at(centre, Vec3::NEG_Z),
     ));
 }
 
@@ -128,12 +140,21 @@ pub fn to_linear(image: &RgbaImage) -> Vec<f32> {
 /// The area-light reference of the current scene: `JITTERS` renders with the sun jittered over
 /// its disk, averaged in linear light (the sun is aimed back at its centre afterwards).
 pub fn area_light_reference(harness: &mut RenderHarness) -> LinearAverage {
+    area_light_reference_towards(harness, sun_direction(), THETA)
+}
+
+/// The area-light reference for a sun towards `sun` of angular diameter `theta`.
+pub fn area_light_reference_towards(
+    harness: &mut RenderHarness,
+    sun: Vec3,
+    theta: f32,
+) -> LinearAverage {
     let mut average = LinearAverage::default();
-    for d in jittered_directions(sun_direction(), THETA, JITTERS) {
+    for d in jittered_directions(sun, theta, JITTERS) {
         aim_sun(harness, d);
         average.add(&harness.render().unwrap().data);
     }
-    aim_sun(harness, sun_direction());
+    aim_sun(harness, sun);
     average
 }
 

@@ -1,0 +1,146 @@
+//! Soft shadows three ways on one scene: Bevy's hard shadows, Bevy's PCSS and Screen Space Soft
+//! Shadows (keys 1 / 2 / 3, or `technique` in the panel, which also shows the live GPU cost:
+//! `render/ssss/elapsed_gpu` for the SSSS passes, `render/main_opaque_pass_3d/elapsed_gpu` where
+//! PCSS filters).
+//!
+//! ```text
+//! cargo run --release --example soft_shadows                 # windowed, egui panel
+//! cargo run --example soft_shadows -- --headless --frames 30 --stats ssss.json
+//! cargo run --example soft_shadows -- --bench [--frames N]   # the issue-6 table, JSON
+//! ```
+//!
+//! `--bench` measures, in one process, for small / medium / large light sizes at two
+//! resolutions: the GPU time of soft shadowing over hard shadows (timestamp queries: PCSS = its
+//! main opaque pass minus the hard-shadow one; SSSS = its own passes plus its main pass minus the
+//! hard-shadow one) and each image's RMSE against an area-light reference (48 hard-shadowed
+//! suns jittered over the light's disk, averaged in linear light) rendered in the same run.
+
+use bevy::prelude::*;
+use bevy_nature::shadow_scene::{
+    DemoSun, ShadowDemo, ShadowTechnique, add_shadow_demo, spawn_shadow_scene, sun_direction,
+};
+use bevy_nature::soft_shadows::ScreenSpaceSoftShadows;
+use bevy_nature::soft_shadows::reference::{LinearAverage, jittered_directions, srgb_to_linear};
+use bevy_nature_harness::headless::HarnessConfig;
+use bevy_nature_harness::{ExampleArgs, ExampleRunner, RenderHarness, require_adapter};
+
+fn main() -> AppExit {
+    let mut rest: Vec<String> = std::env::args().skip(1).collect();
+    let bench = rest.iter().any(|a| a == "--bench");
+    rest.retain(|a| a != "--bench");
+    let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
+        eprintln!("{e} [--bench]");
+        std::process::exit(2)
+    });
+    if bench {
+        return run_bench(&args);
+    }
+    ExampleRunner::with_args("soft_shadows", args)
+        .inspect_resource::<ShadowDemo>()
+        .inspect_component::<ScreenSpaceSoftShadows>()
+        .run(|app| {
+            app.add_plugins(bevy_nature::soft_shadows::SoftShadowsPlugin)
+                .add_systems(Startup, spawn_shadow_scene);
+            add_shadow_demo(app);
+        })
+}
+
+fn linear(image: &[u8]) -> Vec<f32> {
+    image.iter().map(|&v| srgb_to_linear(v)).collect()
+}
+
+/// RMSE over the colour channels, in linear light.
+fn rmse(a: &[f32], b: &[f32]) -> f64 {
+    let mut sum = 0.0f64;
+    let mut n = 0usize;
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        if i % 4 != 3 {
+            sum += ((x - y) as f64).powi(2);
+            n += 1;
+        }
+    }
+    (sum / n as f64).sqrt()
+}
+
+fn run_bench(args: &ExampleArgs) -> AppExit {
+    if require_adapter("soft_shadows").is_none() {
+        return AppExit::error();
+    }
+    let frames = args.frames.unwrap_or(12);
+    let mut rows = Vec::new();
+    for size in [UVec2::new(320, 180), UVec2::new(640, 360)] {
+        let mut harness =
+            RenderHarness::new(HarnessConfig::sized(size.x, size.y)).expect("harness");
+        harness
+            .app_mut()
+            .add_plugins(bevy_nature::soft_shadows::SoftShadowsPlugin)
+            .add_systems(Startup, spawn_shadow_scene);
+        add_shadow_demo(harness.app_mut());
+        harness.wait_until_ready().expect("scene ready");
+        for (label, light_size) in [("small", 0.03f32), ("medium", 0.1), ("large", 0.25)] {
+            let set = |harness: &mut RenderHarness, technique: ShadowTechnique| {
+                let mut demo = harness.world_mut().resource_mut::<ShadowDemo>();
+                demo.technique = ShadowTechnique::ALL
+                    .iter()
+                    .position(|t| *t == technique)
+                    .unwrap() as u32;
+                demo.light_size = light_size;
+            };
+            // The reference: hard shadows from suns jittered over the light's disk.
+            set(&mut harness, ShadowTechnique::Hard);
+            harness.run_frames(3).unwrap();
+            let sun = {
+                let world = harness.world_mut();
+                world
+                    .query_filtered::<Entity, With<DemoSun>>()
+                    .single(world)
+                    .unwrap()
+            };
+            let mut average = LinearAverage::default();
+            for d in jittered_directions(sun_direction(), light_size, 48) {
+                *harness.world_mut().get_mut::<Transform>(sun).unwrap() =
+                    Transform::default().looking_to(-d, Vec3::Y);
+                average.add(&harness.render().unwrap().data);
+            }
+            *harness.world_mut().get_mut::<Transform>(sun).unwrap() =
+                Transform::default().looking_to(-sun_direction(), Vec3::Y);
+            let reference = average.linear();
+            let mut measured = Vec::new();
+            for technique in ShadowTechnique::ALL {
+                set(&mut harness, technique);
+                // Let pipelines compile and the receivers switch, then time.
+                harness.run_frames(8).unwrap();
+                harness.reset_timing();
+                harness.run_frames(frames).unwrap();
+                let main = harness
+                    .pass_time_ms("main_opaque_pass_3d")
+                    .unwrap_or(f64::NAN);
+                let ssss = harness.pass_time_ms("ssss").unwrap_or(0.0);
+                let image = linear(&harness.render().unwrap().data);
+                let error = rmse(&image, &reference);
+                measured.push((technique, main, ssss, error));
+            }
+            let hard_main = measured[0].1;
+            for (technique, main, ssss, error) in &measured {
+                let passes = if *technique == ShadowTechnique::Ssss {
+                    *ssss
+                } else {
+                    0.0
+                };
+                let cost = main + passes - hard_main;
+                rows.push(format!(
+                    "{{\"size\": [{}, {}], \"light\": \"{label}\", \"light_size_rad\": {light_size}, \"technique\": \"{}\", \"main_pass_ms\": {main:.3}, \"ssss_passes_ms\": {passes:.3}, \"cost_over_hard_ms\": {cost:.3}, \"rmse_vs_reference\": {error:.5}}}",
+                    size.x,
+                    size.y,
+                    technique.name()
+                ));
+                eprintln!("{}", rows.last().unwrap());
+            }
+        }
+    }
+    println!(
+        "{{\"frames\": {frames}, \"rows\": [\n  {}\n]}}",
+        rows.join(",\n  ")
+    );
+    AppExit::Success
+}

@@ -1,0 +1,204 @@
+//! The soft-shadow scene of the `soft_shadows` example and benchmark: a ground with posts of
+//! several heights, a table-like panel on legs and a sphere under a low sun, so penumbrae start
+//! hard at every contact and widen with the distance to the blocker — and a switch between
+//! Bevy's hard shadows, Bevy's PCSS and Screen Space Soft Shadows for the same light.
+
+use bevy::light::{CascadeShadowConfigBuilder, DirectionalLightShadowMap, ShadowFilteringMethod};
+use bevy::prelude::*;
+use bevy_soft_shadows::ScreenSpaceSoftShadows;
+
+/// The shadowing technique of the scene's sun.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Reflect)]
+pub enum ShadowTechnique {
+    /// Bevy's shadow map with 2×2 hardware PCF.
+    Hard,
+    /// Bevy's percentage-closer soft shadows (`DirectionalLight::soft_shadow_size`).
+    Pcss,
+    /// Screen Space Soft Shadows ([`ScreenSpaceSoftShadows`]).
+    #[default]
+    Ssss,
+}
+
+impl ShadowTechnique {
+    /// All three, in switching order.
+    pub const ALL: [Self; 3] = [Self::Hard, Self::Pcss, Self::Ssss];
+
+    /// Short name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Hard => "hard",
+            Self::Pcss => "pcss",
+            Self::Ssss => "ssss",
+        }
+    }
+}
+
+/// What the scene shows; edit it (panel, keys 1/2/3) to switch.
+#[derive(Resource, Clone, Debug, PartialEq, Reflect)]
+#[reflect(Resource)]
+pub struct ShadowDemo {
+    /// 0: hard, 1: Bevy's PCSS, 2: SSSS (keys 1, 2, 3).
+    pub technique: u32,
+    /// Angular diameter of the sun (rad).
+    pub light_size: f32,
+    /// Bevy's PCSS size per radian of light size: PCSS's `soft_shadow_size` has no physical unit
+    /// shared with an angular size; this factor gave PCSS its lowest error against the
+    /// area-light reference on the pole scene (`ssss_vs_pcss` test sweep).
+    pub pcss_size_per_radian: f32,
+}
+
+impl Default for ShadowDemo {
+    fn default() -> Self {
+        Self {
+            technique: 2,
+            light_size: 0.1,
+            pcss_size_per_radian: PCSS_SIZE_PER_RADIAN,
+        }
+    }
+}
+
+/// See [`ShadowDemo::pcss_size_per_radian`].
+pub const PCSS_SIZE_PER_RADIAN: f32 = 4.0 / 0.15;
+
+impl ShadowDemo {
+    /// The technique selected.
+    pub fn technique(&self) -> ShadowTechnique {
+        ShadowTechnique::ALL[(self.technique as usize).min(2)]
+    }
+}
+
+/// The scene's sun.
+#[derive(Component)]
+pub struct DemoSun;
+
+/// Direction from the ground towards the sun (35° up).
+pub fn sun_direction() -> Vec3 {
+    Vec3::new(0.6, 0.7, 0.4).normalize()
+}
+
+/// Spawns the scene and its camera (MSAA off: the software rasteriser pays for it).
+pub fn spawn_shadow_scene(
+    mut commands: Commands,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+) {
+    commands.insert_resource(DirectionalLightShadowMap { size: 2048 });
+    let ground = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.75, 0.72, 0.66),
+        perceptual_roughness: 1.0,
+        ..default()
+    });
+    let props = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.55, 0.38, 0.25),
+        perceptual_roughness: 0.8,
+        ..default()
+    });
+    commands.spawn((
+        Mesh3d(meshes.add(Plane3d::default().mesh().size(60.0, 60.0))),
+        MeshMaterial3d(ground),
+    ));
+    // Posts of increasing height: longer posts cast shadows whose tips are wider.
+    for (i, h) in [1.0f32, 2.0, 3.0, 4.0].into_iter().enumerate() {
+        commands.spawn((
+            Mesh3d(meshes.add(Cuboid::new(0.25, h, 0.25))),
+            MeshMaterial3d(props.clone()),
+            Transform::from_xyz(-3.0 + 1.6 * i as f32, h / 2.0, -1.5),
+        ));
+    }
+    // A panel on four legs: a shadow hard at the legs and soft under the top's edge.
+    commands.spawn((
+        Mesh3d(meshes.add(Cuboid::new(2.0, 0.08, 1.2))),
+        MeshMaterial3d(props.clone()),
+        Transform::from_xyz(1.5, 1.2, 1.8),
+    ));
+    for (x, z) in [(-0.9, -0.5), (0.9, -0.5), (-0.9, 0.5), (0.9, 0.5)] {
+        commands.spawn((
+            Mesh3d(meshes.add(Cuboid::new(0.08, 1.2, 0.08))),
+            MeshMaterial3d(props.clone()),
+            Transform::from_xyz(1.5 + x, 0.6, 1.8 + z),
+        ));
+    }
+    commands.spawn((
+        Mesh3d(meshes.add(Sphere::new(0.6).mesh().uv(32, 16))),
+        MeshMaterial3d(props),
+        Transform::from_xyz(-2.0, 0.6, 2.0),
+    ));
+    commands.spawn((
+        DemoSun,
+        DirectionalLight {
+            illuminance: 8000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        CascadeShadowConfigBuilder {
+            num_cascades: 1,
+            minimum_distance: 0.1,
+            maximum_distance: 30.0,
+            first_cascade_far_bound: 30.0,
+            ..default()
+        }
+        .build(),
+        Transform::default().looking_to(-sun_direction(), Vec3::Y),
+    ));
+    commands.spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        ShadowFilteringMethod::Hardware2x2,
+        Transform::from_xyz(-1.0, 6.5, 10.0).looking_at(Vec3::new(0.0, 0.5, 0.5), Vec3::Y),
+    ));
+}
+
+/// Applies [`ShadowDemo`] to the sun when it changes.
+pub fn apply_shadow_demo(
+    demo: Res<ShadowDemo>,
+    mut commands: Commands,
+    mut sun: Query<(Entity, &mut DirectionalLight), With<DemoSun>>,
+) {
+    if !demo.is_changed() {
+        return;
+    }
+    for (entity, mut light) in &mut sun {
+        match demo.technique() {
+            ShadowTechnique::Hard => {
+                light.soft_shadow_size = None;
+                commands.entity(entity).remove::<ScreenSpaceSoftShadows>();
+            }
+            ShadowTechnique::Pcss => {
+                light.soft_shadow_size = Some(demo.light_size * demo.pcss_size_per_radian);
+                commands.entity(entity).remove::<ScreenSpaceSoftShadows>();
+            }
+            ShadowTechnique::Ssss => {
+                light.soft_shadow_size = None;
+                commands.entity(entity).insert(ScreenSpaceSoftShadows {
+                    light_size: demo.light_size,
+                    max_occluder_distance: 5.0,
+                    taps_per_side: 11,
+                    max_kernel_px: 40.0,
+                    ..default()
+                });
+            }
+        }
+    }
+}
+
+/// Keys 1, 2, 3 pick hard shadows, PCSS or SSSS.
+pub fn switch_with_keys(keys: Option<Res<ButtonInput<KeyCode>>>, mut demo: ResMut<ShadowDemo>) {
+    let Some(keys) = keys else { return };
+    for (key, technique) in [
+        (KeyCode::Digit1, 0),
+        (KeyCode::Digit2, 1),
+        (KeyCode::Digit3, 2),
+    ] {
+        if keys.just_pressed(key) && demo.technique != technique {
+            demo.technique = technique;
+        }
+    }
+}
+
+/// Registers the demo's resource and systems (the scene itself is spawned by
+/// [`spawn_shadow_scene`]).
+pub fn add_shadow_demo(app: &mut App) {
+    app.init_resource::<ShadowDemo>()
+        .register_type::<ShadowDemo>()
+        .add_systems(Update, (switch_with_keys, apply_shadow_demo).chain());
+}
