@@ -222,10 +222,7 @@ fn showcase_has_screen_space_soft_shadows() {
     harness.run_frames(2).unwrap();
     let world = harness.world_mut();
     assert_eq!(
-        world
-            .query::<&ScreenSpaceSoftShadows>()
-            .iter(world)
-            .count(),
+        world.query::<&ScreenSpaceSoftShadows>().iter(world).count(),
         1
     );
     let cameras = world
@@ -241,6 +238,9 @@ fn showcase_has_screen_space_soft_shadows() {
         .query::<&MeshMaterial3d<StandardMaterial>>()
         .iter(world)
         .count();
-    assert!(receivers >= 2, "ground and box receive soft shadows: {receivers}");
+    assert!(
+        receivers >= 2,
+        "ground and box receive soft shadows: {receivers}"
+    );
     assert_eq!(standard, 0, "no StandardMaterial left unconverted");
 }

@@ -51,6 +51,17 @@ pub fn disk_visibility(x: f32, width: f32) -> f32 {
     (t * (1.0 - t * t).sqrt() + t.asin() + std::f32::consts::FRAC_PI_2) / std::f32::consts::PI
 }
 
+/// The largest blocker gap a receiver can find in its own surface: the dilated map searches
+/// `reach` metres around it, across which a plane at angle `acos(cos_nl)` to the light rises
+/// towards it by `reach · tan`. Gaps no larger are the surface itself, not a blocker (the
+/// distance pass treats them as "no penumbra"); `cos_nl` is clamped at 0.05 (grazing light).
+pub fn own_surface_gap(reach: f32, cos_nl: f32) -> f32 {
+    if cos_nl <= 0.0 {
+        return 0.0;
+    }
+    reach * (1.0 - cos_nl * cos_nl).max(0.0).sqrt() / cos_nl.max(0.05)
+}
+
 /// Screen-space half extents (x, y) of a unit disk lying on a surface whose view-space normal is
 /// `normal` (unit): the bounding box of the ellipse it projects to (locally orthographic). A
 /// surface facing the camera keeps a round kernel; a floor seen at a grazing angle shrinks it
@@ -106,6 +117,17 @@ mod tests {
         assert_eq!(disk_visibility(-1.0, width), 0.0);
         assert!((disk_visibility(0.0, width) - 0.5).abs() < 1e-6);
         assert!((disk_visibility(1.0, width) - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_surface_is_not_its_own_blocker() {
+        // Light straight above a floor: the floor never rises towards it.
+        assert_eq!(own_surface_gap(0.5, 1.0), 0.0);
+        // 45°: it rises as far as it reaches.
+        assert!((own_surface_gap(0.5, std::f32::consts::FRAC_1_SQRT_2) - 0.5).abs() < 1e-5);
+        // Facing away: no gap allowance (the light does not reach it anyway).
+        assert_eq!(own_surface_gap(0.5, -0.3), 0.0);
+        assert!(own_surface_gap(0.5, 0.0001) <= 0.5 * 20.0);
     }
 
     #[test]

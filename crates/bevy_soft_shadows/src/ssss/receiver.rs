@@ -50,7 +50,7 @@ pub struct NoSoftShadowReceiver;
 pub struct SsssTextures {
     /// Per pixel (hard shadow, σx, σy, eye depth) — the distance map of §6.2.2 (Rgba32Float).
     pub distance: Handle<Image>,
-    /// The hard shadow after the horizontal pass (R32Float).
+    /// The hard shadow after the horizontal pass, with the eye depth (Rg32Float).
     pub horizontal: Handle<Image>,
     /// The soft visibility after the vertical pass (R32Float), read by the receivers.
     pub visibility: Handle<Image>,
@@ -126,7 +126,7 @@ fn prepare_cameras_and_textures(
         }
     };
     put(&mut textures.distance, TextureFormat::Rgba32Float);
-    put(&mut textures.horizontal, TextureFormat::R32Float);
+    put(&mut textures.horizontal, TextureFormat::Rg32Float);
     put(&mut textures.visibility, TextureFormat::R32Float);
 }
 

@@ -204,7 +204,9 @@ impl SpecializedRenderPipeline for SsssPipelines {
         let layout = self.mesh_pipeline.get_view_layout(key.into());
         let (entry, format, label) = match pass {
             SsssPass::Distance => ("distance", TextureFormat::Rgba32Float, "ssss_distance"),
-            SsssPass::BlurHorizontal => ("blur_horizontal", TextureFormat::R32Float, "ssss_blur_h"),
+            SsssPass::BlurHorizontal => {
+                ("blur_horizontal", TextureFormat::Rg32Float, "ssss_blur_h")
+            }
             SsssPass::BlurVertical => ("blur_vertical", TextureFormat::R32Float, "ssss_blur_v"),
         };
         RenderPipelineDescriptor {

@@ -16,7 +16,9 @@
     shadows::{fetch_directional_shadow, get_cascade_index, world_to_directional_light_local},
     view_transformations::{frag_coord_to_ndc, position_ndc_to_world, position_world_to_view, depth_ndc_to_view_z},
 }
-#import bevy_soft_shadows::ssss_types::{SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS}
+#import bevy_soft_shadows::ssss_types::{
+    SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS, MAX_DILATION_TEXELS, DILATION_BLOCK,
+}
 
 @group(2) @binding(0) var dilated: texture_2d_array<f32>;
 @group(2) @binding(1) var<uniform> ssss: SsssUniform;
@@ -77,7 +79,18 @@ fn distance(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     // Light-space depth per metre along the light (orthographic cascade: constant).
     let m = (*light).cascades[cascade].clip_from_world;
     let depth_per_metre = length(vec3(m[0].z, m[1].z, m[2].z));
-    let gap = (blocker - local.z) / max(depth_per_metre, 1e-8);
+    var gap = (blocker - local.z) / max(depth_per_metre, 1e-8);
+    // A surface is not its own blocker: across the dilation footprint a receiver's own plane
+    // rises towards the light by up to reach · tan(angle to the light); a gap no larger than
+    // that is the surface itself (`penumbra::own_surface_gap`).
+    let texel_size = (*light).cascades[cascade].texel_size;
+    let half_width = ssss.max_occluder_distance * tan(0.5 * ssss.light_size);
+    let r = clamp(ceil(half_width / max(texel_size, 1e-6)), 0.0, f32(MAX_DILATION_TEXELS));
+    let reach = (ceil(r / f32(DILATION_BLOCK)) + 1.0) * f32(DILATION_BLOCK) * texel_size;
+    let cos_nl = dot(normal, (*light).direction_to_light.xyz);
+    if cos_nl > 0.0 && gap <= reach * sqrt(max(1.0 - cos_nl * cos_nl, 0.0)) / max(cos_nl, 0.05) {
+        gap = 0.0;
+    }
     // Eq. 6.1 for a light at infinity, then eq. 6.2 (divided by the eye distance).
     let world_width = max(gap, 0.0) * 2.0 * tan(0.5 * ssss.light_size);
     var px = world_width * pixels_per_unit();
@@ -126,7 +139,10 @@ fn lazy_shadow(sample_px: vec2<i32>, centre_world: vec3<f32>, normal: vec3<f32>,
     return fetch_directional_shadow(light, vec4(p, 1.0), normal, view_z_of(p), frag.xy);
 }
 
-fn blur(in: FullscreenVertexOutput, direction: vec2<i32>, sigma_channel: u32) -> f32 {
+// `blur_in` holds the value to blur in .r and the eye depth in channel `depth_channel` (the
+// distance map's .w for the horizontal pass, the horizontal result's .g for the vertical one),
+// so each tap is one texture load.
+fn blur(in: FullscreenVertexOutput, direction: vec2<i32>, sigma_channel: u32, depth_channel: u32) -> f32 {
     let centre = vec2<i32>(in.position.xy);
     let d = textureLoad(distances, centre, 0);
     let own = textureLoad(blur_in, centre, 0).r;
@@ -166,10 +182,11 @@ fn blur(in: FullscreenVertexOutput, direction: vec2<i32>, sigma_channel: u32) ->
         if any(p < vec2(0)) || any(p >= size) {
             continue;
         }
-        let sample_depth = textureLoad(distances, p, 0).w;
+        let tap = textureLoad(blur_in, p, 0);
+        let sample_depth = tap[depth_channel];
         var value = 0.0;
         if sample_depth > 0.0 && abs(sample_depth - z) <= ssss.depth_rejection * z {
-            value = textureLoad(blur_in, p, 0).r;
+            value = tap.r;
         } else if ssss.lazy_shadowing != 0u && light != NO_LIGHT {
             value = lazy_shadow(p, centre_world, normal, light);
             if value < 0.0 {
@@ -190,10 +207,12 @@ fn blur(in: FullscreenVertexOutput, direction: vec2<i32>, sigma_channel: u32) ->
 
 @fragment
 fn blur_horizontal(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    return vec4(blur(in, vec2(1, 0), 1u), 0.0, 0.0, 1.0);
+    // The eye depth rides along for the vertical pass.
+    let depth = textureLoad(distances, vec2<i32>(in.position.xy), 0).w;
+    return vec4(blur(in, vec2(1, 0), 1u, 3u), depth, 0.0, 1.0);
 }
 
 @fragment
 fn blur_vertical(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    return vec4(blur(in, vec2(0, 1), 2u), 0.0, 0.0, 1.0);
+    return vec4(blur(in, vec2(0, 1), 2u, 1u), 0.0, 0.0, 1.0);
 }
