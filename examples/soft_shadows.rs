@@ -116,12 +116,24 @@ fn run_bench(args: &ExampleArgs) -> AppExit {
                     .pass_time_ms("main_opaque_pass_3d")
                     .unwrap_or(f64::NAN);
                 let ssss = harness.pass_time_ms("ssss").unwrap_or(0.0);
+                let breakdown: Vec<String> = ["dilate", "distance", "blur_h", "blur_v"]
+                    .iter()
+                    .filter_map(|p| {
+                        let ms = harness.pass_time_ms(&format!("ssss/ssss_{p}"))?;
+                        Some(format!("\"{p}\": {ms:.3}"))
+                    })
+                    .collect();
                 let image = linear(&harness.render().unwrap().data);
                 let error = rmse(&image, &reference);
-                measured.push((technique, main, ssss, error));
+                let breakdown = if technique == ShadowTechnique::Ssss {
+                    breakdown.join(", ")
+                } else {
+                    String::new()
+                };
+                measured.push((technique, main, ssss, error, breakdown));
             }
             let hard_main = measured[0].1;
-            for (technique, main, ssss, error) in &measured {
+            for (technique, main, ssss, error, breakdown) in &measured {
                 let passes = if *technique == ShadowTechnique::Ssss {
                     *ssss
                 } else {
@@ -129,7 +141,7 @@ fn run_bench(args: &ExampleArgs) -> AppExit {
                 };
                 let cost = main + passes - hard_main;
                 rows.push(format!(
-                    "{{\"size\": [{}, {}], \"light\": \"{label}\", \"light_size_rad\": {light_size}, \"technique\": \"{}\", \"main_pass_ms\": {main:.3}, \"ssss_passes_ms\": {passes:.3}, \"cost_over_hard_ms\": {cost:.3}, \"rmse_vs_reference\": {error:.5}}}",
+                    "{{\"size\": [{}, {}], \"light\": \"{label}\", \"light_size_rad\": {light_size}, \"technique\": \"{}\", \"main_pass_ms\": {main:.3}, \"ssss_passes_ms\": {passes:.3}, \"cost_over_hard_ms\": {cost:.3}, \"rmse_vs_reference\": {error:.5}, \"ssss_pass_ms\": {{{breakdown}}}}}",
                     size.x,
                     size.y,
                     technique.name()

@@ -11,7 +11,32 @@
 //! and shadow filters.
 //!
 //! Add [`SoftShadowsPlugin`] and put [`ScreenSpaceSoftShadows`] (reflected, so inspectors can
-//! edit it) on a light.
+//! edit it) on a shadow-casting `DirectionalLight`. The plugin then adds the depth and normal
+//! prepasses to the 3D cameras and turns meshes' `StandardMaterial`s into
+//! [`SoftShadowMaterial`](ssss::receiver::SoftShadowMaterial)s, whose lighting uses the soft
+//! visibility as that light's shadow term (opt out with
+//! [`NoSoftShadowReceiver`](ssss::receiver::NoSoftShadowReceiver)).
+//!
+//! ```no_run
+//! use bevy::prelude::*;
+//! use bevy_soft_shadows::prelude::*;
+//!
+//! fn sun(mut commands: Commands) {
+//!     commands.spawn((
+//!         DirectionalLight { shadow_maps_enabled: true, ..default() },
+//!         // A 3° sun: penumbrae widen by 5 cm per metre between blocker and ground.
+//!         ScreenSpaceSoftShadows { light_size: 0.05, ..default() },
+//!         Transform::default().looking_to(Vec3::new(-1.0, -1.0, -0.5), Vec3::Y),
+//!     ));
+//! }
+//! ```
+//!
+//! Modules: [`ssss`] (the algorithm as plain Rust — the CPU references — and its render passes),
+//! [`reference`] (the area-light ground truth the tests and the benchmark measure against).
+//!
+//! Limits: one SSSS light (the first shadow-casting directional light in Bevy's order), one
+//! camera's size for the screen textures; spot lights, and materials other than
+//! `StandardMaterial`, are not receivers yet.
 
 use bevy::prelude::*;
 
@@ -20,6 +45,7 @@ pub mod settings;
 pub mod ssss;
 
 pub use settings::ScreenSpaceSoftShadows;
+pub use ssss::receiver::{NoSoftShadowReceiver, SoftShadowMaterial};
 
 /// The soft shadows plugin: registers the settings and keeps them valid.
 #[derive(Default)]
@@ -35,5 +61,7 @@ impl Plugin for SoftShadowsPlugin {
 
 /// Everything a game usually imports.
 pub mod prelude {
-    pub use crate::{ScreenSpaceSoftShadows, SoftShadowsPlugin};
+    pub use crate::{
+        NoSoftShadowReceiver, ScreenSpaceSoftShadows, SoftShadowMaterial, SoftShadowsPlugin,
+    };
 }
