@@ -483,13 +483,18 @@ impl RenderHarness {
         &mut self,
         buffer: Handle<ShaderBuffer>,
     ) -> Result<Vec<u8>, HarnessError> {
+        self.read_back(Readback::buffer(buffer))
+    }
+
+    /// Spawns `readback`, steps until its data arrives (30 frames at most) and despawns it.
+    fn read_back(&mut self, readback: Readback) -> Result<Vec<u8>, HarnessError> {
         self.finish_setup();
         let slot: Arc<Mutex<Option<Vec<u8>>>> = Arc::default();
         let sink = slot.clone();
         let entity = self
             .app
             .world_mut()
-            .spawn(Readback::buffer(buffer))
+            .spawn(readback)
             .observe(move |done: On<ReadbackComplete>| {
                 *sink.lock().unwrap() = Some(done.data.clone());
             })
@@ -508,20 +513,7 @@ impl RenderHarness {
         height: u32,
         bytes_per_texel: u32,
     ) -> Result<Vec<u8>, HarnessError> {
-        self.finish_setup();
-        let slot: Arc<Mutex<Option<Vec<u8>>>> = Arc::default();
-        let sink = slot.clone();
-        let entity = self
-            .app
-            .world_mut()
-            .spawn(Readback::texture(image))
-            .observe(move |done: On<ReadbackComplete>| {
-                *sink.lock().unwrap() = Some(done.data.clone());
-            })
-            .id();
-        let result = self.step_until(&slot, 30);
-        self.app.world_mut().despawn(entity);
-        let padded = result?;
+        let padded = self.read_back(Readback::texture(image))?;
         let row = (width * bytes_per_texel) as usize;
         let stride = row.div_ceil(256) * 256;
         if height > 1 && padded.len() < stride * (height as usize - 1) + row {

@@ -57,14 +57,8 @@ fn ssss_matches_its_cpu_reference_and_follows_eq_6_2() {
     // Bevy's hard shadow and the area-light reference, before SSSS is switched on.
     let hard = to_linear(&harness.render().unwrap());
     let reference = area_light_reference(&mut harness).linear();
-    {
-        let world = harness.world_mut();
-        let sun = world
-            .query_filtered::<Entity, With<Sun>>()
-            .single(world)
-            .unwrap();
-        world.entity_mut(sun).insert(settings());
-    }
+    let sun = sun_entity(&mut harness);
+    harness.world_mut().entity_mut(sun).insert(settings());
     // Pipelines for the new material and passes compile asynchronously: wait until the
     // soft shadow shows (the receiver material replaced the standard one and reads SSSS).
     // Until then the meshes are not drawn (background) or still show the hard shadow.
@@ -195,17 +189,11 @@ fn lazy_shadowing_removes_the_light_leak_of_a_blocker_hiding_its_shadow() {
     harness.wait_until_ready().unwrap();
     let hard = to_linear(&harness.render().unwrap());
     let reference = area_light_reference_towards(&mut harness, sun, THETA_PANEL).linear();
-    let sun_entity = {
-        let world = harness.world_mut();
-        world
-            .query_filtered::<Entity, With<Sun>>()
-            .single(world)
-            .unwrap()
-    };
+    let sun = sun_entity(&mut harness);
     let mut render_with = |lazy: bool| {
         harness
             .world_mut()
-            .entity_mut(sun_entity)
+            .entity_mut(sun)
             .insert(ScreenSpaceSoftShadows {
                 light_size: THETA_PANEL,
                 max_occluder_distance: 3.0,
@@ -282,13 +270,7 @@ fn ssss_is_no_worse_than_bevys_pcss_against_the_area_light_reference() {
     harness.wait_until_ready().unwrap();
     let hard = to_linear(&harness.render().unwrap());
     let reference = area_light_reference(&mut harness).linear();
-    let sun = {
-        let world = harness.world_mut();
-        world
-            .query_filtered::<Entity, With<Sun>>()
-            .single(world)
-            .unwrap()
-    };
+    let sun = sun_entity(&mut harness);
     let set_pcss = |harness: &mut RenderHarness, size: Option<f32>| {
         let world = harness.world_mut();
         world
@@ -348,14 +330,8 @@ fn the_dilated_shadow_map_matches_its_cpu_reference() {
     };
     harness.app_mut().add_plugins(SoftShadowsPlugin);
     setup(&mut harness);
-    {
-        let world = harness.world_mut();
-        let sun = world
-            .query_filtered::<Entity, With<Sun>>()
-            .single(world)
-            .unwrap();
-        world.entity_mut(sun).insert(settings());
-    }
+    let sun = sun_entity(&mut harness);
+    harness.world_mut().entity_mut(sun).insert(settings());
     harness
         .app_mut()
         .sub_app_mut(RenderApp)

@@ -163,3 +163,12 @@ pub fn lit(image: &[f32]) -> f32 {
     let (lx, lz) = pixel_of(-1.5, 2.2);
     image[((lz * SIZE + lx) * 4 + 1) as usize]
 }
+
+/// The scene's sun.
+pub fn sun_entity(harness: &mut RenderHarness) -> Entity {
+    let world = harness.world_mut();
+    world
+        .query_filtered::<Entity, With<Sun>>()
+        .single(world)
+        .unwrap()
+}
