@@ -49,8 +49,7 @@ pub struct ShowcaseOptions {
     /// the forest LoD manager from shared LoD-cache extractions.
     pub forest: bool,
     /// Screen Space Soft Shadows on the sun: penumbrae harden at contact and widen with the
-    /// distance to the blocker on every `StandardMaterial` surface (the box, the bark, the
-    /// ground when it is not clipmap-textured).
+    /// distance to the blocker on the ground (plain or clipmap-textured), the box and the bark.
     pub soft_shadows: bool,
 }
 

@@ -244,3 +244,33 @@ fn showcase_has_screen_space_soft_shadows() {
     );
     assert_eq!(standard, 0, "no StandardMaterial left unconverted");
 }
+
+/// With the clipmap-textured ground (the README's scene), the terrain material receives the soft
+/// shadows too: its soft-shadow fragment stage compiles and renders, and every clipmap material
+/// holds the SSSS visibility texture.
+#[test]
+fn showcase_terrain_receives_soft_shadows() {
+    use bevy_nature::soft_shadows::ssss::receiver::SsssTextures;
+    use bevy_nature::terrain_clip::material::ClipmapMaterial;
+    let options = ShowcaseOptions {
+        terrain: true,
+        forest: false,
+        ..test_options()
+    };
+    let Some((_, mut harness)) = render_showcase("showcase_terrain_ssss", options) else {
+        return;
+    };
+    harness.run_frames(3).unwrap();
+    // A pipeline error (e.g. the soft variant failing to compile) fails `render`.
+    harness.render().unwrap();
+    let world = harness.world_mut();
+    let visibility = world.resource::<SsssTextures>().visibility.clone();
+    let materials = world.resource::<Assets<ClipmapMaterial>>();
+    assert!(materials.len() >= 1);
+    for (_, material) in materials.iter() {
+        assert_eq!(
+            material.extension.soft_visibility.as_ref(),
+            Some(&visibility)
+        );
+    }
+}

@@ -5,12 +5,16 @@
 // whose coverage rectangle holds t is sampled at t / c with Repeat addressing (the toroidal
 // slot); where no layer covers, the resident base level is. textureSampleLevel avoids
 // derivatives, which jump across the toroidal wrap. CPU reference: `clip::stack::finest_covering_layer`.
+//
+// This module holds the bindings and the lookup; `clipmap_fragment.wgsl` (Bevy's shadows) and
+// `clipmap_soft_fragment.wgsl` (screen-space soft shadows) are the fragment stages using it.
+#define_import_path bevy_terrain_clip::clipmap
+
 #import bevy_pbr::{
     pbr_fragment::pbr_input_from_standard_material,
     pbr_functions::alpha_discard,
-    forward_io::{VertexOutput, FragmentOutput},
-    pbr_functions::{apply_pbr_lighting, main_pass_post_lighting_processing},
-    pbr_types::STANDARD_MATERIAL_FLAGS_UNLIT_BIT,
+    forward_io::VertexOutput,
+    pbr_types::PbrInput,
 }
 
 struct ClipmapParams {
@@ -29,6 +33,7 @@ struct ClipmapParams {
 @group(#{MATERIAL_BIND_GROUP}) @binding(103) var base_sampler: sampler;
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var<uniform> clipmap: ClipmapParams;
 
+
 // `footprint` is the pixel's size in virtual-texture coordinates (taken outside the loop, in
 // uniform control flow); in layer i it spans footprint * 2^level texels, which picks the mip.
 fn sample_clip_stack(uv: vec2<f32>, footprint: f32) -> vec4<f32> {
@@ -46,20 +51,13 @@ fn sample_clip_stack(uv: vec2<f32>, footprint: f32) -> vec4<f32> {
     return textureSampleLevel(base, base_sampler, uv, base_lod);
 }
 
-@fragment
-fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> FragmentOutput {
+// The standard material's PBR input with the clip stack's colour as base colour.
+fn clipmap_pbr_input(in: VertexOutput, is_front: bool) -> PbrInput {
     var pbr_input = pbr_input_from_standard_material(in, is_front);
 #ifdef VERTEX_UVS_A
     let footprint = max(length(dpdx(in.uv)), length(dpdy(in.uv)));
     pbr_input.material.base_color = pbr_input.material.base_color * sample_clip_stack(in.uv, footprint);
 #endif
     pbr_input.material.base_color = alpha_discard(pbr_input.material, pbr_input.material.base_color);
-    var out: FragmentOutput;
-    if (pbr_input.material.flags & STANDARD_MATERIAL_FLAGS_UNLIT_BIT) == 0u {
-        out.color = apply_pbr_lighting(pbr_input);
-    } else {
-        out.color = pbr_input.material.base_color;
-    }
-    out.color = main_pass_post_lighting_processing(pbr_input, out.color);
-    return out;
+    return pbr_input;
 }

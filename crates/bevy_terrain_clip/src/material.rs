@@ -45,6 +45,7 @@ impl Default for ClipmapParams {
 
 /// The clip stack's textures and coverage (kept up to date by the plugin).
 #[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
+#[bind_group_data(ClipmapKey)]
 pub struct ClipmapExtension {
     /// The windowed layers.
     #[texture(100, dimension = "2d_array")]
@@ -57,16 +58,63 @@ pub struct ClipmapExtension {
     /// Coverage and sizes.
     #[uniform(104)]
     pub params: ClipmapParams,
+    /// A screen-space soft-shadow visibility texture (R32Float, one value per pixel, negative
+    /// where inactive) to use as the sun's shadow term — `bevy_soft_shadows`'
+    /// `SsssTextures::visibility`. With one, the fragment stage is `clipmap_soft_fragment.wgsl`,
+    /// which imports `bevy_soft_shadows::receiver_functions` (so that plugin must be added);
+    /// without, the terrain is lit with Bevy's own shadows and needs nothing from it.
+    #[texture(105, sample_type = "float", filterable = false)]
+    pub soft_visibility: Option<Handle<Image>>,
+}
+
+/// What the terrain pipeline is specialised on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ClipmapKey {
+    /// The material receives screen-space soft shadows.
+    pub soft_shadows: bool,
+}
+
+impl From<&ClipmapExtension> for ClipmapKey {
+    fn from(material: &ClipmapExtension) -> Self {
+        Self {
+            soft_shadows: material.soft_visibility.is_some(),
+        }
+    }
 }
 
 /// The terrain material.
 pub type ClipmapMaterial = ExtendedMaterial<StandardMaterial, ClipmapExtension>;
 
-const SHADER: &str = "embedded://bevy_terrain_clip/clipmap.wgsl";
+const SHADER: &str = "embedded://bevy_terrain_clip/clipmap_fragment.wgsl";
+
+/// The soft-shadow variant of the fragment stage, loaded at start-up; swapped in by
+/// `specialize` for materials with a soft-visibility texture. (Its import of
+/// `bevy_soft_shadows::receiver_functions` only has to resolve when a pipeline uses it.)
+static SOFT_SHADER: std::sync::OnceLock<Handle<bevy::shader::Shader>> = std::sync::OnceLock::new();
 
 impl MaterialExtension for ClipmapExtension {
     fn fragment_shader() -> ShaderRef {
         ShaderRef::Path(SHADER.into())
+    }
+
+    fn specialize(
+        _pipeline: &bevy::pbr::MaterialExtensionPipeline,
+        descriptor: &mut bevy::render::render_resource::RenderPipelineDescriptor,
+        _layout: &bevy::mesh::MeshVertexBufferLayoutRef,
+        key: bevy::pbr::MaterialExtensionKey<Self>,
+    ) -> Result<(), bevy::render::render_resource::SpecializedMeshPipelineError> {
+        // Only the main pass's fragment stage: the prepass and shadow pipelines run Bevy's
+        // prepass shader (`PREPASS_PIPELINE`) and must keep it.
+        if key.bind_group_data.soft_shadows
+            && let (Some(fragment), Some(soft)) = (descriptor.fragment.as_mut(), SOFT_SHADER.get())
+            && !fragment
+                .shader_defs
+                .iter()
+                .any(|d| *d == bevy::shader::ShaderDefVal::from("PREPASS_PIPELINE"))
+        {
+            fragment.shader = soft.clone();
+        }
+        Ok(())
     }
 }
 
@@ -165,9 +213,29 @@ pub fn flat_patch_mesh(
     mesh
 }
 
+/// Keeps the terrain's shader modules loaded.
+#[derive(Resource)]
+#[allow(dead_code)]
+struct ClipmapShaders(
+    Handle<bevy::shader::Shader>,
+    Handle<bevy::shader::Shader>,
+    Handle<bevy::shader::Shader>,
+);
+
 /// Registers the material.
 pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "clipmap.wgsl");
+    embedded_asset!(app, "clipmap_fragment.wgsl");
+    embedded_asset!(app, "clipmap_soft_fragment.wgsl");
+    // The module imported by both fragment stages, and the soft variant, kept loaded.
+    let module: Handle<bevy::shader::Shader> =
+        bevy::asset::load_embedded_asset!(app, "clipmap.wgsl");
+    let soft: Handle<bevy::shader::Shader> =
+        bevy::asset::load_embedded_asset!(app, "clipmap_soft_fragment.wgsl");
+    let forward: Handle<bevy::shader::Shader> =
+        bevy::asset::load_embedded_asset!(app, "clipmap_fragment.wgsl");
+    let _ = SOFT_SHADER.set(soft.clone());
+    app.insert_resource(ClipmapShaders(module, soft, forward));
     app.add_plugins(MaterialPlugin::<ClipmapMaterial>::default())
         .add_systems(
             PostUpdate,

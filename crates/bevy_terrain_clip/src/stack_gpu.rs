@@ -256,6 +256,7 @@ impl ClipStackTexture {
                 layers: self.layers.clone(),
                 base: self.base.clone(),
                 params: crate::material::clipmap_params(self),
+                soft_visibility: None,
             },
         });
         self.materials.push(handle.clone());

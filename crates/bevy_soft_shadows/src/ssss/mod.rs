@@ -17,8 +17,19 @@ pub mod penumbra;
 pub mod receiver;
 pub mod render;
 
-/// Registers SSSS (main and render world).
+/// Registers SSSS (main and render world). Without Bevy's asset plugin (a bare `App`, as in
+/// unit tests of the settings) only the settings are registered, with a warning.
 pub(crate) fn build(app: &mut bevy::prelude::App) {
+    if !app
+        .world()
+        .contains_resource::<bevy::asset::io::embedded::EmbeddedAssetRegistry>()
+    {
+        bevy::log::warn!(
+            "SoftShadowsPlugin added without AssetPlugin (add it after DefaultPlugins): \
+             Screen Space Soft Shadows will not render"
+        );
+        return;
+    }
     receiver::build(app);
     render::build(app);
 }

@@ -574,9 +574,11 @@ pub(crate) fn build(app: &mut App) {
     app.add_plugins(bevy::render::extract_component::ExtractComponentPlugin::<
         SoftShadowCamera,
     >::default());
-    // The shared WGSL types are imported by path: load them so the import resolves.
+    embedded_asset!(app, "receiver_functions.wgsl");
+    // The shared WGSL modules are imported by path: keep them loaded so the imports resolve.
     let types: Handle<Shader> = load_embedded_asset!(app, "ssss_types.wgsl");
-    app.insert_resource(SsssTypesShader(types));
+    let receiver: Handle<Shader> = load_embedded_asset!(app, "receiver_functions.wgsl");
+    app.insert_resource(SsssTypesShader(types, receiver));
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
@@ -601,7 +603,8 @@ pub(crate) fn build(app: &mut App) {
         );
 }
 
-/// Keeps the shared WGSL module loaded.
+/// Keeps the shared WGSL modules loaded (`bevy_soft_shadows::ssss_types` and
+/// `bevy_soft_shadows::receiver_functions`, which other crates' materials may import).
 #[derive(Resource)]
 #[allow(dead_code)]
-struct SsssTypesShader(Handle<Shader>);
+struct SsssTypesShader(Handle<Shader>, Handle<Shader>);

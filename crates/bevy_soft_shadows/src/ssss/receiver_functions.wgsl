@@ -1,0 +1,62 @@
+#define_import_path bevy_soft_shadows::receiver_functions
+
+// The SSSS light's shadow term inside Bevy's lighting, for any material built on
+// `pbr_input_from_standard_material` + `apply_pbr_lighting` (the `SoftShadowMaterial`, the
+// terrain clipmap material, your own):
+//
+//     color = apply_pbr_lighting(pbr_input);
+//     color = apply_soft_shadow(pbr_input, color, in.position.xy, soft);
+//
+// where `soft` is the SSSS visibility at this pixel (the `SsssTextures::visibility` texture;
+// negative where SSSS is inactive). The light's direct contribution D is re-weighted from Bevy's
+// visibility v_b to v_s: color += exposure · D · (v_s − v_b) — the lighting Bevy would compute
+// had its shadow lookup returned v_s. Ambient, emissive and other lights are untouched.
+#import bevy_pbr::{
+    pbr_functions::{calculate_diffuse_color, calculate_F0_dielectric},
+    pbr_types::PbrInput,
+    mesh_view_bindings as view_bindings,
+    mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
+    mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
+    lighting,
+    shadows::fetch_directional_shadow,
+}
+
+// The SSSS light: the first shadow-casting directional light.
+fn soft_shadow_light() -> u32 {
+    for (var i = 0u; i < view_bindings::lights.n_directional_lights; i += 1u) {
+        if (view_bindings::lights.directional_lights[i].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            return i;
+        }
+    }
+    return 0xffffffffu;
+}
+
+fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, soft: f32) -> vec4<f32> {
+    let light = soft_shadow_light();
+    if soft < 0.0 || light == 0xffffffffu || (pbr_input.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u {
+        return color;
+    }
+    let view = view_bindings::view.view_from_world;
+    let view_z = dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), pbr_input.world_position);
+    let bevy_visibility = fetch_directional_shadow(
+        light, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
+    // The base layer's lighting input, as `apply_pbr_lighting` builds it.
+    let m = pbr_input.material;
+    let NdotV = max(dot(pbr_input.N, pbr_input.V), 0.0001);
+    var input: lighting::LightingInput;
+    input.layers[0].NdotV = NdotV;
+    input.layers[0].N = pbr_input.N;
+    input.layers[0].R = reflect(-pbr_input.V, pbr_input.N);
+    input.layers[0].perceptual_roughness = m.perceptual_roughness;
+    input.layers[0].roughness = lighting::perceptualRoughnessToRoughness(m.perceptual_roughness);
+    input.P = pbr_input.world_position.xyz;
+    input.V = pbr_input.V;
+    input.diffuse_color = calculate_diffuse_color(
+        m.base_color.rgb, m.metallic, m.specular_transmission, m.diffuse_transmission);
+    input.metallic = m.metallic;
+    input.F0_dielectric = calculate_F0_dielectric(m.reflectance);
+    input.F0_metallic = m.base_color.rgb;
+    input.F_ab = lighting::F_AB(m.perceptual_roughness, NdotV);
+    let direct = lighting::directional_light(light, &input, true);
+    return color + vec4(view_bindings::view.exposure * direct * (soft - bevy_visibility), 0.0);
+}
