@@ -34,9 +34,13 @@
 //! Modules: [`ssss`] (the algorithm as plain Rust — the CPU references — and its render passes),
 //! [`reference`] (the area-light ground truth the tests and the benchmark measure against).
 //!
+//! Other materials receive SSSS by calling `apply_soft_shadow` from the WGSL module
+//! `bevy_soft_shadows::receiver_functions` after `apply_pbr_lighting`, with the visibility read
+//! from [`SsssTextures::visibility`](ssss::receiver::SsssTextures) at the fragment's pixel (the
+//! terrain clipmap material does, connected by `bevy_nature`'s glue plugin).
+//!
 //! Limits: one SSSS light (the first shadow-casting directional light in Bevy's order), one
-//! camera's size for the screen textures; spot lights, and materials other than
-//! `StandardMaterial`, are not receivers yet.
+//! camera's size for the screen textures; spot lights are not supported yet.
 
 use bevy::prelude::*;
 
