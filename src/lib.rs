@@ -45,13 +45,16 @@ impl PluginGroup for NaturePlugins {
 }
 
 /// Connects the suite's crates where they meet (each works without the others): the clipmap
-/// terrain material receives Screen Space Soft Shadows while a light has them.
+/// terrain and leaf materials receive Screen Space Soft Shadows while a light has them.
 #[derive(Default)]
 pub struct NatureGluePlugin;
 
 impl bevy::app::Plugin for NatureGluePlugin {
     fn build(&self, app: &mut bevy::app::App) {
-        app.add_systems(bevy::app::PostUpdate, terrain_receives_soft_shadows);
+        app.add_systems(
+            bevy::app::PostUpdate,
+            (terrain_receives_soft_shadows, leaves_receive_soft_shadows),
+        );
     }
 }
 
@@ -87,4 +90,30 @@ pub mod prelude {
     pub use bevy_foliage::prelude::*;
     pub use bevy_soft_shadows::prelude::*;
     pub use bevy_terrain_clip::prelude::*;
+}
+
+/// Gives every leaf material the SSSS visibility texture once SSSS is on.
+fn leaves_receive_soft_shadows(
+    active: Option<bevy::prelude::Res<soft_shadows::ssss::receiver::SsssActive>>,
+    textures: Option<bevy::prelude::Res<soft_shadows::ssss::receiver::SsssTextures>>,
+    materials: Option<
+        bevy::prelude::ResMut<bevy::prelude::Assets<foliage::pruning::material::LeafMaterial>>,
+    >,
+) {
+    let (Some(active), Some(textures), Some(mut materials)) = (active, textures, materials) else {
+        return;
+    };
+    if !active.0 || textures.size == bevy::math::UVec2::ZERO {
+        return;
+    }
+    let stale: Vec<_> = materials
+        .iter()
+        .filter(|(_, m)| m.extension.soft_visibility.as_ref() != Some(&textures.visibility))
+        .map(|(id, _)| id)
+        .collect();
+    for id in stale {
+        if let Some(mut material) = materials.get_mut(id) {
+            material.extension.soft_visibility = Some(textures.visibility.clone());
+        }
+    }
 }

@@ -245,9 +245,9 @@ fn showcase_has_screen_space_soft_shadows() {
     assert_eq!(standard, 0, "no StandardMaterial left unconverted");
 }
 
-/// With the clipmap-textured ground (the README's scene), the terrain material receives the soft
-/// shadows too: its soft-shadow fragment stage compiles and renders, and every clipmap material
-/// holds the SSSS visibility texture.
+/// With the clipmap-textured ground (the README's scene), the terrain and leaf materials receive
+/// the soft shadows too: their soft-shadow fragment stages compile and render, and every clipmap
+/// and leaf material holds the SSSS visibility texture.
 #[test]
 fn showcase_terrain_receives_soft_shadows() {
     use bevy_nature::soft_shadows::ssss::receiver::SsssTextures;

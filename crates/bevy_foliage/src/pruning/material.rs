@@ -69,6 +69,7 @@ impl Default for LeafParams {
 
 /// The extension binding the pruning buffers (managed by the plugin: leave them default).
 #[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
+#[bind_group_data(LeafKey)]
 pub struct LeafExtension {
     /// Instance records.
     #[storage(100, read_only, visibility(vertex))]
@@ -91,7 +92,33 @@ pub struct LeafExtension {
     /// Switches.
     #[uniform(106, visibility(vertex))]
     pub params: LeafParams,
+    /// A screen-space soft-shadow visibility texture (`bevy_soft_shadows`'
+    /// `SsssTextures::visibility`) to use as the sun's shadow term. With one, the main pass's
+    /// fragment stage is `leaf_soft_fragment.wgsl`, which imports
+    /// `bevy_soft_shadows::receiver_functions` (so that plugin must be added); without, leaves
+    /// use Bevy's PBR fragment stage and shadows.
+    #[texture(107, sample_type = "float", filterable = false)]
+    pub soft_visibility: Option<Handle<Image>>,
 }
+
+/// What the leaf pipeline is specialised on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct LeafKey {
+    /// The leaves receive screen-space soft shadows.
+    pub soft_shadows: bool,
+}
+
+impl From<&LeafExtension> for LeafKey {
+    fn from(material: &LeafExtension) -> Self {
+        Self {
+            soft_shadows: material.soft_visibility.is_some(),
+        }
+    }
+}
+
+/// The soft-shadow fragment stage, loaded at start-up and swapped in by `specialize`.
+static LEAF_SOFT_SHADER: std::sync::OnceLock<Handle<bevy::shader::Shader>> =
+    std::sync::OnceLock::new();
 
 const LEAF_SHADER: &str = "embedded://bevy_foliage/pruning/leaf.wgsl";
 const LEAF_PREPASS_SHADER: &str = "embedded://bevy_foliage/pruning/leaf_prepass.wgsl";
@@ -105,6 +132,26 @@ impl MaterialExtension for LeafExtension {
     }
     fn deferred_vertex_shader() -> ShaderRef {
         ShaderRef::Path(LEAF_PREPASS_SHADER.into())
+    }
+
+    fn specialize(
+        _pipeline: &bevy::pbr::MaterialExtensionPipeline,
+        descriptor: &mut bevy::render::render_resource::RenderPipelineDescriptor,
+        _layout: &bevy::mesh::MeshVertexBufferLayoutRef,
+        key: bevy::pbr::MaterialExtensionKey<Self>,
+    ) -> Result<(), bevy::render::render_resource::SpecializedMeshPipelineError> {
+        // Only the main pass: the prepass and shadow pipelines keep Bevy's prepass shader.
+        if key.bind_group_data.soft_shadows
+            && let (Some(fragment), Some(soft)) =
+                (descriptor.fragment.as_mut(), LEAF_SOFT_SHADER.get())
+            && !fragment
+                .shader_defs
+                .iter()
+                .any(|d| *d == bevy::shader::ShaderDefVal::from("PREPASS_PIPELINE"))
+        {
+            fragment.shader = soft.clone();
+        }
+        Ok(())
     }
 }
 
@@ -314,6 +361,7 @@ pub fn refresh_leaf_materials(
         };
         let b = &store.buffers;
         let ext = &material.extension;
+        let soft_visibility = ext.soft_visibility.clone();
         if fresh
             || changed
             || ext.params != params
@@ -329,17 +377,28 @@ pub fn refresh_leaf_materials(
                 leaf_vertices: b.leaf_vertices.clone(),
                 cell_full: b.cell_full.clone(),
                 params,
+                soft_visibility,
             };
         }
     }
     *seen = (store.generation, ids);
 }
 
+/// Keeps the soft-shadow leaf fragment stage loaded.
+#[derive(Resource)]
+#[allow(dead_code)]
+struct LeafSoftShader(Handle<bevy::shader::Shader>);
+
 /// Registers the leaf material and its systems.
 pub(crate) fn build(app: &mut App) {
     load_shader_library!(app, "leaf_pulling.wgsl");
     embedded_asset!(app, "leaf.wgsl");
     embedded_asset!(app, "leaf_prepass.wgsl");
+    embedded_asset!(app, "leaf_soft_fragment.wgsl");
+    let soft: Handle<bevy::shader::Shader> =
+        bevy::asset::load_embedded_asset!(app, "leaf_soft_fragment.wgsl");
+    let _ = LEAF_SOFT_SHADER.set(soft.clone());
+    app.insert_resource(LeafSoftShader(soft));
     for path in [TRIANGLES_DRAWN, TRIANGLES_FULL, KEPT_PERCENT, TREES_PRUNED] {
         app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
     }
