@@ -37,7 +37,7 @@
 //! Other materials receive SSSS by calling `apply_soft_shadow` from the WGSL module
 //! `bevy_soft_shadows::receiver_functions` after `apply_pbr_lighting`, with the visibility read
 //! from [`SsssTextures::visibility`](ssss::receiver::SsssTextures) at the fragment's pixel (the
-//! terrain clipmap material does, connected by `bevy_nature`'s glue plugin).
+//! terrain clipmap and leaf materials do, connected by `bevy_nature`'s glue plugin).
 //!
 //! Limits: one SSSS light (the first shadow-casting directional light in Bevy's order), one
 //! camera's size for the screen textures; spot lights are not supported yet.
