@@ -53,17 +53,47 @@ impl bevy::app::Plugin for NatureGluePlugin {
     fn build(&self, app: &mut bevy::app::App) {
         app.add_systems(
             bevy::app::PostUpdate,
-            (terrain_receives_soft_shadows, leaves_receive_soft_shadows),
+            (
+                receive_soft_shadows::<terrain_clip::material::ClipmapExtension>,
+                receive_soft_shadows::<foliage::pruning::material::LeafExtension>,
+            ),
         );
     }
 }
 
-/// Gives every clipmap material the SSSS visibility texture once SSSS is on.
-fn terrain_receives_soft_shadows(
+/// A material extension that can hold the SSSS visibility texture.
+trait SoftShadowReceiving: bevy::pbr::MaterialExtension {
+    fn soft_visibility(&mut self) -> &mut Option<bevy::prelude::Handle<bevy::prelude::Image>>;
+    fn holds(&self, texture: &bevy::prelude::Handle<bevy::prelude::Image>) -> bool;
+}
+
+impl SoftShadowReceiving for terrain_clip::material::ClipmapExtension {
+    fn soft_visibility(&mut self) -> &mut Option<bevy::prelude::Handle<bevy::prelude::Image>> {
+        &mut self.soft_visibility
+    }
+    fn holds(&self, texture: &bevy::prelude::Handle<bevy::prelude::Image>) -> bool {
+        self.soft_visibility.as_ref() == Some(texture)
+    }
+}
+
+impl SoftShadowReceiving for foliage::pruning::material::LeafExtension {
+    fn soft_visibility(&mut self) -> &mut Option<bevy::prelude::Handle<bevy::prelude::Image>> {
+        &mut self.soft_visibility
+    }
+    fn holds(&self, texture: &bevy::prelude::Handle<bevy::prelude::Image>) -> bool {
+        self.soft_visibility.as_ref() == Some(texture)
+    }
+}
+
+/// Gives every `ExtendedMaterial<StandardMaterial, E>` the SSSS visibility texture once SSSS is
+/// on.
+fn receive_soft_shadows<E: SoftShadowReceiving>(
     active: Option<bevy::prelude::Res<soft_shadows::ssss::receiver::SsssActive>>,
     textures: Option<bevy::prelude::Res<soft_shadows::ssss::receiver::SsssTextures>>,
     materials: Option<
-        bevy::prelude::ResMut<bevy::prelude::Assets<terrain_clip::material::ClipmapMaterial>>,
+        bevy::prelude::ResMut<
+            bevy::prelude::Assets<bevy::pbr::ExtendedMaterial<bevy::prelude::StandardMaterial, E>>,
+        >,
     >,
 ) {
     let (Some(active), Some(textures), Some(mut materials)) = (active, textures, materials) else {
@@ -74,46 +104,12 @@ fn terrain_receives_soft_shadows(
     }
     let stale: Vec<_> = materials
         .iter()
-        .filter(|(_, m)| m.extension.soft_visibility.as_ref() != Some(&textures.visibility))
+        .filter(|(_, m)| !m.extension.holds(&textures.visibility))
         .map(|(id, _)| id)
         .collect();
     for id in stale {
         if let Some(mut material) = materials.get_mut(id) {
-            material.extension.soft_visibility = Some(textures.visibility.clone());
-        }
-    }
-}
-
-/// Everything a game usually imports.
-pub mod prelude {
-    pub use crate::NaturePlugins;
-    pub use bevy_foliage::prelude::*;
-    pub use bevy_soft_shadows::prelude::*;
-    pub use bevy_terrain_clip::prelude::*;
-}
-
-/// Gives every leaf material the SSSS visibility texture once SSSS is on.
-fn leaves_receive_soft_shadows(
-    active: Option<bevy::prelude::Res<soft_shadows::ssss::receiver::SsssActive>>,
-    textures: Option<bevy::prelude::Res<soft_shadows::ssss::receiver::SsssTextures>>,
-    materials: Option<
-        bevy::prelude::ResMut<bevy::prelude::Assets<foliage::pruning::material::LeafMaterial>>,
-    >,
-) {
-    let (Some(active), Some(textures), Some(mut materials)) = (active, textures, materials) else {
-        return;
-    };
-    if !active.0 || textures.size == bevy::math::UVec2::ZERO {
-        return;
-    }
-    let stale: Vec<_> = materials
-        .iter()
-        .filter(|(_, m)| m.extension.soft_visibility.as_ref() != Some(&textures.visibility))
-        .map(|(id, _)| id)
-        .collect();
-    for id in stale {
-        if let Some(mut material) = materials.get_mut(id) {
-            material.extension.soft_visibility = Some(textures.visibility.clone());
+            *material.extension.soft_visibility() = Some(textures.visibility.clone());
         }
     }
 }

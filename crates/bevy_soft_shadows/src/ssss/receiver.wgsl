@@ -1,13 +1,12 @@
 // A StandardMaterial whose directional light's shadow term is Screen Space Soft Shadows: Bevy's
-// lighting, then `apply_soft_shadow` (receiver_functions.wgsl) with the SSSS visibility read at
-// this fragment's pixel.
+// lighting with the SSSS visibility at this fragment's pixel (receiver_functions.wgsl).
 #import bevy_pbr::{
     pbr_fragment::pbr_input_from_standard_material,
-    pbr_functions::{alpha_discard, apply_pbr_lighting, main_pass_post_lighting_processing},
+    pbr_functions::{alpha_discard, main_pass_post_lighting_processing},
     forward_io::{VertexOutput, FragmentOutput},
     pbr_types::STANDARD_MATERIAL_FLAGS_UNLIT_BIT,
 }
-#import bevy_soft_shadows::receiver_functions::apply_soft_shadow
+#import bevy_soft_shadows::receiver_functions::apply_pbr_lighting_soft
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var soft_visibility: texture_2d<f32>;
 
@@ -19,12 +18,7 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
     if (pbr_input.material.flags & STANDARD_MATERIAL_FLAGS_UNLIT_BIT) != 0u {
         out.color = pbr_input.material.base_color;
     } else {
-        out.color = apply_pbr_lighting(pbr_input);
-        let pixel = vec2<u32>(in.position.xy);
-        if all(pixel < textureDimensions(soft_visibility)) {
-            let soft = textureLoad(soft_visibility, pixel, 0).r;
-            out.color = apply_soft_shadow(pbr_input, out.color, in.position.xy, soft);
-        }
+        out.color = apply_pbr_lighting_soft(pbr_input, in.position.xy, soft_visibility);
     }
     out.color = main_pass_post_lighting_processing(pbr_input, out.color);
     return out;

@@ -2,17 +2,17 @@
 
 // The SSSS light's shadow term inside Bevy's lighting, for any material built on
 // `pbr_input_from_standard_material` + `apply_pbr_lighting` (the `SoftShadowMaterial`, the
-// terrain clipmap material, your own):
+// terrain clipmap and leaf materials, your own): where the fragment stage would call
+// `apply_pbr_lighting(pbr_input)`, call
 //
-//     color = apply_pbr_lighting(pbr_input);
-//     color = apply_soft_shadow(pbr_input, color, in.position.xy, soft);
+//     apply_pbr_lighting_soft(pbr_input, in.position.xy, visibility)
 //
-// where `soft` is the SSSS visibility at this pixel (the `SsssTextures::visibility` texture;
-// negative where SSSS is inactive). The light's direct contribution D is re-weighted from Bevy's
+// with `visibility` the `SsssTextures::visibility` texture bound in the material (negative
+// where SSSS is inactive), or `apply_soft_shadow` on an already lit colour. The light's direct contribution D is re-weighted from Bevy's
 // visibility v_b to v_s: color += exposure · D · (v_s − v_b) — the lighting Bevy would compute
 // had its shadow lookup returned v_s. Ambient, emissive and other lights are untouched.
 #import bevy_pbr::{
-    pbr_functions::{calculate_diffuse_color, calculate_F0_dielectric},
+    pbr_functions::{apply_pbr_lighting, calculate_diffuse_color, calculate_F0_dielectric},
     pbr_types::PbrInput,
     mesh_view_bindings as view_bindings,
     mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
@@ -59,4 +59,20 @@ fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, 
     input.F_ab = lighting::F_AB(m.perceptual_roughness, NdotV);
     let direct = lighting::directional_light(light, &input, true);
     return color + vec4(view_bindings::view.exposure * direct * (soft - bevy_visibility), 0.0);
+}
+
+// The SSSS visibility at a fragment (negative — "inactive" — outside the texture).
+fn soft_visibility_at(visibility: texture_2d<f32>, frag_xy: vec2<f32>) -> f32 {
+    let pixel = vec2<u32>(frag_xy);
+    if any(pixel >= textureDimensions(visibility)) {
+        return -1.0;
+    }
+    return textureLoad(visibility, pixel, 0).r;
+}
+
+// Bevy's PBR lighting with the SSSS visibility texture as the sun's shadow term: what a
+// receiving material's fragment stage calls where it would call `apply_pbr_lighting`.
+fn apply_pbr_lighting_soft(pbr_input: PbrInput, frag_xy: vec2<f32>, visibility: texture_2d<f32>) -> vec4<f32> {
+    return apply_soft_shadow(
+        pbr_input, apply_pbr_lighting(pbr_input), frag_xy, soft_visibility_at(visibility, frag_xy));
 }
