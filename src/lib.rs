@@ -113,3 +113,11 @@ fn receive_soft_shadows<E: SoftShadowReceiving>(
         }
     }
 }
+
+/// Everything a game usually imports.
+pub mod prelude {
+    pub use crate::NaturePlugins;
+    pub use bevy_foliage::prelude::*;
+    pub use bevy_soft_shadows::prelude::*;
+    pub use bevy_terrain_clip::prelude::*;
+}

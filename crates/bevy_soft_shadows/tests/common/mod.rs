@@ -172,3 +172,29 @@ pub fn sun_entity(harness: &mut RenderHarness) -> Entity {
         .single(world)
         .unwrap()
 }
+
+/// A harness for `test` with the soft shadows plugin and the pole scene (not yet ready).
+pub fn pole_harness(test: &str) -> Option<RenderHarness> {
+    let mut harness = RenderHarness::for_test(test, SIZE, SIZE)?;
+    harness
+        .app_mut()
+        .add_plugins(bevy_soft_shadows::SoftShadowsPlugin);
+    setup(&mut harness);
+    Some(harness)
+}
+
+/// Renders until the receivers draw the lit ground as `hard` does and `done` holds for the
+/// frame (pipelines for new materials and passes compile asynchronously); fails after 100.
+pub fn render_until(
+    harness: &mut RenderHarness,
+    hard: &[f32],
+    done: impl Fn(&[f32]) -> bool,
+) -> Vec<f32> {
+    for _ in 0..100 {
+        let img = to_linear(&harness.render().unwrap());
+        if (lit(&img) - lit(hard)).abs() < 0.02 * lit(hard) && done(&img) {
+            return img;
+        }
+    }
+    panic!("the soft shadow never showed");
+}
