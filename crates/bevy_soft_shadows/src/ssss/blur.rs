@@ -100,6 +100,7 @@ pub fn soft_shadow(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ssss::penumbra::erf;
 
     fn plane(w: usize, h: usize, sigma: f32) -> ScreenBuffers {
         ScreenBuffers {
@@ -156,15 +157,5 @@ mod tests {
     fn masked_pixels_keep_their_hard_shadow() {
         let soft = soft_shadow(&plane(16, 4, 0.0), SETTINGS, &|_, _| None);
         assert_eq!(soft, plane(16, 4, 0.0).hard);
-    }
-
-    fn erf(x: f32) -> f32 {
-        let t = 1.0 / (1.0 + 0.3275911 * x.abs());
-        let y = 1.0
-            - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t
-                + 0.254829592)
-                * t
-                * (-x * x).exp();
-        y.copysign(x)
     }
 }

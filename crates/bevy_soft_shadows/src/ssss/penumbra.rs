@@ -75,6 +75,18 @@ pub fn kernel_axes(normal: [f32; 3]) -> [f32; 2] {
     ]
 }
 
+/// erf by Abramowitz–Stegun 7.1.26 (|error| < 1.5e-7), for the tests' Gaussian CDFs.
+#[cfg(test)]
+pub(crate) fn erf(x: f32) -> f32 {
+    let t = 1.0 / (1.0 + 0.3275911 * x.abs());
+    let y = 1.0
+        - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t
+            + 0.254829592)
+            * t
+            * (-x * x).exp();
+    y.copysign(x)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -139,16 +151,5 @@ mod tests {
             (a[0] - 1.0).abs() < 1e-6 && (a[1] - 0.5).abs() < 1e-6,
             "{a:?}"
         );
-    }
-
-    /// erf by Abramowitz–Stegun 7.1.26 (|error| < 1.5e-7).
-    fn erf(x: f32) -> f32 {
-        let t = 1.0 / (1.0 + 0.3275911 * x.abs());
-        let y = 1.0
-            - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t
-                + 0.254829592)
-                * t
-                * (-x * x).exp();
-        y.copysign(x)
     }
 }
