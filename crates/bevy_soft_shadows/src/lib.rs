@@ -7,11 +7,11 @@
 //!   Gaussian blurs the hard shadow — O(2n) per pixel where PCSS is O(n²).
 //! - statistically filtered shadow maps and foliage shadows (each in its own module as it lands).
 //!
-//! Every technique is measured against Bevy's own PCSS (`DirectionalLight::soft_shadow_size`)
-//! and shadow filters.
+//! Every technique is measured against Bevy's own PCSS (`DirectionalLight::soft_shadow_size`,
+//! `SpotLight::soft_shadows_enabled`) and shadow filters.
 //!
 //! Add [`SoftShadowsPlugin`] and put [`ScreenSpaceSoftShadows`] (reflected, so inspectors can
-//! edit it) on a shadow-casting `DirectionalLight`. The plugin then adds the depth and normal
+//! edit it) on a shadow-casting `DirectionalLight` or `SpotLight`. The plugin then adds the depth and normal
 //! prepasses to the 3D cameras and turns meshes' `StandardMaterial`s into
 //! [`SoftShadowMaterial`](ssss::receiver::SoftShadowMaterial)s, whose lighting uses the soft
 //! visibility as that light's shadow term (opt out with
@@ -39,8 +39,26 @@
 //! from [`SsssTextures::visibility`](ssss::receiver::SsssTextures) at the fragment's pixel (the
 //! terrain clipmap and leaf materials do, connected by `bevy_nature`'s glue plugin).
 //!
-//! Limits: one SSSS light (the first shadow-casting directional light in Bevy's order), one
-//! camera's size for the screen textures; spot lights are not supported yet.
+//! A spot light works the same way, with `light_size` its diameter in metres:
+//!
+//! ```no_run
+//! use bevy::prelude::*;
+//! use bevy_soft_shadows::prelude::*;
+//!
+//! fn lamp(mut commands: Commands) {
+//!     commands.spawn((
+//!         SpotLight { shadow_maps_enabled: true, outer_angle: 0.7, ..default() },
+//!         // A 30 cm lamp; blockers at least 3 m from it and up to 3 m above their receivers
+//!         // get their whole penumbra (`min_filter::spot_coarse_radius`).
+//!         ScreenSpaceSoftShadows { light_size: 0.3, max_occluder_distance: 3.0, ..default() },
+//!         Transform::from_xyz(0.0, 6.0, 0.0).looking_at(Vec3::ZERO, Vec3::Z),
+//!     ));
+//! }
+//! ```
+//!
+//! Limits: one SSSS light (a directional light if one has the component — the first
+//! shadow-casting directional light in Bevy's order — else the first spot light with it), one
+//! camera's size for the screen textures; point lights (cube shadow maps) are not supported.
 
 use bevy::prelude::*;
 

@@ -33,6 +33,17 @@ pub fn jittered_directions(direction_to_light: Vec3, angular_diameter: f32, n: u
         .collect()
 }
 
+/// `n` positions spread evenly over a disk light of `diameter` centred on `centre` and facing
+/// along `axis` (a spot light's disk, perpendicular to where it points): the local lights whose
+/// average is an area spot light.
+pub fn jittered_positions(centre: Vec3, axis: Vec3, diameter: f32, n: usize) -> Vec<Vec3> {
+    let (t, b) = axis.normalize().any_orthonormal_pair();
+    disk_samples(n)
+        .into_iter()
+        .map(|s| centre + 0.5 * diameter * (s.x * t + s.y * b))
+        .collect()
+}
+
 /// sRGB-encoded 8-bit value to linear.
 pub fn srgb_to_linear(v: u8) -> f32 {
     let c = v as f32 / 255.0;
@@ -161,6 +172,21 @@ mod tests {
         );
         let mean = dirs.iter().copied().sum::<Vec3>().normalize();
         assert!(mean.angle_between(d) < 0.005);
+    }
+
+    #[test]
+    fn jittered_positions_fill_the_spot_lights_disk() {
+        let (centre, axis, d) = (Vec3::new(3.0, 6.0, 0.0), Vec3::new(-4.5, -6.0, 0.0), 0.6);
+        let points = jittered_positions(centre, axis, d, 64);
+        let mut widest = 0.0f32;
+        for p in &points {
+            // In the disk's plane, within its radius.
+            assert!((*p - centre).dot(axis.normalize()).abs() < 1e-5);
+            widest = widest.max(p.distance(centre));
+        }
+        assert!(widest <= 0.5 * d + 1e-5 && widest > 0.45 * d, "{widest}");
+        let mean = points.iter().copied().sum::<Vec3>() / 64.0;
+        assert!(mean.distance(centre) < 0.01 * d, "{mean}");
     }
 
     #[test]

@@ -27,6 +27,32 @@ pub fn coarse_radius(
     (r / DILATION_BLOCK as f32).ceil() as usize
 }
 
+/// The widest fine reach the dilation searches, in shadow-map texels (`ssss_types.wgsl`).
+pub const MAX_DILATION_TEXELS: usize = 64;
+
+/// The coarse radius for a spot light of diameter `light_size` (m) whose shadow map of
+/// `map_size` texels spans `±tan_outer` (Bevy's perspective spot shadow projection).
+///
+/// From the light, a receiver at distance `d_r` sees its blockers at `d_b` within the light's
+/// disk projected onto the blocker's plane: an angle of `(light_size/2)·(1/d_b − 1/d_r)` around
+/// it. The window cannot know `d_r` (it is a filter over the map), so it is sized for every
+/// blocker at least `max_occluder_distance` (Δ) from the light and at most Δ in front of its
+/// receiver: the largest such angle, at `d_b = Δ`, `d_r = 2Δ`, is `light_size / (4Δ)` — the
+/// thesis' "fixed safe distance" set by hand, with the same meaning as for a directional light.
+/// In texels at the map's centre that angle is `tan(angle) / (2·tan_outer) · map_size`.
+pub fn spot_coarse_radius(
+    light_size: f32,
+    max_occluder_distance: f32,
+    tan_outer: f32,
+    map_size: f32,
+    max_texels: f32,
+) -> usize {
+    let angle = light_size / (4.0 * max_occluder_distance.max(1e-3));
+    let texels = angle.tan() / (2.0 * tan_outer.max(1e-4)) * map_size;
+    let r = texels.ceil().clamp(0.0, max_texels);
+    (r / DILATION_BLOCK as f32).ceil() as usize
+}
+
 /// Which stored depth is nearer the light.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DepthConvention {
@@ -134,6 +160,41 @@ pub fn coarse_dilate(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_spot_window_covers_every_blocker_within_the_safe_distance() {
+        // A spot of 0.3 m, 45° outer angle, 1024² map; blockers ≥ Δ from the light and ≤ Δ in
+        // front of the receiver, on the axis: the light disk seen from the receiver, projected
+        // on the blocker's plane, must fall inside the window R·BLOCK texels around it.
+        let (w, delta, tan_outer, size) = (0.3f32, 3.0f32, 1.0f32, 1024.0f32);
+        let r = spot_coarse_radius(w, delta, tan_outer, size, 1e6);
+        let window = (r * DILATION_BLOCK) as f32;
+        let texels_of = |lateral: f32, d: f32| lateral / d / (2.0 * tan_outer) * size;
+        let mut widest = 0.0f32;
+        for i in 0..=20 {
+            let d_b = delta * (1.0 + 4.0 * i as f32 / 20.0);
+            for j in 1..=20 {
+                let d_r = d_b + delta * j as f32 / 20.0;
+                // The disk's radius projected from the receiver onto the blocker's plane.
+                let lateral = 0.5 * w * (d_r - d_b) / d_r;
+                widest = widest.max(texels_of(lateral, d_b));
+            }
+        }
+        assert!(widest <= window, "search {widest} texels, window {window}");
+        // … and not much more than needed: the worst case sits exactly on the bound.
+        assert!(
+            window < widest + 2.0 * DILATION_BLOCK as f32,
+            "{widest} vs {window}"
+        );
+        // A blocker nearer the light than Δ needs more than the window (documented limit).
+        let lateral = 0.5 * w * delta / (1.5 * delta);
+        assert!(texels_of(lateral, 0.5 * delta) > window);
+        // Capped like the directional reach.
+        assert_eq!(
+            spot_coarse_radius(10.0, 0.01, 0.1, 4096.0, MAX_DILATION_TEXELS as f32),
+            MAX_DILATION_TEXELS / DILATION_BLOCK
+        );
+    }
 
     #[test]
     fn separable_dilation_equals_the_square_filter() {

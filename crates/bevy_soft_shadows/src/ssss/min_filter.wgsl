@@ -4,9 +4,12 @@
 // of 2R + 1 coarse texels. Bevy's shadow maps are reverse Z, so "nearest the light" is the
 // maximum. The reach covers half the penumbra of a blocker `max_occluder_distance` in front of
 // the receiver, in the texels of each cascade: r = ⌈max_occluder_distance · tan(θ/2) / texel⌉,
-// R = ⌈r / BLOCK⌉. CPU reference: `ssss::min_filter::coarse_dilate`.
+// R = ⌈r / BLOCK⌉. A spot light's one layer uses the radius computed on the CPU
+// (`ssss::min_filter::spot_coarse_radius`). CPU reference: `ssss::min_filter::coarse_dilate`.
 #import bevy_pbr::mesh_view_types::{Lights, DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT}
-#import bevy_soft_shadows::ssss_types::{SsssUniform, MAX_DILATION_TEXELS, NO_LIGHT, DILATION_BLOCK}
+#import bevy_soft_shadows::ssss_types::{
+    SsssUniform, MAX_DILATION_TEXELS, NO_LIGHT, DILATION_BLOCK, LIGHT_KIND_SPOT,
+}
 
 @group(0) @binding(0) var shadow_depth: texture_depth_2d_array;
 @group(0) @binding(1) var rows_in: texture_2d_array<f32>;
@@ -26,6 +29,11 @@ fn ssss_light() -> u32 {
 // Coarse dilation radius R for one layer of the shadow texture array; -1 for layers of other
 // lights (left alone).
 fn radius_of_layer(layer: u32) -> i32 {
+    if ssss.light_kind == LIGHT_KIND_SPOT {
+        // Spot shadow maps follow the directional cascades in the array.
+        let spot_layer = i32(ssss.light_index) + lights.spot_light_shadowmap_offset;
+        return select(-1, i32(ssss.spot_radius), i32(layer) == spot_layer);
+    }
     let i = ssss_light();
     if i == NO_LIGHT {
         return -1;

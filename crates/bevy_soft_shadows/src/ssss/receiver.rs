@@ -17,12 +17,13 @@ use bevy::shader::ShaderRef;
 /// The soft visibility of the SSSS light, per pixel, for the receiving materials.
 #[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
 pub struct SoftShadowReceiver {
-    /// The SSSS output (R32Float, the camera's size; −1 where SSSS is inactive).
+    /// The SSSS output (Rg32Float, the camera's size): the soft visibility (−1 where SSSS is
+    /// inactive) and the light (a spot light's clustered index, −1 for a directional light).
     #[texture(100, sample_type = "float", filterable = false)]
     pub visibility: Handle<Image>,
 }
 
-/// A `StandardMaterial` receiving Screen Space Soft Shadows from the directional light.
+/// A `StandardMaterial` receiving Screen Space Soft Shadows from the SSSS light.
 pub type SoftShadowMaterial = ExtendedMaterial<StandardMaterial, SoftShadowReceiver>;
 
 const SHADER: &str = "embedded://bevy_soft_shadows/ssss/receiver.wgsl";
@@ -52,7 +53,8 @@ pub struct SsssTextures {
     pub distance: Handle<Image>,
     /// The hard shadow after the horizontal pass, with the eye depth (Rg32Float).
     pub horizontal: Handle<Image>,
-    /// The soft visibility after the vertical pass (R32Float), read by the receivers.
+    /// The soft visibility after the vertical pass and the light it is for (Rg32Float), read by
+    /// the receivers.
     pub visibility: Handle<Image>,
     /// Their size in pixels.
     pub size: UVec2,
@@ -81,7 +83,13 @@ pub struct SsssActive(pub bool);
 /// Adds the prepasses and the camera marker, and (re)sizes the textures to the camera.
 fn prepare_cameras_and_textures(
     mut commands: Commands,
-    lights: Query<(), (With<ScreenSpaceSoftShadows>, With<DirectionalLight>)>,
+    lights: Query<
+        (),
+        (
+            With<ScreenSpaceSoftShadows>,
+            Or<(With<DirectionalLight>, With<SpotLight>)>,
+        ),
+    >,
     cameras: Query<(Entity, &Camera, Has<SoftShadowCamera>), With<Camera3d>>,
     mut textures: ResMut<SsssTextures>,
     mut images: ResMut<Assets<Image>>,
@@ -127,21 +135,31 @@ fn prepare_cameras_and_textures(
     };
     put(&mut textures.distance, TextureFormat::Rgba32Float);
     put(&mut textures.horizontal, TextureFormat::Rg32Float);
-    put(&mut textures.visibility, TextureFormat::R32Float);
+    put(&mut textures.visibility, TextureFormat::Rg32Float);
 }
 
 /// SSSS replaces Bevy's PCSS for its light: the hard shadow it blurs is Bevy's shadow lookup,
 /// which PCSS would already have softened. A light with both gets PCSS switched off (warned).
 fn switch_off_pcss_under_ssss(
-    mut lights: Query<(Entity, &mut DirectionalLight), With<ScreenSpaceSoftShadows>>,
+    mut suns: Query<(Entity, &mut DirectionalLight), With<ScreenSpaceSoftShadows>>,
+    mut spots: Query<(Entity, &mut SpotLight), With<ScreenSpaceSoftShadows>>,
 ) {
-    for (entity, mut light) in &mut lights {
+    for (entity, mut light) in &mut suns {
         if light.soft_shadow_size.is_some() {
             warn!(
                 "light {entity} has both ScreenSpaceSoftShadows and PCSS (soft_shadow_size): \
                  SSSS replaces PCSS, soft_shadow_size set to None"
             );
             light.soft_shadow_size = None;
+        }
+    }
+    for (entity, mut light) in &mut spots {
+        if light.soft_shadows_enabled {
+            warn!(
+                "spot light {entity} has both ScreenSpaceSoftShadows and PCSS \
+                 (soft_shadows_enabled): SSSS replaces PCSS, soft_shadows_enabled set to false"
+            );
+            light.soft_shadows_enabled = false;
         }
     }
 }

@@ -7,21 +7,22 @@
 //
 //     apply_pbr_lighting_soft(pbr_input, in.position.xy, visibility)
 //
-// with `visibility` the `SsssTextures::visibility` texture bound in the material (negative
-// where SSSS is inactive), or `apply_soft_shadow` on an already lit colour. The light's direct contribution D is re-weighted from Bevy's
+// with `visibility` the `SsssTextures::visibility` texture bound in the material (.r the soft
+// visibility, negative where SSSS is inactive; .g which light), or `apply_soft_shadow` on an
+// already lit colour. The light's direct contribution D is re-weighted from Bevy's
 // visibility v_b to v_s: color += exposure · D · (v_s − v_b) — the lighting Bevy would compute
 // had its shadow lookup returned v_s. Ambient, emissive and other lights are untouched.
 #import bevy_pbr::{
     pbr_functions::{apply_pbr_lighting, calculate_diffuse_color, calculate_F0_dielectric},
     pbr_types::PbrInput,
     mesh_view_bindings as view_bindings,
-    mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
+    mesh_view_types::{DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT, POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT},
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
     lighting,
-    shadows::fetch_directional_shadow,
+    shadows::{fetch_directional_shadow, fetch_spot_shadow},
 }
 
-// The SSSS light: the first shadow-casting directional light.
+// A directional SSSS light: the first shadow-casting directional light.
 fn soft_shadow_light() -> u32 {
     for (var i = 0u; i < view_bindings::lights.n_directional_lights; i += 1u) {
         if (view_bindings::lights.directional_lights[i].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
@@ -31,15 +32,12 @@ fn soft_shadow_light() -> u32 {
     return 0xffffffffu;
 }
 
-fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, soft: f32) -> vec4<f32> {
-    let light = soft_shadow_light();
-    if soft < 0.0 || light == 0xffffffffu || (pbr_input.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u {
+// `soft` is what `soft_visibility_at` read: (visibility, light), the light being a spot light's
+// clustered index or −1 for the directional light.
+fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, soft: vec2<f32>) -> vec4<f32> {
+    if soft.x < 0.0 || (pbr_input.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u {
         return color;
     }
-    let view = view_bindings::view.view_from_world;
-    let view_z = dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), pbr_input.world_position);
-    let bevy_visibility = fetch_directional_shadow(
-        light, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
     // The base layer's lighting input, as `apply_pbr_lighting` builds it.
     let m = pbr_input.material;
     let NdotV = max(dot(pbr_input.N, pbr_input.V), 0.0001);
@@ -57,20 +55,44 @@ fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, 
     input.F0_dielectric = calculate_F0_dielectric(m.reflectance);
     input.F0_metallic = m.base_color.rgb;
     input.F_ab = lighting::F_AB(m.perceptual_roughness, NdotV);
-    let direct = lighting::directional_light(light, &input, true);
-    return color + vec4(view_bindings::view.exposure * direct * (soft - bevy_visibility), 0.0);
+    var bevy_visibility = 1.0;
+    var direct = vec3(0.0);
+    if soft.y >= 0.0 {
+        // A spot light: Bevy's `fetch_spot_shadow` and `lighting::spot_light`, as its clustered
+        // light loop calls them.
+        let id = u32(soft.y);
+        let light = &view_bindings::clustered_lights.data[id];
+        if ((*light).flags & POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
+            return color;
+        }
+        bevy_visibility = fetch_spot_shadow(
+            id, pbr_input.world_position, pbr_input.world_normal, (*light).shadow_map_near_z, frag_xy);
+        direct = lighting::spot_light(id, &input, true);
+    } else {
+        let light = soft_shadow_light();
+        if light == 0xffffffffu {
+            return color;
+        }
+        let view = view_bindings::view.view_from_world;
+        let view_z = dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), pbr_input.world_position);
+        bevy_visibility = fetch_directional_shadow(
+            light, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
+        direct = lighting::directional_light(light, &input, true);
+    }
+    return color + vec4(view_bindings::view.exposure * direct * (soft.x - bevy_visibility), 0.0);
 }
 
-// The SSSS visibility at a fragment (negative — "inactive" — outside the texture).
-fn soft_visibility_at(visibility: texture_2d<f32>, frag_xy: vec2<f32>) -> f32 {
+// The SSSS (visibility, light) at a fragment (visibility negative — "inactive" — outside the
+// texture).
+fn soft_visibility_at(visibility: texture_2d<f32>, frag_xy: vec2<f32>) -> vec2<f32> {
     let pixel = vec2<u32>(frag_xy);
     if any(pixel >= textureDimensions(visibility)) {
-        return -1.0;
+        return vec2(-1.0);
     }
-    return textureLoad(visibility, pixel, 0).r;
+    return textureLoad(visibility, pixel, 0).rg;
 }
 
-// Bevy's PBR lighting with the SSSS visibility texture as the sun's shadow term: what a
+// Bevy's PBR lighting with the SSSS visibility texture as the SSSS light's shadow term: what a
 // receiving material's fragment stage calls where it would call `apply_pbr_lighting`.
 fn apply_pbr_lighting_soft(pbr_input: PbrInput, frag_xy: vec2<f32>, visibility: texture_2d<f32>) -> vec4<f32> {
     return apply_soft_shadow(

@@ -8,10 +8,11 @@ use super::receiver::{SoftShadowCamera, SsssActive, SsssTextures};
 use crate::settings::ScreenSpaceSoftShadows;
 use bevy::asset::{embedded_asset, load_embedded_asset};
 use bevy::core_pipeline::{Core3d, Core3dSystems, FullscreenShader};
+use bevy::light::DirectionalLightShadowMap;
 use bevy::pbr::{
-    GpuLights, LATE_SHADOW_PASS, LightMeta, MeshPipeline, MeshPipelineKey, MeshPipelineSystems,
-    MeshViewBindGroup, ViewKeyCache, ViewLightsUniformOffset, ViewShadowBindings,
-    per_view_shadow_pass,
+    GlobalClusterableObjectMeta, GpuLights, LATE_SHADOW_PASS, LightMeta, MeshPipeline,
+    MeshPipelineKey, MeshPipelineSystems, MeshViewBindGroup, ViewKeyCache, ViewLightsUniformOffset,
+    ViewShadowBindings, per_view_shadow_pass,
 };
 use bevy::prelude::*;
 use bevy::render::diagnostic::RecordDiagnostics;
@@ -21,6 +22,7 @@ use bevy::render::render_resource::binding_types::{
 };
 use bevy::render::render_resource::*;
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery};
+use bevy::render::sync_world::RenderEntity;
 use bevy::render::texture::{CachedTexture, GpuImage, TextureCache};
 use bevy::render::view::ExtractedView;
 use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems};
@@ -45,7 +47,19 @@ pub struct SsssUniform {
     pub lazy_shadowing: u32,
     /// 1 while a light has SSSS.
     pub enabled: u32,
+    /// Which kind of light has SSSS: [`LIGHT_KIND_DIRECTIONAL`] or [`LIGHT_KIND_SPOT`].
+    pub light_kind: u32,
+    /// For a spot light, its index in Bevy's clustered light array (its shadow map is layer
+    /// `index + spot_light_shadowmap_offset` of the shadow texture array).
+    pub light_index: u32,
+    /// For a spot light, the coarse dilation radius `R` (`min_filter::spot_coarse_radius`).
+    pub spot_radius: u32,
 }
+
+/// [`SsssUniform::light_kind`] of a directional light (`ssss_types.wgsl`).
+pub const LIGHT_KIND_DIRECTIONAL: u32 = 0;
+/// [`SsssUniform::light_kind`] of a spot light (`ssss_types.wgsl`).
+pub const LIGHT_KIND_SPOT: u32 = 1;
 
 impl SsssUniform {
     /// The uniform for (sanitised) settings.
@@ -59,6 +73,9 @@ impl SsssUniform {
             taps_per_side: s.taps_per_side,
             lazy_shadowing: s.lazy_shadowing as u32,
             enabled: 1,
+            light_kind: LIGHT_KIND_DIRECTIONAL,
+            light_index: 0,
+            spot_radius: 0,
         }
     }
 }
@@ -78,18 +95,63 @@ pub struct SsssDilationReadback {
 struct ExtractedSsss {
     uniform: SsssUniform,
     textures: SsssTextures,
+    /// The render-world entity of the spot light with SSSS (its clustered index is only known
+    /// after Bevy's `prepare_lights`).
+    spot: Option<Entity>,
 }
 
+/// The light SSSS shades: the first directional light with [`ScreenSpaceSoftShadows`], else the
+/// first spot light with it (its shadows must be on: without a shadow map there is nothing to
+/// soften, and SSSS stays off with a warning).
+#[allow(clippy::type_complexity)]
 fn extract_ssss(
     mut extracted: ResMut<ExtractedSsss>,
-    lights: Extract<Query<&ScreenSpaceSoftShadows, With<DirectionalLight>>>,
+    directional: Extract<Query<&ScreenSpaceSoftShadows, With<DirectionalLight>>>,
+    spots: Extract<Query<(Entity, &ScreenSpaceSoftShadows, &SpotLight, &RenderEntity)>>,
+    shadow_map: Extract<Res<DirectionalLightShadowMap>>,
     textures: Extract<Res<SsssTextures>>,
     active: Extract<Res<SsssActive>>,
+    mut warned: Local<bool>,
 ) {
     extracted.textures = textures.clone();
-    extracted.uniform = match lights.iter().next() {
-        Some(settings) if active.0 => SsssUniform::new(&settings.sanitized().0),
-        _ => SsssUniform::default(),
+    extracted.spot = None;
+    extracted.uniform = SsssUniform::default();
+    if !active.0 {
+        return;
+    }
+    if let Some(settings) = directional.iter().next() {
+        extracted.uniform = SsssUniform::new(&settings.sanitized().0);
+        return;
+    }
+    let Some((entity, settings, spot, render_entity)) = spots.iter().next() else {
+        return;
+    };
+    if !spot.shadow_maps_enabled {
+        if !*warned {
+            warn!(
+                "ScreenSpaceSoftShadows on spot light {entity}: its shadow maps are off \
+                 (shadow_maps_enabled = false), so SSSS is off too"
+            );
+            *warned = true;
+        }
+        return;
+    }
+    *warned = false;
+    let settings = settings.sanitized().0;
+    extracted.spot = Some(render_entity.id());
+    extracted.uniform = SsssUniform {
+        light_kind: LIGHT_KIND_SPOT,
+        spot_radius: super::min_filter::spot_coarse_radius(
+            settings.light_size,
+            settings.max_occluder_distance,
+            // Bevy clamps the outer angle just below π/2 for the shadow projection.
+            spot.outer_angle
+                .min(std::f32::consts::FRAC_PI_2 - 1e-4)
+                .tan(),
+            shadow_map.size as f32,
+            super::min_filter::MAX_DILATION_TEXELS as f32,
+        ) as u32,
+        ..SsssUniform::new(&settings)
     };
 }
 
@@ -99,9 +161,17 @@ struct SsssUniformBuffer(UniformBuffer<SsssUniform>);
 fn prepare_uniform(
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
-    extracted: Res<ExtractedSsss>,
+    mut extracted: ResMut<ExtractedSsss>,
+    clustered: Res<GlobalClusterableObjectMeta>,
     mut buffer: ResMut<SsssUniformBuffer>,
 ) {
+    // A spot light's place in the clustered light array (Bevy sorts it every frame).
+    if let Some(spot) = extracted.spot {
+        match clustered.entity_to_index.get(&spot) {
+            Some(&index) => extracted.uniform.light_index = index as u32,
+            None => extracted.uniform.enabled = 0,
+        }
+    }
     buffer.0.set(extracted.uniform);
     buffer.0.write_buffer(&device, &queue);
 }
@@ -207,7 +277,7 @@ impl SpecializedRenderPipeline for SsssPipelines {
             SsssPass::BlurHorizontal => {
                 ("blur_horizontal", TextureFormat::Rg32Float, "ssss_blur_h")
             }
-            SsssPass::BlurVertical => ("blur_vertical", TextureFormat::R32Float, "ssss_blur_v"),
+            SsssPass::BlurVertical => ("blur_vertical", TextureFormat::Rg32Float, "ssss_blur_v"),
         };
         RenderPipelineDescriptor {
             label: Some(label.into()),

@@ -2,7 +2,8 @@
 // bind Bevy's mesh view group (view, lights, shadow maps, prepass depth and normals):
 //
 // - `distance`: per pixel the hard shadow (Bevy's own lookup), the blocker found in the dilated
-//   shadow map, the penumbra width by eq. 6.1 (light at infinity) and eq. 6.2 (in pixels), and
+//   shadow map, the penumbra width by eq. 6.1 (a spot light, or its limit for a light at
+//   infinity) and eq. 6.2 (in pixels), and
 //   the kernel's σ along x and y from the surface normal; written as (hard, σx, σy, eye depth).
 // - `blur_horizontal`, `blur_vertical`: the separable Gaussian with depth rejection and lazy
 //   shadowing.
@@ -11,13 +12,17 @@
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_pbr::{
     mesh_view_bindings as view_bindings,
-    mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
+    mesh_view_types::{DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT, POINT_LIGHT_FLAGS_SPOT_LIGHT_Y_NEGATIVE},
     prepass_utils::{prepass_depth, prepass_normal},
-    shadows::{fetch_directional_shadow, get_cascade_index, world_to_directional_light_local},
+    shadows::{
+        fetch_directional_shadow, fetch_spot_shadow, get_cascade_index,
+        world_to_directional_light_local,
+    },
     view_transformations::{frag_coord_to_ndc, position_ndc_to_world, position_world_to_view, depth_ndc_to_view_z},
 }
+#import bevy_render::maths::orthonormalize
 #import bevy_soft_shadows::ssss_types::{
-    SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS, MAX_DILATION_TEXELS, DILATION_BLOCK,
+    SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS, MAX_DILATION_TEXELS, DILATION_BLOCK, LIGHT_KIND_SPOT,
 }
 
 @group(2) @binding(0) var dilated: texture_2d_array<f32>;
@@ -25,7 +30,11 @@
 @group(2) @binding(2) var distances: texture_2d<f32>;
 @group(2) @binding(3) var blur_in: texture_2d<f32>;
 
+// The SSSS light: a spot light's clustered index, or the first shadow-casting directional light.
 fn ssss_light() -> u32 {
+    if ssss.light_kind == LIGHT_KIND_SPOT {
+        return ssss.light_index;
+    }
     for (var i = 0u; i < view_bindings::lights.n_directional_lights; i += 1u) {
         if (view_bindings::lights.directional_lights[i].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             return i;
@@ -38,6 +47,15 @@ fn view_z_of(world: vec3<f32>) -> f32 {
     return position_world_to_view(world).z;
 }
 
+// Bevy's own hard shadow lookup for the SSSS light (2×2 hardware PCF, the thesis' hard shadow).
+fn hard_shadow(light: u32, world: vec3<f32>, normal: vec3<f32>, frag_xy: vec2<f32>) -> f32 {
+    if ssss.light_kind == LIGHT_KIND_SPOT {
+        let near = view_bindings::clustered_lights.data[light].shadow_map_near_z;
+        return fetch_spot_shadow(light, vec4(world, 1.0), normal, near, frag_xy);
+    }
+    return fetch_directional_shadow(light, vec4(world, 1.0), normal, view_z_of(world), frag_xy);
+}
+
 // Pixels per metre at unit eye distance (perspective) or everywhere (orthographic).
 fn pixels_per_unit() -> f32 {
     return view_bindings::view.clip_from_view[1][1] * 0.5 * view_bindings::view.viewport.w;
@@ -45,6 +63,84 @@ fn pixels_per_unit() -> f32 {
 
 fn is_orthographic() -> bool {
     return view_bindings::view.clip_from_view[3][3] == 1.0;
+}
+
+// A surface is not its own blocker: across the dilation footprint (`reach` metres) a receiver's
+// own plane rises towards the light by up to reach · tan(angle to the light); a gap no larger
+// than that is the surface itself (`penumbra::own_surface_gap`).
+fn is_own_surface(gap: f32, reach: f32, cos_nl: f32) -> bool {
+    return cos_nl > 0.0 && gap <= reach * sqrt(max(1.0 - cos_nl * cos_nl, 0.0)) / max(cos_nl, 0.05);
+}
+
+// Eq. 6.1 for a light at infinity: the penumbra's world width behind the blocker found in the
+// dilated map at the receiver's texel (reverse Z: larger is nearer the light).
+fn directional_penumbra(i: u32, world: vec3<f32>, normal: vec3<f32>, view_z: f32) -> f32 {
+    let light = &view_bindings::lights.directional_lights[i];
+    let cascade = get_cascade_index(i, view_z);
+    if cascade >= (*light).num_cascades {
+        return 0.0;
+    }
+    let local = world_to_directional_light_local(i, cascade, vec4(world, 1.0));
+    if local.w == 0.0 {
+        return 0.0;
+    }
+    let size = vec2<f32>(textureDimensions(dilated));
+    let texel = vec2<i32>(clamp(local.xy * size, vec2(0.0), size - 1.0));
+    let layer = i32((*light).depth_texture_base_index + cascade);
+    let blocker = textureLoad(dilated, texel, layer, 0).r;
+    // Light-space depth per metre along the light (orthographic cascade: constant).
+    let m = (*light).cascades[cascade].clip_from_world;
+    let depth_per_metre = length(vec3(m[0].z, m[1].z, m[2].z));
+    let gap = (blocker - local.z) / max(depth_per_metre, 1e-8);
+    let texel_size = (*light).cascades[cascade].texel_size;
+    let half_width = ssss.max_occluder_distance * tan(0.5 * ssss.light_size);
+    let r = clamp(ceil(half_width / max(texel_size, 1e-6)), 0.0, f32(MAX_DILATION_TEXELS));
+    let reach = (ceil(r / f32(DILATION_BLOCK)) + 1.0) * f32(DILATION_BLOCK) * texel_size;
+    if is_own_surface(gap, reach, dot(normal, (*light).direction_to_light.xyz)) {
+        return 0.0;
+    }
+    return max(gap, 0.0) * 2.0 * tan(0.5 * ssss.light_size);
+}
+
+// Eq. 6.1 for a spot light of diameter `light_size`: w = light_size · (d_r − d_b) / d_b, with
+// the distances along the spot's axis. Bevy's spot shadow map is an infinite reverse-Z
+// perspective projection, so a stored depth is near / d (as in `fetch_spot_shadow`).
+fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>) -> f32 {
+    let light = &view_bindings::clustered_lights.data[id];
+    let to_light = (*light).position_radius.xyz - world;
+    var spot_dir = vec3((*light).light_custom_data.x, 0.0, (*light).light_custom_data.y);
+    spot_dir.y = sqrt(max(0.0, 1.0 - spot_dir.x * spot_dir.x - spot_dir.z * spot_dir.z));
+    if ((*light).flags & POINT_LIGHT_FLAGS_SPOT_LIGHT_Y_NEGATIVE) != 0u {
+        spot_dir.y = -spot_dir.y;
+    }
+    let projected = (-to_light) * orthonormalize(-spot_dir);
+    let d_r = -projected.z;
+    let near = (*light).shadow_map_near_z;
+    if d_r <= near {
+        return 0.0;
+    }
+    let tan_outer = (*light).spot_light_tan_angle;
+    let uv = projected.xy / (tan_outer * d_r) * vec2(0.5, -0.5) + vec2(0.5);
+    if any(uv < vec2(0.0)) || any(uv > vec2(1.0)) {
+        return 0.0;
+    }
+    let size = vec2<f32>(textureDimensions(dilated));
+    let texel = vec2<i32>(clamp(uv * size, vec2(0.0), size - 1.0));
+    let layer = i32(id) + view_bindings::lights.spot_light_shadowmap_offset;
+    let blocker = textureLoad(dilated, texel, layer, 0).r;
+    if blocker <= near / d_r {
+        return 0.0;
+    }
+    let d_b = near / blocker;
+    let gap = d_r - d_b;
+    // A shadow-map texel spans 2·d·tan_outer / size metres at distance d.
+    let fine = f32(textureDimensions(view_bindings::directional_shadow_textures).x);
+    let texel_size = 2.0 * d_r * tan_outer / fine;
+    let reach = (f32(ssss.spot_radius) + 1.0) * f32(DILATION_BLOCK) * texel_size;
+    if is_own_surface(gap, reach, dot(normal, normalize(to_light))) {
+        return 0.0;
+    }
+    return gap * ssss.light_size / d_b;
 }
 
 @fragment
@@ -60,39 +156,14 @@ fn distance(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     let normal = normalize(prepass_normal(frag, 0u));
     let view_z = view_z_of(world);
     let eye_depth = -view_z;
-    let hard = fetch_directional_shadow(i, vec4(world, 1.0), normal, view_z, in.position.xy);
-
-    // Blocker: the dilated map at the receiver's texel (reverse Z: larger is nearer the light).
-    let light = &view_bindings::lights.directional_lights[i];
-    let cascade = get_cascade_index(i, view_z);
-    if cascade >= (*light).num_cascades {
-        return vec4(hard, 0.0, 0.0, eye_depth);
+    let hard = hard_shadow(i, world, normal, in.position.xy);
+    var world_width = 0.0;
+    if ssss.light_kind == LIGHT_KIND_SPOT {
+        world_width = spot_penumbra(i, world, normal);
+    } else {
+        world_width = directional_penumbra(i, world, normal, view_z);
     }
-    let local = world_to_directional_light_local(i, cascade, vec4(world, 1.0));
-    if local.w == 0.0 {
-        return vec4(hard, 0.0, 0.0, eye_depth);
-    }
-    let size = vec2<f32>(textureDimensions(dilated));
-    let texel = vec2<i32>(clamp(local.xy * size, vec2(0.0), size - 1.0));
-    let layer = i32((*light).depth_texture_base_index + cascade);
-    let blocker = textureLoad(dilated, texel, layer, 0).r;
-    // Light-space depth per metre along the light (orthographic cascade: constant).
-    let m = (*light).cascades[cascade].clip_from_world;
-    let depth_per_metre = length(vec3(m[0].z, m[1].z, m[2].z));
-    var gap = (blocker - local.z) / max(depth_per_metre, 1e-8);
-    // A surface is not its own blocker: across the dilation footprint a receiver's own plane
-    // rises towards the light by up to reach · tan(angle to the light); a gap no larger than
-    // that is the surface itself (`penumbra::own_surface_gap`).
-    let texel_size = (*light).cascades[cascade].texel_size;
-    let half_width = ssss.max_occluder_distance * tan(0.5 * ssss.light_size);
-    let r = clamp(ceil(half_width / max(texel_size, 1e-6)), 0.0, f32(MAX_DILATION_TEXELS));
-    let reach = (ceil(r / f32(DILATION_BLOCK)) + 1.0) * f32(DILATION_BLOCK) * texel_size;
-    let cos_nl = dot(normal, (*light).direction_to_light.xyz);
-    if cos_nl > 0.0 && gap <= reach * sqrt(max(1.0 - cos_nl * cos_nl, 0.0)) / max(cos_nl, 0.05) {
-        gap = 0.0;
-    }
-    // Eq. 6.1 for a light at infinity, then eq. 6.2 (divided by the eye distance).
-    let world_width = max(gap, 0.0) * 2.0 * tan(0.5 * ssss.light_size);
+    // Eq. 6.2: in pixels, divided by the eye distance for a perspective view.
     var px = world_width * pixels_per_unit();
     if !is_orthographic() {
         px = px / max(eye_depth, 1e-4);
@@ -136,7 +207,7 @@ fn lazy_shadow(sample_px: vec2<i32>, centre_world: vec3<f32>, normal: vec3<f32>,
         return -1.0;
     }
     let p = near + t * dir;
-    return fetch_directional_shadow(light, vec4(p, 1.0), normal, view_z_of(p), frag.xy);
+    return hard_shadow(light, p, normal, frag.xy);
 }
 
 // `blur_in` holds the value to blur in .r and the eye depth in channel `depth_channel` (the
@@ -212,7 +283,10 @@ fn blur_horizontal(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     return vec4(blur(in, vec2(1, 0), 1u, 3u), depth, 0.0, 1.0);
 }
 
+// The receivers read (visibility, light): the light is a spot light's clustered index, or −1
+// for the directional light (`receiver_functions::apply_soft_shadow`).
 @fragment
 fn blur_vertical(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    return vec4(blur(in, vec2(0, 1), 2u, 1u), 0.0, 0.0, 1.0);
+    let light = select(-1.0, f32(ssss.light_index), ssss.light_kind == LIGHT_KIND_SPOT);
+    return vec4(blur(in, vec2(0, 1), 2u, 1u), light, 0.0, 1.0);
 }

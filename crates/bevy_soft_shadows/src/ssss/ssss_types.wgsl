@@ -2,7 +2,7 @@
 
 // Mirrors `ssss::render::SsssUniform`.
 struct SsssUniform {
-    // Angular diameter of the directional light (rad).
+    // Angular diameter of a directional light (rad), diameter of a spot light (m).
     light_size: f32,
     max_occluder_distance: f32,
     min_kernel_px: f32,
@@ -12,7 +12,16 @@ struct SsssUniform {
     lazy_shadowing: u32,
     // 1 while a light has SSSS; 0 makes the passes write "inactive" (-1) for the receivers.
     enabled: u32,
+    // LIGHT_KIND_DIRECTIONAL or LIGHT_KIND_SPOT.
+    light_kind: u32,
+    // A spot light's index in the clustered light array.
+    light_index: u32,
+    // A spot light's coarse dilation radius (`ssss::min_filter::spot_coarse_radius`).
+    spot_radius: u32,
 }
+
+const LIGHT_KIND_DIRECTIONAL: u32 = 0u;
+const LIGHT_KIND_SPOT: u32 = 1u;
 
 const MAX_DILATION_TEXELS: u32 = 64u;
 // Side of the shadow-map blocks one coarse texel of the dilated map stands for

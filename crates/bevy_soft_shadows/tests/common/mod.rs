@@ -44,6 +44,34 @@ pub fn setup(harness: &mut RenderHarness) {
 /// The ground, one blocker (`shape` at `at`), the sun towards `sun` and the top-down camera
 /// centred on `centre`.
 pub fn setup_scene(harness: &mut RenderHarness, shape: Cuboid, at: Vec3, sun: Vec3, centre: Vec3) {
+    spawn_ground_blocker_and_camera(harness, shape, at, centre);
+    harness.world_mut().spawn((
+        Sun,
+        DirectionalLight {
+            illuminance: 3000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        CascadeShadowConfigBuilder {
+            num_cascades: 1,
+            minimum_distance: 0.1,
+            maximum_distance: 14.0,
+            first_cascade_far_bound: 14.0,
+            ..default()
+        }
+        .build(),
+        Transform::default().looking_to(-sun, Vec3::Y),
+    ));
+}
+
+/// The ground (no ambient light, 2048² shadow maps), one blocker (`shape` at `at`, marked
+/// [`Blocker`]) and the orthographic top-down camera centred on `centre`; no light.
+pub fn spawn_ground_blocker_and_camera(
+    harness: &mut RenderHarness,
+    shape: Cuboid,
+    at: Vec3,
+    centre: Vec3,
+) {
     let world = harness.world_mut();
     world.insert_resource(GlobalAmbientLight {
         brightness: 0.0,
@@ -67,26 +95,10 @@ pub fn setup_scene(harness: &mut RenderHarness, shape: Cuboid, at: Vec3, sun: Ve
         });
     world.spawn((Mesh3d(ground), MeshMaterial3d(material.clone())));
     world.spawn((
+        Blocker,
         Mesh3d(pole),
         MeshMaterial3d(material),
         Transform::from_translation(at),
-    ));
-    world.spawn((
-        Sun,
-        DirectionalLight {
-            illuminance: 3000.0,
-            shadow_maps_enabled: true,
-            ..default()
-        },
-        CascadeShadowConfigBuilder {
-            num_cascades: 1,
-            minimum_distance: 0.1,
-            maximum_distance: 14.0,
-            first_cascade_far_bound: 14.0,
-            ..default()
-        }
-        .build(),
-        Transform::default().looking_to(-sun, Vec3::Y),
     ));
     world.spawn((
         Camera3d::default(),
@@ -104,6 +116,10 @@ pub fn setup_scene(harness: &mut RenderHarness, shape: Cuboid, at: Vec3, sun: Ve
         Transform::from_translation(centre + Vec3::Y * 10.0).looking_at(centre, Vec3::NEG_Z),
     ));
 }
+
+/// The scene's blocker.
+#[derive(Component)]
+pub struct Blocker;
 
 pub fn aim_sun(harness: &mut RenderHarness, direction_to_light: Vec3) {
     let world = harness.world_mut();
@@ -197,4 +213,24 @@ pub fn render_until(
         }
     }
     panic!("the soft shadow never showed");
+}
+
+/// Little-endian f32s.
+pub fn floats(bytes: &[u8]) -> Vec<f32> {
+    bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
+}
+
+/// Root mean square difference of the green channel of two linear RGBA images.
+pub fn rmse(a: &[f32], b: &[f32]) -> f32 {
+    let mut sum = 0.0;
+    let mut n = 0;
+    for i in (0..a.len()).step_by(4) {
+        let d = a[i + 1] - b[i + 1];
+        sum += d * d;
+        n += 1;
+    }
+    (sum / n as f32).sqrt()
 }
