@@ -7,33 +7,41 @@
 //! cargo run --release --example soft_shadows                 # windowed, egui panel
 //! cargo run --example soft_shadows -- --headless --frames 30 --stats ssss.json
 //! cargo run --example soft_shadows -- --bench [--frames N]   # the issue-6 table, JSON
+//! cargo run --example soft_shadows -- --bench --spot          # the same under a lamp
 //! ```
+//!
+//! Key 4 (or `spot` in the panel) switches from the sun to a lamp (a spot light) above the scene.
 //!
 //! `--bench` measures, in one process, for small / medium / large light sizes at two
 //! resolutions: the GPU time of soft shadowing over hard shadows (timestamp queries: PCSS = its
 //! main opaque pass minus the hard-shadow one; SSSS = its own passes plus its main pass minus the
 //! hard-shadow one) and each image's RMSE against an area-light reference (48 hard-shadowed
-//! suns jittered over the light's disk, averaged in linear light) rendered in the same run.
+//! suns jittered over the light's disk, averaged in linear light — or with `--spot`, 48 spot
+//! lights spread over the lamp's disk) rendered in the same run.
 
 use bevy::prelude::*;
 use bevy_nature::shadow_scene::{
-    DemoSun, ShadowDemo, ShadowTechnique, add_shadow_demo, spawn_shadow_scene, sun_direction,
+    DemoLamp, DemoSun, LAMP_AIM, LAMP_POSITION, ShadowDemo, ShadowTechnique, add_shadow_demo,
+    lamp_diameter, lamp_transform, spawn_shadow_scene, sun_direction,
 };
 use bevy_nature::soft_shadows::ScreenSpaceSoftShadows;
-use bevy_nature::soft_shadows::reference::{LinearAverage, jittered_directions, srgb_to_linear};
+use bevy_nature::soft_shadows::reference::{
+    LinearAverage, jittered_directions, jittered_positions, srgb_to_linear,
+};
 use bevy_nature_harness::headless::HarnessConfig;
 use bevy_nature_harness::{ExampleArgs, ExampleRunner, RenderHarness, require_adapter};
 
 fn main() -> AppExit {
     let mut rest: Vec<String> = std::env::args().skip(1).collect();
     let bench = rest.iter().any(|a| a == "--bench");
-    rest.retain(|a| a != "--bench");
+    let spot = rest.iter().any(|a| a == "--spot");
+    rest.retain(|a| a != "--bench" && a != "--spot");
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
-        eprintln!("{e} [--bench]");
+        eprintln!("{e} [--bench] [--spot]");
         std::process::exit(2)
     });
     if bench {
-        return run_bench(&args);
+        return run_bench(&args, spot);
     }
     ExampleRunner::with_args("soft_shadows", args)
         .inspect_resource::<ShadowDemo>()
@@ -42,6 +50,7 @@ fn main() -> AppExit {
             app.add_plugins(bevy_nature::soft_shadows::SoftShadowsPlugin)
                 .add_systems(Startup, spawn_shadow_scene);
             add_shadow_demo(app);
+            app.world_mut().resource_mut::<ShadowDemo>().spot = spot;
         })
 }
 
@@ -62,7 +71,7 @@ fn rmse(a: &[f32], b: &[f32]) -> f64 {
     (sum / n as f64).sqrt()
 }
 
-fn run_bench(args: &ExampleArgs) -> AppExit {
+fn run_bench(args: &ExampleArgs, spot: bool) -> AppExit {
     if require_adapter("soft_shadows").is_none() {
         return AppExit::error();
     }
@@ -76,6 +85,7 @@ fn run_bench(args: &ExampleArgs) -> AppExit {
             .add_plugins(bevy_nature::soft_shadows::SoftShadowsPlugin)
             .add_systems(Startup, spawn_shadow_scene);
         add_shadow_demo(harness.app_mut());
+        harness.world_mut().resource_mut::<ShadowDemo>().spot = spot;
         harness.wait_until_ready().expect("scene ready");
         for (label, light_size) in [("small", 0.03f32), ("medium", 0.1), ("large", 0.25)] {
             let set = |harness: &mut RenderHarness, technique: ShadowTechnique| {
@@ -86,24 +96,43 @@ fn run_bench(args: &ExampleArgs) -> AppExit {
                     .unwrap() as u32;
                 demo.light_size = light_size;
             };
-            // The reference: hard shadows from suns jittered over the light's disk.
+            // The reference: hard shadows from suns jittered over the light's disk, or lamps
+            // spread over the lamp's disk.
             set(&mut harness, ShadowTechnique::Hard);
             harness.run_frames(3).unwrap();
-            let sun = {
+            let (sun, lamp) = {
                 let world = harness.world_mut();
-                world
+                let sun = world
                     .query_filtered::<Entity, With<DemoSun>>()
                     .single(world)
-                    .unwrap()
+                    .unwrap();
+                let lamp = world
+                    .query_filtered::<Entity, With<DemoLamp>>()
+                    .single(world)
+                    .unwrap();
+                (sun, lamp)
             };
             let mut average = LinearAverage::default();
-            for d in jittered_directions(sun_direction(), light_size, 48) {
-                *harness.world_mut().get_mut::<Transform>(sun).unwrap() =
-                    Transform::default().looking_to(-d, Vec3::Y);
+            let poses: Vec<(Entity, Transform)> = if spot {
+                let diameter = lamp_diameter(light_size);
+                jittered_positions(LAMP_POSITION, LAMP_AIM - LAMP_POSITION, diameter, 48)
+                    .into_iter()
+                    .map(|p| (lamp, lamp_transform(p)))
+                    .collect()
+            } else {
+                jittered_directions(sun_direction(), light_size, 48)
+                    .into_iter()
+                    .map(|d| (sun, Transform::default().looking_to(-d, Vec3::Y)))
+                    .collect()
+            };
+            for (light, pose) in poses {
+                *harness.world_mut().get_mut::<Transform>(light).unwrap() = pose;
                 average.add(&harness.render().unwrap().data);
             }
             *harness.world_mut().get_mut::<Transform>(sun).unwrap() =
                 Transform::default().looking_to(-sun_direction(), Vec3::Y);
+            *harness.world_mut().get_mut::<Transform>(lamp).unwrap() =
+                lamp_transform(LAMP_POSITION);
             let reference = average.linear();
             let mut measured = Vec::new();
             for technique in ShadowTechnique::ALL {
@@ -141,9 +170,10 @@ fn run_bench(args: &ExampleArgs) -> AppExit {
                 };
                 let cost = main + passes - hard_main;
                 rows.push(format!(
-                    "{{\"size\": [{}, {}], \"light\": \"{label}\", \"light_size_rad\": {light_size}, \"technique\": \"{}\", \"main_pass_ms\": {main:.3}, \"ssss_passes_ms\": {passes:.3}, \"cost_over_hard_ms\": {cost:.3}, \"rmse_vs_reference\": {error:.5}, \"ssss_pass_ms\": {{{breakdown}}}}}",
+                    "{{\"size\": [{}, {}], \"light\": \"{}{label}\", \"light_size_rad\": {light_size}, \"technique\": \"{}\", \"main_pass_ms\": {main:.3}, \"ssss_passes_ms\": {passes:.3}, \"cost_over_hard_ms\": {cost:.3}, \"rmse_vs_reference\": {error:.5}, \"ssss_pass_ms\": {{{breakdown}}}}}",
                     size.x,
                     size.y,
+                    if spot { "spot " } else { "" },
                     technique.name()
                 ));
                 eprintln!("{}", rows.last().unwrap());

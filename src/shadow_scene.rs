@@ -1,7 +1,8 @@
 //! The soft-shadow scene of the `soft_shadows` example and benchmark: a ground with posts of
-//! several heights, a table-like panel on legs and a sphere under a low sun, so penumbrae start
-//! hard at every contact and widen with the distance to the blocker — and a switch between
-//! Bevy's hard shadows, Bevy's PCSS and Screen Space Soft Shadows for the same light.
+//! several heights, a table-like panel on legs and a sphere under a low sun or a lamp (spot
+//! light) above them, so penumbrae start hard at every contact and widen with the distance to
+//! the blocker — and a switch between Bevy's hard shadows, Bevy's PCSS and Screen Space Soft
+//! Shadows for the same light.
 
 use bevy::light::{CascadeShadowConfigBuilder, DirectionalLightShadowMap, ShadowFilteringMethod};
 use bevy::prelude::*;
@@ -12,7 +13,8 @@ use bevy_soft_shadows::ScreenSpaceSoftShadows;
 pub enum ShadowTechnique {
     /// Bevy's shadow map with 2×2 hardware PCF.
     Hard,
-    /// Bevy's percentage-closer soft shadows (`DirectionalLight::soft_shadow_size`).
+    /// Bevy's percentage-closer soft shadows (`DirectionalLight::soft_shadow_size`,
+    /// `SpotLight::soft_shadows_enabled`).
     Pcss,
     /// Screen Space Soft Shadows ([`ScreenSpaceSoftShadows`]).
     #[default]
@@ -39,8 +41,11 @@ impl ShadowTechnique {
 pub struct ShadowDemo {
     /// 0: hard, 1: Bevy's PCSS, 2: SSSS (keys 1, 2, 3).
     pub technique: u32,
-    /// Angular diameter of the sun (rad).
+    /// Angular diameter of the light seen from the scene (rad): the sun's, or the lamp's from
+    /// [`LAMP_DISTANCE`] away (its diameter is [`lamp_diameter`]).
     pub light_size: f32,
+    /// Light the scene with the lamp (a spot light) instead of the sun (key 4 toggles).
+    pub spot: bool,
     /// Bevy's PCSS size per radian of light size: PCSS's `soft_shadow_size` has no physical unit
     /// shared with an angular size; this factor gave PCSS its lowest error against the
     /// area-light reference on the pole scene (`ssss_vs_pcss` test sweep).
@@ -52,6 +57,7 @@ impl Default for ShadowDemo {
         Self {
             technique: 2,
             light_size: 0.1,
+            spot: false,
             pcss_size_per_radian: PCSS_SIZE_PER_RADIAN,
         }
     }
@@ -67,9 +73,36 @@ impl ShadowDemo {
     }
 }
 
+/// Bevy's spot PCSS `radius` per metre of lamp radius: its kernel is in units of a fixed texel
+/// size times an empirical factor, not metres; 30× gave it its lowest error against the
+/// area-light reference (`ssss_spot` test sweep).
+pub const PCSS_SPOT_RADIUS_SCALE: f32 = 30.0;
+
 /// The scene's sun.
 #[derive(Component)]
 pub struct DemoSun;
+
+/// The scene's lamp (a spot light), used instead of the sun when [`ShadowDemo::spot`] is on.
+#[derive(Component)]
+pub struct DemoLamp;
+
+/// Where the lamp hangs and what it points at.
+pub const LAMP_POSITION: Vec3 = Vec3::new(1.0, 7.0, 3.0);
+/// See [`LAMP_POSITION`].
+pub const LAMP_AIM: Vec3 = Vec3::new(-0.5, 0.0, 0.3);
+/// The distance from which the lamp's diameter subtends [`ShadowDemo::light_size`].
+pub const LAMP_DISTANCE: f32 = 7.0;
+
+/// The lamp's diameter (m) for an angular size `light_size` seen from [`LAMP_DISTANCE`].
+pub fn lamp_diameter(light_size: f32) -> f32 {
+    2.0 * LAMP_DISTANCE * (0.5 * light_size).tan()
+}
+
+/// The lamp's transform at `position` (always pointing the same way, so a jittered lamp keeps
+/// its orientation).
+pub fn lamp_transform(position: Vec3) -> Transform {
+    Transform::from_translation(position).looking_to(LAMP_AIM - LAMP_POSITION, Vec3::Y)
+}
 
 /// Direction from the ground towards the sun (35° up).
 pub fn sun_direction() -> Vec3 {
@@ -141,6 +174,19 @@ pub fn spawn_shadow_scene(
         Transform::default().looking_to(-sun_direction(), Vec3::Y),
     ));
     commands.spawn((
+        DemoLamp,
+        SpotLight {
+            intensity: 3.0e6,
+            range: 40.0,
+            shadow_maps_enabled: true,
+            outer_angle: 0.75,
+            inner_angle: 0.6,
+            ..default()
+        },
+        lamp_transform(LAMP_POSITION),
+        Visibility::Hidden,
+    ));
+    commands.spawn((
         Camera3d::default(),
         Msaa::Off,
         ShadowFilteringMethod::Hardware2x2,
@@ -148,42 +194,74 @@ pub fn spawn_shadow_scene(
     ));
 }
 
-/// Applies [`ShadowDemo`] to the sun when it changes.
+/// The SSSS settings of the demo for a light of `light_size` (rad, or m for the lamp).
+fn ssss_settings(light_size: f32, max_occluder_distance: f32) -> ScreenSpaceSoftShadows {
+    ScreenSpaceSoftShadows {
+        light_size,
+        max_occluder_distance,
+        taps_per_side: 11,
+        max_kernel_px: 40.0,
+        ..default()
+    }
+}
+
+/// Applies [`ShadowDemo`] to the sun and the lamp when it changes: the light in use is visible
+/// and shadowed with the technique chosen, the other hidden.
 pub fn apply_shadow_demo(
     demo: Res<ShadowDemo>,
     mut commands: Commands,
-    mut sun: Query<(Entity, &mut DirectionalLight), With<DemoSun>>,
+    mut sun: Query<(Entity, &mut DirectionalLight, &mut Visibility), With<DemoSun>>,
+    mut lamp: Query<(Entity, &mut SpotLight, &mut Visibility), Without<DemoSun>>,
 ) {
     if !demo.is_changed() {
         return;
     }
-    for (entity, mut light) in &mut sun {
-        match demo.technique() {
-            ShadowTechnique::Hard => {
-                light.soft_shadow_size = None;
-                commands.entity(entity).remove::<ScreenSpaceSoftShadows>();
-            }
-            ShadowTechnique::Pcss => {
-                light.soft_shadow_size = Some(demo.light_size * demo.pcss_size_per_radian);
-                commands.entity(entity).remove::<ScreenSpaceSoftShadows>();
-            }
-            ShadowTechnique::Ssss => {
-                light.soft_shadow_size = None;
-                commands.entity(entity).insert(ScreenSpaceSoftShadows {
-                    light_size: demo.light_size,
-                    max_occluder_distance: 5.0,
-                    taps_per_side: 11,
-                    max_kernel_px: 40.0,
-                    ..default()
-                });
-            }
+    let technique = demo.technique();
+    for (entity, mut light, mut visibility) in &mut sun {
+        *visibility = if demo.spot {
+            Visibility::Hidden
+        } else {
+            Visibility::Inherited
+        };
+        light.soft_shadow_size = (technique == ShadowTechnique::Pcss)
+            .then(|| demo.light_size * demo.pcss_size_per_radian);
+        if technique == ShadowTechnique::Ssss && !demo.spot {
+            commands
+                .entity(entity)
+                .insert(ssss_settings(demo.light_size, 5.0));
+        } else {
+            commands.entity(entity).remove::<ScreenSpaceSoftShadows>();
+        }
+    }
+    for (entity, mut light, mut visibility) in &mut lamp {
+        *visibility = if demo.spot {
+            Visibility::Inherited
+        } else {
+            Visibility::Hidden
+        };
+        let diameter = lamp_diameter(demo.light_size);
+        light.soft_shadows_enabled = technique == ShadowTechnique::Pcss;
+        light.radius = if technique == ShadowTechnique::Pcss {
+            0.5 * diameter * PCSS_SPOT_RADIUS_SCALE
+        } else {
+            0.0
+        };
+        // Blockers at least 3.5 m from the lamp and up to 3.5 m above their receivers get
+        // their whole penumbra (`min_filter::spot_coarse_radius`): the posts and the panel.
+        if technique == ShadowTechnique::Ssss && demo.spot {
+            commands.entity(entity).insert(ssss_settings(diameter, 3.5));
+        } else {
+            commands.entity(entity).remove::<ScreenSpaceSoftShadows>();
         }
     }
 }
 
-/// Keys 1, 2, 3 pick hard shadows, PCSS or SSSS.
+/// Keys 1, 2, 3 pick hard shadows, PCSS or SSSS; key 4 switches between the sun and the lamp.
 pub fn switch_with_keys(keys: Option<Res<ButtonInput<KeyCode>>>, mut demo: ResMut<ShadowDemo>) {
     let Some(keys) = keys else { return };
+    if keys.just_pressed(KeyCode::Digit4) {
+        demo.spot = !demo.spot;
+    }
     for (key, technique) in [
         (KeyCode::Digit1, 0),
         (KeyCode::Digit2, 1),

@@ -4,6 +4,7 @@
 //!
 //! - The spot light's coarse dilated map on the GPU equals its CPU reference at the radius
 //!   `min_filter::spot_coarse_radius` gives.
+//! - The distance pass's σ equals its CPU reference (`ssss::distance`) on the ground's pixels.
 //! - The penumbra in the final image follows eq. 6.1 for a local light,
 //!   `w = light_size · (d_r − d_b) / d_b`, at three distances behind the pole.
 //! - The image is closer to the reference than Bevy's hard shadow, and no further from it than
@@ -18,9 +19,13 @@ use bevy_nature_harness::{RenderHarness, artifacts_dir};
 use bevy_soft_shadows::reference::{
     LinearAverage, disk_rise_fraction, jittered_positions, linear_to_srgb, rise_width,
 };
+use bevy_soft_shadows::ssss::distance::{
+    CoarseMap, SpotProjection, pixel_sigma, spot_penumbra_width,
+};
 use bevy_soft_shadows::ssss::min_filter::{
     DepthConvention, MAX_DILATION_TEXELS, coarse_dilate, spot_coarse_radius,
 };
+use bevy_soft_shadows::ssss::receiver::SsssTextures;
 use bevy_soft_shadows::ssss::render::SsssDilationReadback;
 use bevy_soft_shadows::{ScreenSpaceSoftShadows, SoftShadowsPlugin};
 use common::*;
@@ -228,7 +233,87 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
         "the GPU dilation equals the CPU reference at R = {radius}"
     );
 
-    // 2. Penumbra widths (10–90 %) across the side edge, in visibility (over the unshadowed
+    // 2. The distance pass against its CPU reference (`ssss::distance`), pixel by pixel on the
+    //    ground: the same coarse map, Bevy's spot projection, eq. 6.1, eq. 6.2 and the mask.
+    let textures = harness.world_mut().resource::<SsssTextures>().clone();
+    let distance = floats(
+        &harness
+            .read_image(textures.distance.clone(), SIZE, SIZE, 16)
+            .unwrap(),
+    );
+    let light = harness.world_mut().get::<SpotLight>(lamp).unwrap().clone();
+    // The lamp's forward as Bevy extracts it: along z it is ±0 up to rounding, and the sign
+    // decides the basis `orthonormalize` builds (the map's orientation about the axis).
+    let forward = harness
+        .world_mut()
+        .get::<GlobalTransform>(lamp)
+        .unwrap()
+        .forward();
+    let projection = SpotProjection {
+        position: LAMP,
+        forward: *forward,
+        tan_outer: light.outer_angle.tan(),
+        near: light.shadow_map_near_z,
+    };
+    let coarse = CoarseMap {
+        depth: &gpu,
+        width: cw,
+        height: ch,
+        map_size: fine_size.x as f32,
+        radius,
+    };
+    let s = settings();
+    let m_per_px = VIEW_M / SIZE as f32;
+    let (mut ground, mut agree, mut penumbra, mut worst) = (0, 0, 0, 0.0f32);
+    for row in 0..SIZE {
+        for col in 0..SIZE {
+            let i = (row * SIZE + col) as usize * 4;
+            // Ground pixels only (the camera is 10 m above it); the pole's top is 6 m away.
+            if (distance[i + 3] - 10.0).abs() > 1e-3 {
+                continue;
+            }
+            ground += 1;
+            let world = Vec3::new(
+                CENTRE.x - VIEW_M / 2.0 + (col as f32 + 0.5) * m_per_px,
+                0.0,
+                CENTRE.z - VIEW_M / 2.0 + (row as f32 + 0.5) * m_per_px,
+            );
+            let width = spot_penumbra_width(&projection, &coarse, world, Vec3::Y, s.light_size);
+            // Orthographic top-down view: SIZE / VIEW_M pixels per metre, no eye-depth division;
+            // the ground faces the camera, so both kernel axes are σ.
+            let sigma = pixel_sigma(
+                width,
+                SIZE as f32 / VIEW_M,
+                None,
+                s.min_kernel_px,
+                s.max_kernel_px,
+            );
+            let error = (distance[i + 1] - sigma)
+                .abs()
+                .max((distance[i + 2] - sigma).abs());
+            if error <= 1e-3 * (1.0 + sigma) {
+                agree += 1;
+            }
+            worst = worst.max(error);
+            penumbra += (sigma > 0.0) as u32;
+        }
+    }
+    println!(
+        "distance pass vs CPU: {agree} of {ground} ground pixels agree ({penumbra} in penumbra), \
+         worst σ difference {worst:.3} px"
+    );
+    assert!(
+        ground > (SIZE * SIZE / 2) as u32 && penumbra > 500,
+        "{ground} / {penumbra}"
+    );
+    // A pixel whose uv falls exactly on a coarse texel's border may round to its neighbour.
+    assert!(
+        agree as f32 >= 0.995 * ground as f32,
+        "the distance pass differs from its CPU reference at {} pixels",
+        ground - agree
+    );
+
+    // 3. Penumbra widths (10–90 %) across the side edge, in visibility (over the unshadowed
     //    render), against eq. 6.1.
     let visibility = |img: &[f32]| -> Vec<f32> {
         img.iter()
@@ -238,7 +323,6 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
             .collect()
     };
     let (v_ref, v_ssss) = (visibility(&reference), visibility(&ssss));
-    let m_per_px = VIEW_M / SIZE as f32;
     let k = disk_rise_fraction();
     let mut widths = Vec::new();
     for x in [-1.0f32, -2.0, -3.0] {
@@ -267,7 +351,7 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
         "growth {growth} vs eq. 6.1 {expected_growth}"
     );
 
-    // 3. Against the area-light reference.
+    // 4. Against the area-light reference.
     let (e_ssss, e_hard) = (rmse(&ssss, &reference), rmse(&hard, &reference));
     println!(
         "RMSE vs area-light reference: SSSS {e_ssss:.4}, best PCSS {e_pcss:.4} \

@@ -47,7 +47,8 @@ pub fn spot_coarse_radius(
     map_size: f32,
     max_texels: f32,
 ) -> usize {
-    let angle = light_size / (4.0 * max_occluder_distance.max(1e-3));
+    // (An angle past ~86° is capped anyway; keep its tangent positive.)
+    let angle = (light_size / (4.0 * max_occluder_distance.max(1e-3))).min(1.5);
     let texels = angle.tan() / (2.0 * tan_outer.max(1e-4)) * map_size;
     let r = texels.ceil().clamp(0.0, max_texels);
     (r / DILATION_BLOCK as f32).ceil() as usize

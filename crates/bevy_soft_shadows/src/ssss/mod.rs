@@ -5,11 +5,13 @@
 //!    outer-penumbra pixels find their blocker.
 //! 2. [`penumbra`]: the blocker–receiver distance gives the penumbra's width (eq. 6.1), divided
 //!    by the eye distance for screen space (eq. 6.2); a Gaussian of σ = width/4 stands in for the
-//!    area light, its axes shortened by the surface's slant.
+//!    area light, its axes shortened by the surface's slant. [`distance`] composes them per
+//!    pixel as the distance pass does (with Bevy's spot-light projection).
 //! 3. [`kernel`] and [`blur`]: the hard shadow blurred by a horizontal then a vertical pass, with
 //!    depth rejection and lazy shadowing (§6.2.3, §6.3.2).
 
 pub mod blur;
+pub mod distance;
 pub mod kernel;
 pub mod min_filter;
 pub mod penumbra;

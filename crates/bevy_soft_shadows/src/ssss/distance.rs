@@ -1,0 +1,255 @@
+//! The distance map of §6.2.2, per pixel: the blocker found in the coarse dilated shadow map,
+//! the penumbra's world width by eq. 6.1, its width on screen by eq. 6.2, the mask of pixels
+//! that can never be in penumbra, and the kernel's σ — the CPU reference of the `distance` pass
+//! in `ssss.wgsl` (tested against it pixel by pixel in `tests/ssss_spot.rs`).
+//!
+//! For spot lights the light space is Bevy's spot shadow projection ([`SpotProjection`]): an
+//! infinite reverse-Z perspective whose stored depth is `near / d`, `d` the distance along the
+//! spot's axis — so depths turn back into distances exactly, and eq. 6.1 applies as written.
+
+use super::kernel::KERNEL_REACH_SIGMAS;
+use super::min_filter::DILATION_BLOCK;
+use super::penumbra::{own_surface_gap, penumbra_sigma, penumbra_width, screen_penumbra_px};
+use bevy::math::{Mat3, Vec2, Vec3};
+
+/// Bevy's spot-light shadow projection, as `fetch_spot_shadow` builds it from the clustered
+/// light (without its depth and normal biases, which only the hard shadow lookup applies).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpotProjection {
+    /// The light's position.
+    pub position: Vec3,
+    /// Where it points (its transform's forward, unit length).
+    pub forward: Vec3,
+    /// `tan(outer_angle)`: the map spans ±this at unit distance.
+    pub tan_outer: f32,
+    /// `SpotLight::shadow_map_near_z`.
+    pub near: f32,
+}
+
+/// Bevy's `orthonormalize` (`bevy_render::maths`): a basis whose third column is `z`.
+fn orthonormalize(z: Vec3) -> Mat3 {
+    let sign = 1f32.copysign(z.z);
+    let a = -1.0 / (sign + z.z);
+    let b = z.x * z.y * a;
+    let x_basis = Vec3::new(1.0 + sign * z.x * z.x * a, sign * b, -sign * z.x);
+    let y_basis = Vec3::new(b, sign + z.y * z.y * a, -z.y);
+    Mat3::from_cols(x_basis, y_basis, z)
+}
+
+impl SpotProjection {
+    /// The shadow-map coordinates of `world` (uv in [0, 1]², v down) and its distance from the
+    /// light along the axis; `None` behind the near plane.
+    pub fn project(&self, world: Vec3) -> Option<(Vec2, f32)> {
+        let basis = orthonormalize(-self.forward);
+        let offset = world - self.position;
+        // `offset * basis` in WGSL: the offset in the basis' coordinates.
+        let local = Vec3::new(
+            offset.dot(basis.x_axis),
+            offset.dot(basis.y_axis),
+            offset.dot(basis.z_axis),
+        );
+        let distance = -local.z;
+        if distance <= self.near {
+            return None;
+        }
+        let ndc = Vec2::new(local.x, local.y) / (self.tan_outer * distance);
+        Some((ndc * Vec2::new(0.5, -0.5) + Vec2::splat(0.5), distance))
+    }
+
+    /// The stored (reverse-Z) depth of a point `distance` along the axis.
+    pub fn depth(&self, distance: f32) -> f32 {
+        self.near / distance
+    }
+
+    /// The distance along the axis of a stored depth.
+    pub fn distance(&self, depth: f32) -> f32 {
+        self.near / depth
+    }
+
+    /// Metres one texel of a `map_size`² shadow map spans at `distance`.
+    pub fn texel_size(&self, distance: f32, map_size: f32) -> f32 {
+        2.0 * distance * self.tan_outer / map_size
+    }
+}
+
+/// The coarse dilated map of one light, as the distance pass reads it.
+#[derive(Clone, Copy, Debug)]
+pub struct CoarseMap<'a> {
+    /// Row-major nearest depths (reverse Z).
+    pub depth: &'a [f32],
+    /// Size in coarse texels.
+    pub width: usize,
+    /// Size in coarse texels.
+    pub height: usize,
+    /// The fine shadow map's size in texels.
+    pub map_size: f32,
+    /// The dilation's coarse radius `R`.
+    pub radius: usize,
+}
+
+impl CoarseMap<'_> {
+    /// The texel under `uv` (clamped to the map).
+    pub fn at(&self, uv: Vec2) -> f32 {
+        let x = (uv.x * self.width as f32).clamp(0.0, self.width as f32 - 1.0) as usize;
+        let y = (uv.y * self.height as f32).clamp(0.0, self.height as f32 - 1.0) as usize;
+        self.depth[y * self.width + x]
+    }
+}
+
+/// Eq. 6.1 for a spot light of diameter `light_size`: the world width of the penumbra at
+/// receiver `world` (unit `normal`), behind the blocker the coarse map holds at its texel. Zero
+/// outside the map, with no blocker nearer the light, or when the "blocker" is only the
+/// receiver's own surface across the dilation footprint ([`own_surface_gap`]).
+pub fn spot_penumbra_width(
+    projection: &SpotProjection,
+    coarse: &CoarseMap,
+    world: Vec3,
+    normal: Vec3,
+    light_size: f32,
+) -> f32 {
+    let Some((uv, d_receiver)) = projection.project(world) else {
+        return 0.0;
+    };
+    if uv.cmplt(Vec2::ZERO).any() || uv.cmpgt(Vec2::ONE).any() {
+        return 0.0;
+    }
+    let blocker = coarse.at(uv);
+    if blocker <= projection.depth(d_receiver) {
+        return 0.0;
+    }
+    let d_blocker = projection.distance(blocker);
+    let gap = d_receiver - d_blocker;
+    let reach = ((coarse.radius + 1) * DILATION_BLOCK) as f32
+        * projection.texel_size(d_receiver, coarse.map_size);
+    let cos_nl = normal.dot((projection.position - world).normalize());
+    if cos_nl > 0.0 && gap <= own_surface_gap(reach, cos_nl) {
+        return 0.0;
+    }
+    penumbra_width(d_receiver, d_blocker, light_size)
+}
+
+/// The kernel's σ (pixels) for a penumbra `width_px` wide on screen: σ = width/4, zero when the
+/// kernel would reach less than a pixel (the mask of §6.2.2: the blur leaves those pixels
+/// alone), else with its reach (2.5 σ) clamped to `[min_kernel_px, max_kernel_px]`.
+pub fn kernel_sigma(width_px: f32, min_kernel_px: f32, max_kernel_px: f32) -> f32 {
+    let sigma = penumbra_sigma(width_px);
+    if KERNEL_REACH_SIGMAS * sigma < 1.0 {
+        return 0.0;
+    }
+    (KERNEL_REACH_SIGMAS * sigma).clamp(min_kernel_px, max_kernel_px) / KERNEL_REACH_SIGMAS
+}
+
+/// The distance pass's σ at a pixel: eq. 6.2 (`pixels_per_unit` = the projection's pixels per
+/// metre at unit eye distance; divided by `eye_depth` for perspective views) on a penumbra
+/// `world_width` wide, through [`kernel_sigma`].
+pub fn pixel_sigma(
+    world_width: f32,
+    pixels_per_unit: f32,
+    eye_depth: Option<f32>,
+    min_kernel_px: f32,
+    max_kernel_px: f32,
+) -> f32 {
+    let px = match eye_depth {
+        Some(z) => screen_penumbra_px(world_width, z.max(1e-4), pixels_per_unit),
+        None => world_width * pixels_per_unit,
+    };
+    kernel_sigma(px, min_kernel_px, max_kernel_px)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lamp() -> SpotProjection {
+        SpotProjection {
+            position: Vec3::new(3.0, 6.0, 0.0),
+            forward: Vec3::new(-4.5, -6.0, 0.0).normalize(),
+            tan_outer: 0.6f32.tan(),
+            near: 0.1,
+        }
+    }
+
+    #[test]
+    fn the_spot_projection_maps_its_axis_to_the_centre_and_its_cone_to_the_edge() {
+        let p = lamp();
+        let (uv, d) = p.project(p.position + 5.0 * p.forward).unwrap();
+        assert!(uv.distance(Vec2::splat(0.5)) < 1e-5, "{uv}");
+        assert!((d - 5.0).abs() < 1e-4);
+        // A point at the outer angle, off the axis along the basis' x axis, lands on the edge.
+        let basis = orthonormalize(-p.forward);
+        let edge = p.position + 4.0 * p.forward + 4.0 * p.tan_outer * basis.x_axis;
+        let (uv, d) = p.project(edge).unwrap();
+        assert!(
+            (uv.x - 1.0).abs() < 1e-4 && (uv.y - 0.5).abs() < 1e-4,
+            "{uv}"
+        );
+        assert!((d - 4.0).abs() < 1e-4);
+        assert!(
+            p.project(p.position - p.forward).is_none(),
+            "behind the light"
+        );
+        // Depth and distance are inverse: the reverse-Z infinite projection.
+        assert!((p.distance(p.depth(7.5)) - 7.5).abs() < 1e-5);
+        assert!(p.depth(2.0) > p.depth(3.0), "nearer is larger");
+        // The basis is orthonormal.
+        assert!((basis.determinant().abs() - 1.0).abs() < 1e-5);
+        assert!(basis.x_axis.dot(basis.y_axis).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_blocker_halfway_to_the_light_gives_a_penumbra_as_wide_as_the_light() {
+        let p = lamp();
+        let receiver = p.position + 8.0 * p.forward;
+        let (uv, _) = p.project(receiver).unwrap();
+        // A 1×1 coarse map holding a blocker at 4 m along the axis.
+        let depth = [p.depth(4.0)];
+        let coarse = CoarseMap {
+            depth: &depth,
+            width: 1,
+            height: 1,
+            map_size: 2048.0,
+            radius: 2,
+        };
+        assert_eq!(coarse.at(uv), depth[0]);
+        // Facing the light: no own-surface gap to discount.
+        let normal = -p.forward;
+        let w = spot_penumbra_width(&p, &coarse, receiver, normal, 0.5);
+        assert!((w - 0.5).abs() < 1e-4, "{w}");
+        // The blocker behind the receiver casts nothing; nor does a gap within the receiver's
+        // own slope across the footprint, at grazing light.
+        let behind = [p.depth(9.0)];
+        let coarse_behind = CoarseMap {
+            depth: &behind,
+            ..coarse
+        };
+        assert_eq!(
+            spot_penumbra_width(&p, &coarse_behind, receiver, normal, 0.5),
+            0.0
+        );
+        let near = [p.depth(7.99)];
+        let grazing = (normal + 20.0 * normal.any_orthonormal_vector()).normalize();
+        let coarse_near = CoarseMap {
+            depth: &near,
+            ..coarse
+        };
+        assert_eq!(
+            spot_penumbra_width(&p, &coarse_near, receiver, grazing, 0.5),
+            0.0
+        );
+        assert!(spot_penumbra_width(&p, &coarse_near, receiver, normal, 0.5) > 0.0);
+    }
+
+    #[test]
+    fn kernel_sigma_masks_sub_pixel_kernels_and_clamps_the_reach() {
+        // σ = w/4; a 1.6 px penumbra reaches exactly 1 px.
+        assert_eq!(kernel_sigma(1.5, 0.0, 60.0), 0.0);
+        assert!((kernel_sigma(8.0, 0.0, 60.0) - 2.0).abs() < 1e-6);
+        // Reach 2.5σ clamped to [min, max].
+        assert!((kernel_sigma(80.0, 0.0, 10.0) - 4.0).abs() < 1e-6);
+        assert!((kernel_sigma(2.0, 5.0, 60.0) - 2.0).abs() < 1e-6);
+        // Eq. 6.2: perspective divides by the eye depth, orthographic does not.
+        let ortho = pixel_sigma(0.4, 32.0, None, 0.0, 60.0);
+        let persp = pixel_sigma(0.4, 32.0, Some(2.0), 0.0, 60.0);
+        assert!((ortho - 2.0 * persp).abs() < 1e-5, "{ortho} {persp}");
+    }
+}
