@@ -15,7 +15,9 @@ pub struct ScreenSpaceSoftShadows {
     /// positive.
     pub light_size: f32,
     /// Largest blocker–receiver distance (m) the min filter of the shadow map searches for
-    /// blockers: it bounds the widest outer penumbra.
+    /// blockers: it bounds the widest outer penumbra. For a spot light the filter's window
+    /// covers every blocker at least this far from the light and at most this far in front of
+    /// its receiver (`ssss::min_filter::spot_coarse_radius`).
     pub max_occluder_distance: f32,
     /// Smallest blur kernel radius in pixels (0 keeps hard contact shadows).
     pub min_kernel_px: f32,

@@ -70,11 +70,12 @@ fn eq_6_1(x_g: f32) -> f32 {
     DIAMETER * (k - 1.0)
 }
 
-#[test]
-fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
-    let Some(mut harness) = RenderHarness::for_test("ssss_spot", SIZE, SIZE) else {
-        return;
-    };
+/// The pole scene under the lamp, for `test`; with `neighbours`, also a directional light and
+/// two point lights with shadows but no light (their shadow maps move the spot's layer in the shadow
+/// texture array and its index in the clustered lights). Returns the harness (ready), the lamp
+/// and the render with the pole hidden (each pixel's light, for visibility).
+fn spot_scene(test: &str, neighbours: bool) -> Option<(RenderHarness, Entity, Vec<f32>)> {
+    let mut harness = RenderHarness::for_test(test, SIZE, SIZE)?;
     harness.app_mut().add_plugins(SoftShadowsPlugin);
     spawn_ground_blocker_and_camera(
         &mut harness,
@@ -97,6 +98,27 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
             Transform::from_translation(LAMP).looking_to(AIM - LAMP, Vec3::Y),
         ))
         .id();
+    if neighbours {
+        let world = harness.world_mut();
+        world.spawn((
+            DirectionalLight {
+                illuminance: 0.0,
+                shadow_maps_enabled: true,
+                ..default()
+            },
+            Transform::default().looking_to(Vec3::new(0.3, -1.0, 0.2), Vec3::Y),
+        ));
+        for x in [-2.0, 2.0] {
+            world.spawn((
+                PointLight {
+                    intensity: 0.0,
+                    shadow_maps_enabled: true,
+                    ..default()
+                },
+                Transform::from_xyz(x, 3.0, 2.0),
+            ));
+        }
+    }
     harness
         .app_mut()
         .sub_app_mut(RenderApp)
@@ -123,6 +145,53 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
         .entity_mut(blocker)
         .insert(Visibility::Inherited);
     harness.render().unwrap();
+    Some((harness, lamp, unshadowed))
+}
+
+/// Each pixel's green over the unshadowed render's.
+fn visibility(img: &[f32], unshadowed: &[f32]) -> Vec<f32> {
+    img.iter()
+        .zip(unshadowed)
+        .enumerate()
+        .map(|(i, (&v, &u))| if i % 4 == 1 { v / u.max(1e-4) } else { v })
+        .collect()
+}
+
+/// The 10–90 % penumbra width (m) across the side edge at ground x, from a visibility image.
+fn width_at(visibility: &[f32], x: f32) -> f32 {
+    rise_width(&profile(visibility, x, 1.0), 0.1, 0.9).expect("the penumbra rises") * VIEW_M
+        / SIZE as f32
+}
+
+/// SSSS on a spot light with a directional light and two point lights beside it: the spot's shadow
+/// map is then a later layer of the array and its clustered index moves; the penumbrae must
+/// still follow eq. 6.1.
+#[test]
+fn ssss_finds_the_spot_lights_shadow_map_beside_other_lights() {
+    let Some((mut harness, lamp, unshadowed)) = spot_scene("ssss_spot_neighbours", true) else {
+        return;
+    };
+    let hard = to_linear(&harness.render().unwrap());
+    harness.world_mut().entity_mut(lamp).insert(settings());
+    let ssss = render_until(&mut harness, &hard, |img| rmse(img, &hard) > 0.003);
+    let v = visibility(&ssss, &unshadowed);
+    let m_per_px = VIEW_M / SIZE as f32;
+    for x in [-1.0f32, -2.0, -3.0] {
+        let expected = disk_rise_fraction() * eq_6_1(x);
+        let measured = width_at(&v, x);
+        println!("x = {x} m: SSSS {measured:.3} m, eq. 6.1 {expected:.3} m");
+        assert!(
+            (measured - expected).abs() <= 0.25 * expected + m_per_px,
+            "x = {x}: SSSS {measured} vs eq. 6.1 {expected}"
+        );
+    }
+}
+
+#[test]
+fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
+    let Some((mut harness, lamp, unshadowed)) = spot_scene("ssss_spot", false) else {
+        return;
+    };
     let hard = to_linear(&harness.render().unwrap());
     let mut average = LinearAverage::default();
     for p in jittered_positions(LAMP, AIM - LAMP, DIAMETER, JITTERS) {
@@ -315,22 +384,15 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
 
     // 3. Penumbra widths (10–90 %) across the side edge, in visibility (over the unshadowed
     //    render), against eq. 6.1.
-    let visibility = |img: &[f32]| -> Vec<f32> {
-        img.iter()
-            .zip(&unshadowed)
-            .enumerate()
-            .map(|(i, (&v, &u))| if i % 4 == 1 { v / u.max(1e-4) } else { v })
-            .collect()
-    };
-    let (v_ref, v_ssss) = (visibility(&reference), visibility(&ssss));
+    let (v_ref, v_ssss) = (
+        visibility(&reference, &unshadowed),
+        visibility(&ssss, &unshadowed),
+    );
     let k = disk_rise_fraction();
     let mut widths = Vec::new();
     for x in [-1.0f32, -2.0, -3.0] {
         let expected = k * eq_6_1(x);
-        let width = |v: &[f32]| {
-            rise_width(&profile(v, x, 1.0), 0.1, 0.9).expect("the penumbra rises") * m_per_px
-        };
-        let (r, s) = (width(&v_ref), width(&v_ssss));
+        let (r, s) = (width_at(&v_ref, x), width_at(&v_ssss, x));
         println!(
             "x = {x} m: 10–90 % width reference {r:.3} m, SSSS {s:.3} m, eq. 6.1 {expected:.3} m"
         );
