@@ -103,6 +103,37 @@ pub fn nearest_filter_1d(
     out
 }
 
+/// One line of the filter the way the GPU runs it (van Herk / Gil-Werman, `min_filter.wgsl`):
+/// O(1) work per texel whatever the radius. The line is cut into segments of `k = 2r + 1`;
+/// `g` is the nearest depth from a texel's segment start to it, `h` from it to the segment's
+/// end. A window `[p − r, p + r]` (clamped to the line) spans the end of one segment and the
+/// start of the next, so its nearest depth is `nearest(h[a], g[b])`, or one of them when the
+/// clamped window lies in a single segment. Equal to the direct filter (tested): the order of
+/// max/min never changes the result.
+pub fn segment_filter_1d(line: &[f32], radius: usize, convention: DepthConvention) -> Vec<f32> {
+    let (n, k) = (line.len(), 2 * radius + 1);
+    let (mut g, mut h) = (line.to_vec(), line.to_vec());
+    for start in (0..n).step_by(k) {
+        let end = (start + k).min(n);
+        for i in start + 1..end {
+            g[i] = convention.nearest(g[i - 1], line[i]);
+        }
+        for i in (start..end - 1).rev() {
+            h[i] = convention.nearest(h[i + 1], line[i]);
+        }
+    }
+    (0..n)
+        .map(|p| {
+            let (a, b) = (p.saturating_sub(radius), (p + radius).min(n - 1));
+            if a / k == b / k {
+                if a % k == 0 { g[b] } else { h[a] }
+            } else {
+                convention.nearest(h[a], g[b])
+            }
+        })
+        .collect()
+}
+
 /// The dilated map: the horizontal pass, then the vertical one on its result — equal to the
 /// nearest depth over the `(2r + 1)²` square (min and max are separable).
 pub fn dilate(
@@ -195,6 +226,30 @@ mod tests {
             spot_coarse_radius(10.0, 0.01, 0.1, 4096.0, MAX_DILATION_TEXELS as f32),
             MAX_DILATION_TEXELS / DILATION_BLOCK
         );
+    }
+
+    #[test]
+    fn the_segment_filter_equals_the_direct_filter() {
+        // Every radius against lines shorter and longer than a segment, both conventions.
+        let mut seed = 7u32;
+        for n in [1usize, 2, 5, 16, 33, 34, 100] {
+            let line: Vec<f32> = (0..n)
+                .map(|_| {
+                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    (seed >> 8) as f32 / (1u32 << 24) as f32
+                })
+                .collect();
+            for radius in 0..=17 {
+                for convention in [DepthConvention::ReverseZ, DepthConvention::Forward] {
+                    let direct = nearest_filter_1d(&line, n, 1, radius, true, convention);
+                    assert_eq!(
+                        segment_filter_1d(&line, radius, convention),
+                        direct,
+                        "n {n}, r {radius}, {convention:?}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

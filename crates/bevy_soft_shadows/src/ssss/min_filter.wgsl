@@ -16,6 +16,7 @@
 @group(0) @binding(2) var dilated_out: texture_storage_2d_array<r32float, write>;
 @group(0) @binding(3) var<uniform> lights: Lights;
 @group(0) @binding(4) var<uniform> ssss: SsssUniform;
+@group(0) @binding(5) var scan_out: texture_storage_2d_array<rg32float, write>;
 
 fn ssss_light() -> u32 {
     for (var i = 0u; i < lights.n_directional_lights; i += 1u) {
@@ -68,34 +69,99 @@ fn reduce(@builtin(global_invocation_id) id: vec3<u32>) {
     textureStore(dilated_out, id.xy, id.z, vec4(nearest, 0.0, 0.0, 0.0));
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
+// The separable filter, van Herk / Gil-Werman style: O(1) work per texel whatever the radius
+// (the direct filter reads 2R + 1 texels per texel and pass, ~60 at the spot light's R = 14).
+// Along the filtered axis the line is cut into segments of k = 2R + 1 texels; `scan_*` writes
+// for each texel the nearest depth from its segment's start to it (g, in .r) and from it to
+// its segment's end (h, in .g). A window [p − R, p + R] is k long, so it covers the end of one
+// segment and the start of the next: its nearest depth is max(h[p − R], g[p + R]) (`combine_*`).
+// Max is exact, so the result is bit-identical to the direct filter (`nearest_filter_1d`).
+
+// k for R ≤ MAX_DILATION_TEXELS / DILATION_BLOCK.
+const MAX_SEGMENT: u32 = 2u * (MAX_DILATION_TEXELS / DILATION_BLOCK) + 1u;
+
+// Texel `i` along the filtered axis of line `line`.
+fn texel_on(horizontal: bool, line: i32, i: i32) -> vec2<i32> {
+    return select(vec2(line, i), vec2(i, line), horizontal);
+}
+
+fn scan(id: vec3<u32>, horizontal: bool) {
     let size = vec2<i32>(textureDimensions(rows_in));
     let r = radius_of_layer(id.z);
-    if i32(id.x) >= size.x || i32(id.y) >= size.y || r < 0 {
+    // One invocation per segment: (segment, line) is (x, y) for rows, (y, x) for columns.
+    let segment = i32(select(id.y, id.x, horizontal));
+    let line = i32(select(id.x, id.y, horizontal));
+    let n = select(size.y, size.x, horizontal);
+    let lines = select(size.x, size.y, horizontal);
+    if r < 0 || line >= lines {
         return;
     }
-    var nearest = 0.0;
-    for (var o = -r; o <= r; o += 1) {
-        let x = clamp(i32(id.x) + o, 0, size.x - 1);
-        nearest = max(nearest, textureLoad(rows_in, vec2(x, i32(id.y)), id.z, 0).r);
+    let k = 2 * r + 1;
+    let start = segment * k;
+    if start >= n {
+        return;
     }
-    textureStore(dilated_out, id.xy, id.z, vec4(nearest, 0.0, 0.0, 0.0));
+    let len = min(k, n - start);
+    var depth: array<f32, MAX_SEGMENT>;
+    for (var i = 0; i < len; i += 1) {
+        depth[i] = textureLoad(rows_in, texel_on(horizontal, line, start + i), id.z, 0).r;
+    }
+    // Suffix maxima, then prefix maxima on the way out.
+    var suffix: array<f32, MAX_SEGMENT>;
+    var nearest = 0.0;
+    for (var i = len - 1; i >= 0; i -= 1) {
+        nearest = max(nearest, depth[i]);
+        suffix[i] = nearest;
+    }
+    nearest = 0.0;
+    for (var i = 0; i < len; i += 1) {
+        nearest = max(nearest, depth[i]);
+        textureStore(scan_out, texel_on(horizontal, line, start + i), id.z, vec4(nearest, suffix[i], 0.0, 0.0));
+    }
+}
+
+fn combine(id: vec3<u32>, horizontal: bool) {
+    let size = vec2<i32>(textureDimensions(rows_in));
+    let r = radius_of_layer(id.z);
+    if r < 0 || i32(id.x) >= size.x || i32(id.y) >= size.y {
+        return;
+    }
+    let k = 2 * r + 1;
+    let p = i32(select(id.y, id.x, horizontal));
+    let line = i32(select(id.x, id.y, horizontal));
+    let n = select(size.y, size.x, horizontal);
+    // The window, clamped to the line (as the direct filter clamps it).
+    let a = max(p - r, 0);
+    let b = min(p + r, n - 1);
+    let h = textureLoad(rows_in, texel_on(horizontal, line, a), id.z, 0).g;
+    let g = textureLoad(rows_in, texel_on(horizontal, line, b), id.z, 0).r;
+    var nearest = max(h, g);
+    if a / k == b / k {
+        // Inside one segment (only when clamped, or exactly one whole segment): it starts at
+        // the segment's start (g alone) or ends at its end (h alone).
+        nearest = select(h, g, a % k == 0);
+    }
+    textureStore(dilated_out, vec2<i32>(id.xy), id.z, vec4(nearest, 0.0, 0.0, 0.0));
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn vertical(@builtin(global_invocation_id) id: vec3<u32>) {
-    let size = vec2<i32>(textureDimensions(rows_in));
-    let r = radius_of_layer(id.z);
-    if i32(id.x) >= size.x || i32(id.y) >= size.y || r < 0 {
-        return;
-    }
-    var nearest = 0.0;
-    for (var o = -r; o <= r; o += 1) {
-        let y = clamp(i32(id.y) + o, 0, size.y - 1);
-        nearest = max(nearest, textureLoad(rows_in, vec2(i32(id.x), y), id.z, 0).r);
-    }
-    textureStore(dilated_out, id.xy, id.z, vec4(nearest, 0.0, 0.0, 0.0));
+fn scan_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
+    scan(id, true);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn combine_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
+    combine(id, true);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn scan_vertical(@builtin(global_invocation_id) id: vec3<u32>) {
+    scan(id, false);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn combine_vertical(@builtin(global_invocation_id) id: vec3<u32>) {
+    combine(id, false);
 }
 
 // Debug copy of the shadow map into a float texture that can be read back (tests compare the

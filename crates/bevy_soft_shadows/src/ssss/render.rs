@@ -192,8 +192,8 @@ struct SsssPipelines {
     screen_layout: BindGroupLayoutDescriptor,
     dilate_layout: BindGroupLayoutDescriptor,
     dilate_reduce: CachedComputePipelineId,
-    dilate_horizontal: CachedComputePipelineId,
-    dilate_vertical: CachedComputePipelineId,
+    /// Scan and combine along rows, then along columns (`min_filter.wgsl`).
+    dilate_passes: [CachedComputePipelineId; 4],
     copy_shadow: CachedComputePipelineId,
 }
 
@@ -215,6 +215,7 @@ fn init_pipelines(
                 texture_storage_2d_array(TextureFormat::R32Float, StorageTextureAccess::WriteOnly),
                 uniform_buffer::<GpuLights>(true),
                 uniform_buffer::<SsssUniform>(false),
+                texture_storage_2d_array(TextureFormat::Rg32Float, StorageTextureAccess::WriteOnly),
             ),
         ),
     );
@@ -241,8 +242,12 @@ fn init_pipelines(
         })
     };
     let dilate_reduce = queue("reduce");
-    let dilate_horizontal = queue("horizontal");
-    let dilate_vertical = queue("vertical");
+    let dilate_passes = [
+        queue("scan_horizontal"),
+        queue("combine_horizontal"),
+        queue("scan_vertical"),
+        queue("combine_vertical"),
+    ];
     let copy_shadow = queue("copy_shadow");
     commands.insert_resource(SsssPipelines {
         mesh_pipeline: mesh_pipeline.clone(),
@@ -251,8 +256,7 @@ fn init_pipelines(
         screen_layout,
         dilate_layout,
         dilate_reduce,
-        dilate_horizontal,
-        dilate_vertical,
+        dilate_passes,
         copy_shadow,
     });
 }
@@ -331,12 +335,15 @@ fn prepare_pipelines(
     }
 }
 
-/// The coarse dilated shadow map and its horizontal half-step: one texel per
-/// [`DILATION_BLOCK`](super::min_filter::DILATION_BLOCK)² block of the shadow texture array.
+/// The coarse dilated shadow map, its horizontal half-step and the segment scans of the
+/// filter: one texel per [`DILATION_BLOCK`](super::min_filter::DILATION_BLOCK)² block of the
+/// shadow texture array (`scan_sink`, 1×1, takes the unused scan output of the combine passes).
 #[derive(Component)]
 struct SsssDilation {
     rows: CachedTexture,
     dilated: CachedTexture,
+    scan: CachedTexture,
+    scan_sink: CachedTexture,
     size: Extent3d,
 }
 
@@ -354,7 +361,7 @@ fn prepare_dilation(
             height: texture.height().div_ceil(block),
             depth_or_array_layers: texture.depth_or_array_layers(),
         };
-        let mut get = |label: &'static str| {
+        let mut get = |label: &'static str, size: Extent3d, format: TextureFormat| {
             cache.get(
                 &device,
                 TextureDescriptor {
@@ -363,7 +370,7 @@ fn prepare_dilation(
                     mip_level_count: 1,
                     sample_count: 1,
                     dimension: TextureDimension::D2,
-                    format: TextureFormat::R32Float,
+                    format,
                     usage: TextureUsages::STORAGE_BINDING
                         | TextureUsages::TEXTURE_BINDING
                         | TextureUsages::COPY_SRC,
@@ -371,11 +378,20 @@ fn prepare_dilation(
                 },
             )
         };
-        let rows = get("ssss_dilation_rows");
-        let dilated = get("ssss_dilated_shadow_map");
+        let rows = get("ssss_dilation_rows", size, TextureFormat::R32Float);
+        let dilated = get("ssss_dilated_shadow_map", size, TextureFormat::R32Float);
+        let scan = get("ssss_dilation_scan", size, TextureFormat::Rg32Float);
+        let one = Extent3d {
+            width: 1,
+            height: 1,
+            depth_or_array_layers: 1,
+        };
+        let scan_sink = get("ssss_dilation_scan_sink", one, TextureFormat::Rg32Float);
         commands.entity(entity).insert(SsssDilation {
             rows,
             dilated,
+            scan,
+            scan_sink,
             size,
         });
     }
@@ -412,8 +428,10 @@ fn ssss(
     let (mesh_view, shadows, lights_offset, ids, dilation) = view.into_inner();
     let (
         Some(dilate_reduce),
-        Some(dilate_h),
-        Some(dilate_v),
+        Some(scan_h),
+        Some(combine_h),
+        Some(scan_v),
+        Some(combine_v),
         Some(distance_pipeline),
         Some(blur_h_pipeline),
         Some(blur_v_pipeline),
@@ -424,8 +442,10 @@ fn ssss(
         Some(visibility),
     ) = (
         pipeline_cache.get_compute_pipeline(pipelines.dilate_reduce),
-        pipeline_cache.get_compute_pipeline(pipelines.dilate_horizontal),
-        pipeline_cache.get_compute_pipeline(pipelines.dilate_vertical),
+        pipeline_cache.get_compute_pipeline(pipelines.dilate_passes[0]),
+        pipeline_cache.get_compute_pipeline(pipelines.dilate_passes[1]),
+        pipeline_cache.get_compute_pipeline(pipelines.dilate_passes[2]),
+        pipeline_cache.get_compute_pipeline(pipelines.dilate_passes[3]),
         pipeline_cache.get_render_pipeline(ids.distance),
         pipeline_cache.get_render_pipeline(ids.blur_horizontal),
         pipeline_cache.get_render_pipeline(ids.blur_vertical),
@@ -441,8 +461,10 @@ fn ssss(
     let device = ctx.render_device().clone();
     let rows_view = array_view(&dilation.rows.texture);
     let dilated_view = array_view(&dilation.dilated.texture);
+    let scan_view = array_view(&dilation.scan.texture);
+    let sink_view = array_view(&dilation.scan_sink.texture);
     let dilate_layout = pipeline_cache.get_bind_group_layout(&pipelines.dilate_layout);
-    let dilate_group = |input: &TextureView, output: &TextureView| {
+    let dilate_group = |input: &TextureView, output: &TextureView, scan: &TextureView| {
         device.create_bind_group(
             "ssss_dilate",
             &dilate_layout,
@@ -452,14 +474,23 @@ fn ssss(
                 output,
                 lights_binding.clone(),
                 uniform_binding.clone(),
+                scan,
             )),
         )
     };
-    // reduce: shadow map → dilated (blocks); horizontal: dilated → rows; vertical: rows →
-    // dilated. (`rows_in` of the reduce pass is unused.)
-    let reduce_group = dilate_group(&rows_view, &dilated_view);
-    let rows_group = dilate_group(&dilated_view, &rows_view);
-    let columns_group = dilate_group(&rows_view, &dilated_view);
+    // reduce: shadow map → dilated (blocks); rows: dilated → scan → rows; columns: rows →
+    // scan → dilated. (Inputs and outputs a pass does not use are bound to textures it does
+    // not otherwise touch.)
+    let reduce_group = dilate_group(&rows_view, &dilated_view, &scan_view);
+    let steps = [
+        (scan_h, dilate_group(&dilated_view, &rows_view, &scan_view)),
+        (combine_h, dilate_group(&scan_view, &rows_view, &sink_view)),
+        (scan_v, dilate_group(&rows_view, &dilated_view, &scan_view)),
+        (
+            combine_v,
+            dilate_group(&scan_view, &dilated_view, &sink_view),
+        ),
+    ];
     let screen_layout = pipeline_cache.get_bind_group_layout(&pipelines.screen_layout);
     let screen_group = |distances: &TextureView, blur_in: &TextureView| {
         device.create_bind_group(
@@ -497,12 +528,12 @@ fn ssss(
         pass.set_pipeline(dilate_reduce);
         pass.set_bind_group(0, &reduce_group, &[lights_offset.offset]);
         pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-        pass.set_pipeline(dilate_h);
-        pass.set_bind_group(0, &rows_group, &[lights_offset.offset]);
-        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-        pass.set_pipeline(dilate_v);
-        pass.set_bind_group(0, &columns_group, &[lights_offset.offset]);
-        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        // (The scans run one invocation per segment; the grid covers the smallest, R = 0.)
+        for (pipeline, group) in &steps {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, group, &[lights_offset.offset]);
+            pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        }
         span.end(&mut pass);
     }
     for (label, pipeline, group, target) in [
@@ -546,7 +577,7 @@ fn ssss(
             &pipeline_cache,
             &shadows.directional_light_depth_texture,
             &dilation.dilated.texture,
-            |fine_view| dilate_group(&rows_view, fine_view),
+            |fine_view| dilate_group(&rows_view, fine_view, &scan_view),
             lights_offset.offset,
             &mut readback,
         );
