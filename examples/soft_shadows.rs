@@ -15,7 +15,8 @@
 //! `--bench` measures, in one process, for small / medium / large light sizes at two
 //! resolutions: the GPU time of soft shadowing over hard shadows (timestamp queries: PCSS = its
 //! main opaque pass minus the hard-shadow one; SSSS = its own passes plus its main pass minus the
-//! hard-shadow one) and each image's RMSE against an area-light reference (48 hard-shadowed
+//! hard-shadow one; SSSS both with its O(1)-per-texel segment min filter and with the direct
+//! filter) and each image's RMSE against an area-light reference (48 hard-shadowed
 //! suns jittered over the light's disk, averaged in linear light — or with `--spot`, 48 spot
 //! lights spread over the lamp's disk) rendered in the same run.
 
@@ -28,6 +29,7 @@ use bevy_nature::soft_shadows::ScreenSpaceSoftShadows;
 use bevy_nature::soft_shadows::reference::{
     LinearAverage, jittered_directions, jittered_positions, srgb_to_linear,
 };
+use bevy_nature::soft_shadows::ssss::render::SsssDilationFilter;
 use bevy_nature_harness::headless::HarnessConfig;
 use bevy_nature_harness::{ExampleArgs, ExampleRunner, RenderHarness, require_adapter};
 
@@ -135,8 +137,21 @@ fn run_bench(args: &ExampleArgs, spot: bool) -> AppExit {
                 lamp_transform(LAMP_POSITION);
             let reference = average.linear();
             let mut measured = Vec::new();
-            for technique in ShadowTechnique::ALL {
+            // SSSS twice: with the segment min filter (the default) and the direct one, timed
+            // side by side (same maps, so the same image).
+            let runs = [
+                (ShadowTechnique::Hard, SsssDilationFilter::Segments, "hard"),
+                (ShadowTechnique::Pcss, SsssDilationFilter::Segments, "pcss"),
+                (ShadowTechnique::Ssss, SsssDilationFilter::Segments, "ssss"),
+                (
+                    ShadowTechnique::Ssss,
+                    SsssDilationFilter::Direct,
+                    "ssss_direct_filter",
+                ),
+            ];
+            for (technique, filter, name) in runs {
                 set(&mut harness, technique);
+                harness.world_mut().insert_resource(filter);
                 // Let pipelines compile and the receivers switch, then time.
                 harness.run_frames(8).unwrap();
                 harness.reset_timing();
@@ -145,7 +160,7 @@ fn run_bench(args: &ExampleArgs, spot: bool) -> AppExit {
                     .pass_time_ms("main_opaque_pass_3d")
                     .unwrap_or(f64::NAN);
                 let ssss = harness.pass_time_ms("ssss").unwrap_or(0.0);
-                let breakdown: Vec<String> = ["dilate", "distance", "blur_h", "blur_v"]
+                let breakdown: Vec<String> = ["reduce", "dilate", "distance", "blur_h", "blur_v"]
                     .iter()
                     .filter_map(|p| {
                         let ms = harness.pass_time_ms(&format!("ssss/ssss_{p}"))?;
@@ -159,10 +174,13 @@ fn run_bench(args: &ExampleArgs, spot: bool) -> AppExit {
                 } else {
                     String::new()
                 };
-                measured.push((technique, main, ssss, error, breakdown));
+                measured.push((technique, name, main, ssss, error, breakdown));
             }
-            let hard_main = measured[0].1;
-            for (technique, main, ssss, error, breakdown) in &measured {
+            harness
+                .world_mut()
+                .insert_resource(SsssDilationFilter::Segments);
+            let hard_main = measured[0].2;
+            for (technique, name, main, ssss, error, breakdown) in &measured {
                 let passes = if *technique == ShadowTechnique::Ssss {
                     *ssss
                 } else {
@@ -174,7 +192,7 @@ fn run_bench(args: &ExampleArgs, spot: bool) -> AppExit {
                     size.x,
                     size.y,
                     if spot { "spot " } else { "" },
-                    technique.name()
+                    name
                 ));
                 eprintln!("{}", rows.last().unwrap());
             }

@@ -291,7 +291,7 @@ fn ssss_is_no_worse_than_bevys_pcss_against_the_area_light_reference() {
 fn the_dilated_shadow_map_matches_its_cpu_reference() {
     use bevy::render::RenderApp;
     use bevy_soft_shadows::ssss::min_filter::{DepthConvention, coarse_dilate, coarse_radius};
-    use bevy_soft_shadows::ssss::render::SsssDilationReadback;
+    use bevy_soft_shadows::ssss::render::{SsssDilationFilter, SsssDilationReadback};
     let Some(mut harness) = pole_harness("ssss_dilation") else {
         return;
     };
@@ -309,7 +309,7 @@ fn the_dilated_shadow_map_matches_its_cpu_reference() {
             .flat_map(|y| floats(&bytes[y * stride..y * stride + size.x as usize * 4]))
             .collect()
     };
-    let mut read = |coarse: bool| {
+    let read = |harness: &mut RenderHarness, coarse: bool| {
         let mut size = UVec2::ZERO;
         let bytes = harness
             .read_render_buffer(|world| {
@@ -326,8 +326,8 @@ fn the_dilated_shadow_map_matches_its_cpu_reference() {
         (unpad(bytes, size), size)
     };
     // Both copies come from the last rendered frame (the scene is static).
-    let (fine, fine_size) = read(false);
-    let (gpu, coarse_size) = read(true);
+    let (fine, fine_size) = read(&mut harness, false);
+    let (gpu, coarse_size) = read(&mut harness, true);
     let (w, h) = (fine_size.x as usize, fine_size.y as usize);
     assert!(
         fine.iter().any(|&d| d > 0.0),
@@ -359,6 +359,13 @@ fn the_dilated_shadow_map_matches_its_cpu_reference() {
         matching.iter().any(|r| (r_min..=r_max).contains(r)),
         "R {matching:?} outside {r_min}..={r_max}"
     );
+    // The direct filter (the benchmark's comparison) gives the same map.
+    harness
+        .world_mut()
+        .insert_resource(SsssDilationFilter::Direct);
+    harness.run_frames(3).unwrap();
+    let (direct, _) = read(&mut harness, true);
+    assert!(direct == gpu, "the direct and segment filters differ");
 }
 
 /// Cascades: the pole scene with two cascades split at 5 m from the camera, so the ground (10 m

@@ -164,6 +164,36 @@ fn combine_vertical(@builtin(global_invocation_id) id: vec3<u32>) {
     combine(id, false);
 }
 
+// The direct form of the same filter (2R + 1 reads per texel and pass), kept as the reference
+// `SsssDilationFilter::Direct` selects: the segment filter must equal it bit for bit, and the
+// benchmark times the two side by side.
+fn direct(id: vec3<u32>, horizontal: bool) {
+    let size = vec2<i32>(textureDimensions(rows_in));
+    let r = radius_of_layer(id.z);
+    if r < 0 || i32(id.x) >= size.x || i32(id.y) >= size.y {
+        return;
+    }
+    let p = i32(select(id.y, id.x, horizontal));
+    let line = i32(select(id.x, id.y, horizontal));
+    let n = select(size.y, size.x, horizontal);
+    var nearest = 0.0;
+    for (var o = -r; o <= r; o += 1) {
+        let i = clamp(p + o, 0, n - 1);
+        nearest = max(nearest, textureLoad(rows_in, texel_on(horizontal, line, i), id.z, 0).r);
+    }
+    textureStore(dilated_out, vec2<i32>(id.xy), id.z, vec4(nearest, 0.0, 0.0, 0.0));
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn direct_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
+    direct(id, true);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn direct_vertical(@builtin(global_invocation_id) id: vec3<u32>) {
+    direct(id, false);
+}
+
 // Debug copy of the shadow map into a float texture that can be read back (tests compare the
 // dilated map with its CPU reference computed from it).
 @compute @workgroup_size(8, 8, 1)

@@ -16,6 +16,7 @@ use bevy::pbr::{
 };
 use bevy::prelude::*;
 use bevy::render::diagnostic::RecordDiagnostics;
+use bevy::render::extract_resource::ExtractResource;
 use bevy::render::render_asset::RenderAssets;
 use bevy::render::render_resource::binding_types::{
     texture_2d, texture_2d_array, texture_storage_2d_array, uniform_buffer,
@@ -78,6 +79,17 @@ impl SsssUniform {
             spot_radius: 0,
         }
     }
+}
+
+/// How the separable min filter of the dilation runs. Both give the same map bit for bit.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq, Reflect, ExtractResource)]
+#[reflect(Resource, Default)]
+pub enum SsssDilationFilter {
+    /// Van Herk / Gil-Werman segments: O(1) work per texel whatever the radius (the default).
+    #[default]
+    Segments,
+    /// The direct filter, 2R + 1 reads per texel and pass: the reference, for comparisons.
+    Direct,
 }
 
 /// Insert into the render world to get copies of layer 0 of the shadow map and of the coarse
@@ -194,6 +206,8 @@ struct SsssPipelines {
     dilate_reduce: CachedComputePipelineId,
     /// Scan and combine along rows, then along columns (`min_filter.wgsl`).
     dilate_passes: [CachedComputePipelineId; 4],
+    /// The direct filter along rows, then columns.
+    dilate_direct: [CachedComputePipelineId; 2],
     copy_shadow: CachedComputePipelineId,
 }
 
@@ -248,6 +262,7 @@ fn init_pipelines(
         queue("scan_vertical"),
         queue("combine_vertical"),
     ];
+    let dilate_direct = [queue("direct_horizontal"), queue("direct_vertical")];
     let copy_shadow = queue("copy_shadow");
     commands.insert_resource(SsssPipelines {
         mesh_pipeline: mesh_pipeline.clone(),
@@ -257,6 +272,7 @@ fn init_pipelines(
         dilate_layout,
         dilate_reduce,
         dilate_passes,
+        dilate_direct,
         copy_shadow,
     });
 }
@@ -423,9 +439,17 @@ fn ssss(
     light_meta: Res<LightMeta>,
     images: Res<RenderAssets<GpuImage>>,
     readback: Option<ResMut<SsssDilationReadback>>,
+    filter: Option<Res<SsssDilationFilter>>,
     mut ctx: RenderContext,
 ) {
     let (mesh_view, shadows, lights_offset, ids, dilation) = view.into_inner();
+    let direct = filter.is_some_and(|f| *f == SsssDilationFilter::Direct);
+    let (Some(direct_h), Some(direct_v)) = (
+        pipeline_cache.get_compute_pipeline(pipelines.dilate_direct[0]),
+        pipeline_cache.get_compute_pipeline(pipelines.dilate_direct[1]),
+    ) else {
+        return;
+    };
     let (
         Some(dilate_reduce),
         Some(scan_h),
@@ -482,15 +506,28 @@ fn ssss(
     // scan → dilated. (Inputs and outputs a pass does not use are bound to textures it does
     // not otherwise touch.)
     let reduce_group = dilate_group(&rows_view, &dilated_view, &scan_view);
-    let steps = [
-        (scan_h, dilate_group(&dilated_view, &rows_view, &scan_view)),
-        (combine_h, dilate_group(&scan_view, &rows_view, &sink_view)),
-        (scan_v, dilate_group(&rows_view, &dilated_view, &scan_view)),
-        (
-            combine_v,
-            dilate_group(&scan_view, &dilated_view, &sink_view),
-        ),
-    ];
+    let steps = if direct {
+        vec![
+            (
+                direct_h,
+                dilate_group(&dilated_view, &rows_view, &scan_view),
+            ),
+            (
+                direct_v,
+                dilate_group(&rows_view, &dilated_view, &scan_view),
+            ),
+        ]
+    } else {
+        vec![
+            (scan_h, dilate_group(&dilated_view, &rows_view, &scan_view)),
+            (combine_h, dilate_group(&scan_view, &rows_view, &sink_view)),
+            (scan_v, dilate_group(&rows_view, &dilated_view, &scan_view)),
+            (
+                combine_v,
+                dilate_group(&scan_view, &dilated_view, &sink_view),
+            ),
+        ]
+    };
     let screen_layout = pipeline_cache.get_bind_group_layout(&pipelines.screen_layout);
     let screen_group = |distances: &TextureView, blur_in: &TextureView| {
         device.create_bind_group(
@@ -513,23 +550,24 @@ fn ssss(
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let time_span = diagnostics.time_span(ctx.command_encoder(), "ssss");
-    {
-        let encoder = ctx.command_encoder();
-        let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
-            label: Some("ssss_dilate"),
-            timestamp_writes: None,
-        });
-        let groups = [
-            dilation.size.width.div_ceil(8),
-            dilation.size.height.div_ceil(8),
-            dilation.size.depth_or_array_layers,
-        ];
-        let span = diagnostics.pass_span(&mut pass, "ssss_dilate");
-        pass.set_pipeline(dilate_reduce);
-        pass.set_bind_group(0, &reduce_group, &[lights_offset.offset]);
-        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-        // (The scans run one invocation per segment; the grid covers the smallest, R = 0.)
-        for (pipeline, group) in &steps {
+    let groups = [
+        dilation.size.width.div_ceil(8),
+        dilation.size.height.div_ceil(8),
+        dilation.size.depth_or_array_layers,
+    ];
+    // Two compute passes, timed apart: the block reduction reads the whole shadow map; the
+    // filter's cost is the separable min filter's. (The scans run one invocation per segment;
+    // the grid covers the most segments, at R = 0.)
+    let reduce = [(dilate_reduce, reduce_group)];
+    for (label, dispatches) in [("ssss_reduce", &reduce[..]), ("ssss_dilate", &steps[..])] {
+        let mut pass = ctx
+            .command_encoder()
+            .begin_compute_pass(&ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes: None,
+            });
+        let span = diagnostics.pass_span(&mut pass, label);
+        for (pipeline, group) in dispatches {
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, group, &[lights_offset.offset]);
             pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
@@ -674,7 +712,12 @@ pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "ssss.wgsl");
     app.add_plugins(bevy::render::extract_component::ExtractComponentPlugin::<
         SoftShadowCamera,
-    >::default());
+    >::default())
+        .add_plugins(bevy::render::extract_resource::ExtractResourcePlugin::<
+            SsssDilationFilter,
+        >::default())
+        .init_resource::<SsssDilationFilter>()
+        .register_type::<SsssDilationFilter>();
     embedded_asset!(app, "receiver_functions.wgsl");
     // The shared WGSL modules are imported by path: keep them loaded so the imports resolve.
     let types: Handle<Shader> = load_embedded_asset!(app, "ssss_types.wgsl");
