@@ -15,8 +15,8 @@
 //! `--bench` measures, in one process, for small / medium / large light sizes at two
 //! resolutions: the GPU time of soft shadowing over hard shadows (timestamp queries: PCSS = its
 //! main opaque pass minus the hard-shadow one; SSSS = its own passes plus its main pass minus the
-//! hard-shadow one; SSSS both with its O(1)-per-texel segment min filter and with the direct
-//! filter) and each image's RMSE against an area-light reference (48 hard-shadowed
+//! hard-shadow one; SSSS as by default, then with its direct and its O(1)-per-texel segment
+//! min filter forced) and each image's RMSE against an area-light reference (48 hard-shadowed
 //! suns jittered over the light's disk, averaged in linear light — or with `--spot`, 48 spot
 //! lights spread over the lamp's disk) rendered in the same run.
 
@@ -178,7 +178,7 @@ fn run_bench(args: &ExampleArgs, spot: bool) -> AppExit {
             }
             harness
                 .world_mut()
-                .insert_resource(SsssDilationFilter::Segments);
+                .insert_resource(SsssDilationFilter::Auto);
             let hard_main = measured[0].2;
             for (technique, name, main, ssss, error, breakdown) in &measured {
                 let passes = if *technique == ShadowTechnique::Ssss {

@@ -27,6 +27,14 @@ pub fn coarse_radius(
     (r / DILATION_BLOCK as f32).ceil() as usize
 }
 
+/// From this coarse radius on, [`SsssDilationFilter::Auto`](super::render::SsssDilationFilter)
+/// runs the segment filter ([`segment_filter_1d`]) instead of the direct one: the direct
+/// filter's cost grows with `2R + 1` reads per texel and pass, the segment filter's does not
+/// but starts higher. On llvmpipe (issue 6's note) the 512² coarse map took 2.8 / 6.4 ms direct
+/// vs ~10 ms segments at R = 5 / 11 (sun), and 21–25 ms direct vs 14–15 ms segments at R = 14–16
+/// (lamp), so they cross near R = 10.
+pub const SEGMENT_FILTER_FROM_RADIUS: usize = 10;
+
 /// The widest fine reach the dilation searches, in shadow-map texels (`ssss_types.wgsl`).
 pub const MAX_DILATION_TEXELS: usize = 64;
 

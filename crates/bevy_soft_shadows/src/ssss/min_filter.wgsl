@@ -164,9 +164,9 @@ fn combine_vertical(@builtin(global_invocation_id) id: vec3<u32>) {
     combine(id, false);
 }
 
-// The direct form of the same filter (2R + 1 reads per texel and pass), kept as the reference
-// `SsssDilationFilter::Direct` selects: the segment filter must equal it bit for bit, and the
-// benchmark times the two side by side.
+// The direct form of the same filter (2R + 1 reads per texel and pass): cheaper than the
+// segments for small radii, so `SsssDilationFilter::Auto` runs it below
+// `min_filter::SEGMENT_FILTER_FROM_RADIUS`. Both give the same map bit for bit.
 fn direct(id: vec3<u32>, horizontal: bool) {
     let size = vec2<i32>(textureDimensions(rows_in));
     let r = radius_of_layer(id.z);

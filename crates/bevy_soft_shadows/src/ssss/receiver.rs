@@ -81,6 +81,7 @@ fn screen_image(size: UVec2, format: TextureFormat) -> Image {
 pub struct SsssActive(pub bool);
 
 /// Adds the prepasses and the camera marker, and (re)sizes the textures to the camera.
+#[allow(clippy::type_complexity)]
 fn prepare_cameras_and_textures(
     mut commands: Commands,
     lights: Query<

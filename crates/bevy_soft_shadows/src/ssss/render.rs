@@ -8,7 +8,7 @@ use super::receiver::{SoftShadowCamera, SsssActive, SsssTextures};
 use crate::settings::ScreenSpaceSoftShadows;
 use bevy::asset::{embedded_asset, load_embedded_asset};
 use bevy::core_pipeline::{Core3d, Core3dSystems, FullscreenShader};
-use bevy::light::DirectionalLightShadowMap;
+use bevy::light::{Cascades, DirectionalLightShadowMap};
 use bevy::pbr::{
     GlobalClusterableObjectMeta, GpuLights, LATE_SHADOW_PASS, LightMeta, MeshPipeline,
     MeshPipelineKey, MeshPipelineSystems, MeshViewBindGroup, ViewKeyCache, ViewLightsUniformOffset,
@@ -81,14 +81,18 @@ impl SsssUniform {
     }
 }
 
-/// How the separable min filter of the dilation runs. Both give the same map bit for bit.
+/// How the separable min filter of the dilation runs. All give the same map bit for bit.
 #[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq, Reflect, ExtractResource)]
 #[reflect(Resource, Default)]
 pub enum SsssDilationFilter {
-    /// Van Herk / Gil-Werman segments: O(1) work per texel whatever the radius (the default).
+    /// The direct filter below a coarse radius of
+    /// [`SEGMENT_FILTER_FROM_RADIUS`](super::min_filter::SEGMENT_FILTER_FROM_RADIUS), the
+    /// segments from it on (the largest radius of the light's cascades decides).
     #[default]
+    Auto,
+    /// Van Herk / Gil-Werman segments: O(1) work per texel whatever the radius.
     Segments,
-    /// The direct filter, 2R + 1 reads per texel and pass: the reference, for comparisons.
+    /// The direct filter, 2R + 1 reads per texel and pass.
     Direct,
 }
 
@@ -110,6 +114,9 @@ struct ExtractedSsss {
     /// The render-world entity of the spot light with SSSS (its clustered index is only known
     /// after Bevy's `prepare_lights`).
     spot: Option<Entity>,
+    /// The largest coarse dilation radius over the light's shadow maps (for
+    /// [`SsssDilationFilter::Auto`]).
+    max_radius: usize,
 }
 
 /// The light SSSS shades: the first directional light with [`ScreenSpaceSoftShadows`], else the
@@ -118,7 +125,9 @@ struct ExtractedSsss {
 #[allow(clippy::type_complexity)]
 fn extract_ssss(
     mut extracted: ResMut<ExtractedSsss>,
-    directional: Extract<Query<&ScreenSpaceSoftShadows, With<DirectionalLight>>>,
+    directional: Extract<
+        Query<(&ScreenSpaceSoftShadows, Option<&Cascades>), With<DirectionalLight>>,
+    >,
     spots: Extract<Query<(Entity, &ScreenSpaceSoftShadows, &SpotLight, &RenderEntity)>>,
     shadow_map: Extract<Res<DirectionalLightShadowMap>>,
     textures: Extract<Res<SsssTextures>>,
@@ -128,11 +137,29 @@ fn extract_ssss(
     extracted.textures = textures.clone();
     extracted.spot = None;
     extracted.uniform = SsssUniform::default();
+    extracted.max_radius = 0;
     if !active.0 {
         return;
     }
-    if let Some(settings) = directional.iter().next() {
-        extracted.uniform = SsssUniform::new(&settings.sanitized().0);
+    let max_texels = super::min_filter::MAX_DILATION_TEXELS as f32;
+    if let Some((settings, cascades)) = directional.iter().next() {
+        let settings = settings.sanitized().0;
+        // The radius the dilation pass computes per cascade (`min_filter.wgsl`); without
+        // cascades yet, assume the widest.
+        extracted.max_radius = cascades
+            .into_iter()
+            .flat_map(|c| c.cascades.values().flatten())
+            .map(|c| {
+                super::min_filter::coarse_radius(
+                    settings.max_occluder_distance,
+                    settings.light_size,
+                    c.texel_size,
+                    max_texels,
+                )
+            })
+            .max()
+            .unwrap_or(super::min_filter::MAX_DILATION_TEXELS / super::min_filter::DILATION_BLOCK);
+        extracted.uniform = SsssUniform::new(&settings);
         return;
     }
     let Some((entity, settings, spot, render_entity)) = spots.iter().next() else {
@@ -443,7 +470,13 @@ fn ssss(
     mut ctx: RenderContext,
 ) {
     let (mesh_view, shadows, lights_offset, ids, dilation) = view.into_inner();
-    let direct = filter.is_some_and(|f| *f == SsssDilationFilter::Direct);
+    let direct = match filter.map_or(SsssDilationFilter::Auto, |f| *f) {
+        SsssDilationFilter::Direct => true,
+        SsssDilationFilter::Segments => false,
+        SsssDilationFilter::Auto => {
+            extracted.max_radius < super::min_filter::SEGMENT_FILTER_FROM_RADIUS
+        }
+    };
     let (Some(direct_h), Some(direct_v)) = (
         pipeline_cache.get_compute_pipeline(pipelines.dilate_direct[0]),
         pipeline_cache.get_compute_pipeline(pipelines.dilate_direct[1]),
