@@ -137,16 +137,21 @@ fn run_bench(args: &ExampleArgs, spot: bool) -> AppExit {
                 lamp_transform(LAMP_POSITION);
             let reference = average.linear();
             let mut measured = Vec::new();
-            // SSSS twice: with the segment min filter (the default) and the direct one, timed
-            // side by side (same maps, so the same image).
+            // SSSS as it runs by default (the min filter picked by radius), then with each min
+            // filter forced, timed side by side (same maps, so the same image).
             let runs = [
-                (ShadowTechnique::Hard, SsssDilationFilter::Segments, "hard"),
-                (ShadowTechnique::Pcss, SsssDilationFilter::Segments, "pcss"),
-                (ShadowTechnique::Ssss, SsssDilationFilter::Segments, "ssss"),
+                (ShadowTechnique::Hard, SsssDilationFilter::Auto, "hard"),
+                (ShadowTechnique::Pcss, SsssDilationFilter::Auto, "pcss"),
+                (ShadowTechnique::Ssss, SsssDilationFilter::Auto, "ssss"),
                 (
                     ShadowTechnique::Ssss,
                     SsssDilationFilter::Direct,
                     "ssss_direct_filter",
+                ),
+                (
+                    ShadowTechnique::Ssss,
+                    SsssDilationFilter::Segments,
+                    "ssss_segment_filter",
                 ),
             ];
             for (technique, filter, name) in runs {
