@@ -30,10 +30,10 @@ pub fn coarse_radius(
 /// From this coarse radius on, [`SsssDilationFilter::Auto`](super::render::SsssDilationFilter)
 /// runs the segment filter ([`segment_filter_1d`]) instead of the direct one: the direct
 /// filter's cost grows with `2R + 1` reads per texel and pass, the segment filter's does not
-/// but starts higher. On llvmpipe (issue 6's note) the 512² coarse map took 2.8 / 6.4 ms direct
-/// vs ~10 ms segments at R = 5 / 11 (sun), and 21–25 ms direct vs 14–15 ms segments at R = 14–16
-/// (lamp), so they cross near R = 10.
-pub const SEGMENT_FILTER_FROM_RADIUS: usize = 10;
+/// but starts higher. On llvmpipe (issue 6's note; 512² coarse map, the two timed side by side)
+/// the direct filter won up to R ≈ 11 (2.8 / 4.7 / 6.4 ms at R ≈ 2 / 5 / 11 against ~10 ms for
+/// the segments, sun) and lost from R = 14 (21–23 ms against 14–18 ms, lamp).
+pub const SEGMENT_FILTER_FROM_RADIUS: usize = 12;
 
 /// The widest fine reach the dilation searches, in shadow-map texels (`ssss_types.wgsl`).
 pub const MAX_DILATION_TEXELS: usize = 64;
