@@ -95,7 +95,8 @@ impl LodSlots {
 
     /// The slot holding `lod`: exact 0 and 1 have their own.
     pub fn slot_of(&self, lod: f32) -> usize {
-        if !(lod > 0.0) {
+        // A NaN level goes to the LoD-0 slot as well.
+        if lod.is_nan() || lod <= 0.0 {
             return SLOT_LOD_ZERO;
         }
         if lod >= 1.0 {

@@ -569,7 +569,7 @@ pub fn run_forest_manager(
 
 /// Points every shown forest tree at the extraction it draws: its `MeshTag` (the extraction's
 /// instance slot) and the slot mesh that fits the extraction's kept count.
-#[allow(clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub fn draw_forest_trees(
     mut commands: Commands,
     state: Res<ForestState>,

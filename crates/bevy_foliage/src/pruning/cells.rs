@@ -43,6 +43,8 @@ pub struct Cell {
 /// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations.
 /// Returns eigenvalues and the matrix whose columns are the matching unit eigenvectors,
 /// sorted by decreasing eigenvalue.
+// The Jacobi rotation reads as in the textbook with explicit indices.
+#[allow(clippy::needless_range_loop)]
 pub fn symmetric_eigen(m: Mat3) -> (Vec3, Mat3) {
     let mut a = [[0.0f64; 3]; 3];
     for (i, row) in a.iter_mut().enumerate() {

@@ -99,6 +99,7 @@ impl BakedFoliage {
 pub struct ManagedPruning;
 
 /// Computes [`PruningParams`] for every pruned tree from the pruning camera.
+#[allow(clippy::too_many_arguments)]
 pub fn compute_pruning_params(
     mut commands: Commands,
     mut asset_events: MessageReader<AssetEvent<BakedFoliage>>,

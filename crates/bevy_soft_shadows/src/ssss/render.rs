@@ -178,18 +178,19 @@ fn extract_ssss(
     *warned = false;
     let settings = settings.sanitized().0;
     extracted.spot = Some(render_entity.id());
+    extracted.max_radius = super::min_filter::spot_coarse_radius(
+        settings.light_size,
+        settings.max_occluder_distance,
+        // Bevy clamps the outer angle just below π/2 for the shadow projection.
+        spot.outer_angle
+            .min(std::f32::consts::FRAC_PI_2 - 1e-4)
+            .tan(),
+        shadow_map.size as f32,
+        max_texels,
+    );
     extracted.uniform = SsssUniform {
         light_kind: LIGHT_KIND_SPOT,
-        spot_radius: super::min_filter::spot_coarse_radius(
-            settings.light_size,
-            settings.max_occluder_distance,
-            // Bevy clamps the outer angle just below π/2 for the shadow projection.
-            spot.outer_angle
-                .min(std::f32::consts::FRAC_PI_2 - 1e-4)
-                .tan(),
-            shadow_map.size as f32,
-            super::min_filter::MAX_DILATION_TEXELS as f32,
-        ) as u32,
+        spot_radius: extracted.max_radius as u32,
         ..SsssUniform::new(&settings)
     };
 }
