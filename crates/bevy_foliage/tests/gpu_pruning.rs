@@ -80,7 +80,7 @@ fn gpu_compaction_equals_cpu_reference_for_random_cameras_and_instances() {
     for i in 0..10 {
         let kind = i % 2;
         let transform = Transform::from_xyz(rng.range(-30.0, 30.0), 0.0, rng.range(-30.0, 30.0))
-            .with_rotation(Quat::from_rotation_y(rng.range(0.0, 6.28)))
+            .with_rotation(Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)))
             .with_scale(Vec3::splat(rng.range(0.7, 1.4)));
         let entity = harness
             .world_mut()

@@ -174,12 +174,12 @@ fn count_frames(
     }
     let Some(frames) = run.frames else { return };
     let n = times.all_ms.len() as u32;
-    if n == frames {
-        if let Some(path) = &run.screenshot {
-            commands
-                .spawn(Screenshot::primary_window())
-                .observe(save_to_disk(path.clone()));
-        }
+    if n == frames
+        && let Some(path) = &run.screenshot
+    {
+        commands
+            .spawn(Screenshot::primary_window())
+            .observe(save_to_disk(path.clone()));
     }
     // Give the asynchronous screenshot a few frames to be written before exiting.
     if n == frames + 5 {

@@ -93,18 +93,16 @@ mod tests {
         );
         // Nonsense fractions fall back to something drawable.
         assert!(
-            decimated_leaf_mesh(&tree.leaves, f32::NAN, 1)
+            !decimated_leaf_mesh(&tree.leaves, f32::NAN, 1)
                 .indices()
                 .unwrap()
-                .len()
-                > 0
+                .is_empty()
         );
         assert!(
-            decimated_leaf_mesh(&tree.leaves, -1.0, 1)
+            !decimated_leaf_mesh(&tree.leaves, -1.0, 1)
                 .indices()
                 .unwrap()
-                .len()
-                > 0
+                .is_empty()
         );
     }
 }

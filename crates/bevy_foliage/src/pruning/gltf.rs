@@ -326,7 +326,7 @@ pub(crate) mod tests {
             for i in &p.indices {
                 bin.extend_from_slice(&i.to_le_bytes());
             }
-            while bin.len() % 4 != 0 {
+            while !bin.len().is_multiple_of(4) {
                 bin.push(0);
             }
             let min: Vec<f32> = (0..3)

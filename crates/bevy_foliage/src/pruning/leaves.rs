@@ -174,7 +174,7 @@ impl LeafSet {
                 .max(1e-30);
             // Relative threshold: a leaf whose area is below ~1e-12 of its squared coordinate
             // scale is a line or a point, whatever the model's units.
-            if !(area > extent * extent * 1e-12) {
+            if area.is_nan() || area <= extent * extent * 1e-12 {
                 skipped.degenerate += 1;
                 continue;
             }

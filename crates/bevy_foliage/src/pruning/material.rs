@@ -276,6 +276,7 @@ pub const TREES_PRUNED: DiagnosticPath = DiagnosticPath::const_new("foliage/tree
 
 /// Gives every pruned tree the slot mesh that fits its kept count, its material and its tag,
 /// and publishes the leaf counts as diagnostics.
+#[allow(clippy::type_complexity)]
 pub fn assign_slot_meshes(
     mut commands: Commands,
     mut diagnostics: Diagnostics,

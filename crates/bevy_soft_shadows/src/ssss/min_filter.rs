@@ -30,9 +30,11 @@ pub fn coarse_radius(
 /// From this coarse radius on, [`SsssDilationFilter::Auto`](super::render::SsssDilationFilter)
 /// runs the segment filter ([`segment_filter_1d`]) instead of the direct one: the direct
 /// filter's cost grows with `2R + 1` reads per texel and pass, the segment filter's does not
-/// but starts higher. On llvmpipe (issue 6's note; 512² coarse map, the two timed side by side)
-/// the direct filter won up to R ≈ 11 (2.8 / 4.7 / 6.4 ms at R ≈ 2 / 5 / 11 against ~10 ms for
-/// the segments, sun) and lost from R = 14 (21–23 ms against 14–18 ms, lamp).
+/// but starts higher. On llvmpipe (issue 6's note: `soft_shadows --bench [--spot]`, 512² coarse
+/// map, the two timed side by side) the direct filter took 2.8 / 4.0 / 6.4 ms at R = 1 / 3 / 6
+/// (sun) and 10.3 / 21.1 / 23.5 ms at R = 5 / 14 / 16 (lamp); the segments ~10 ms (sun) and
+/// ~14 ms (lamp) at any R. Growing by 0.7–1.2 ms per unit of R, the direct filter meets the
+/// segments near R = 10–12.
 pub const SEGMENT_FILTER_FROM_RADIUS: usize = 12;
 
 /// The widest fine reach the dilation searches, in shadow-map texels (`ssss_types.wgsl`).

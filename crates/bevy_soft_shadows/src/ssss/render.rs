@@ -96,6 +96,17 @@ pub enum SsssDilationFilter {
     Direct,
 }
 
+impl SsssDilationFilter {
+    /// Whether the segment filter runs for a largest coarse radius of `max_radius`.
+    pub fn uses_segments(self, max_radius: usize) -> bool {
+        match self {
+            Self::Auto => max_radius >= super::min_filter::SEGMENT_FILTER_FROM_RADIUS,
+            Self::Segments => true,
+            Self::Direct => false,
+        }
+    }
+}
+
 /// Insert into the render world to get copies of layer 0 of the shadow map and of the coarse
 /// dilated map (both R32Float, row-major, rows padded to 256 bytes) in `fine` and `coarse`
 /// after the next frame — for tests of the dilation against its CPU reference.
@@ -471,13 +482,9 @@ fn ssss(
     mut ctx: RenderContext,
 ) {
     let (mesh_view, shadows, lights_offset, ids, dilation) = view.into_inner();
-    let direct = match filter.map_or(SsssDilationFilter::Auto, |f| *f) {
-        SsssDilationFilter::Direct => true,
-        SsssDilationFilter::Segments => false,
-        SsssDilationFilter::Auto => {
-            extracted.max_radius < super::min_filter::SEGMENT_FILTER_FROM_RADIUS
-        }
-    };
+    let direct = !filter
+        .map_or(SsssDilationFilter::Auto, |f| *f)
+        .uses_segments(extracted.max_radius);
     let (Some(direct_h), Some(direct_v)) = (
         pipeline_cache.get_compute_pipeline(pipelines.dilate_direct[0]),
         pipeline_cache.get_compute_pipeline(pipelines.dilate_direct[1]),
@@ -737,6 +744,29 @@ fn copy_for_readback(
     }
     readback.fine = Some(copy_layer0(ctx, &fine, "ssss_shadow_copy_buffer"));
     readback.coarse = Some(copy_layer0(ctx, dilated, "ssss_dilated_copy_buffer"));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::SsssDilationFilter;
+    use crate::ssss::min_filter::{
+        DILATION_BLOCK, MAX_DILATION_TEXELS, SEGMENT_FILTER_FROM_RADIUS, spot_coarse_radius,
+    };
+
+    #[test]
+    fn auto_picks_the_filter_by_radius() {
+        let auto = SsssDilationFilter::Auto;
+        assert!(!auto.uses_segments(SEGMENT_FILTER_FROM_RADIUS - 1));
+        assert!(auto.uses_segments(SEGMENT_FILTER_FROM_RADIUS));
+        assert!(SsssDilationFilter::Segments.uses_segments(0));
+        assert!(!SsssDilationFilter::Direct.uses_segments(16));
+        // The soft_shadows example's medium lamp (0.70 m, Δ 3.5 m, outer 0.75 rad, 2048²)
+        // has R = 14: Auto runs the segments there.
+        let r = spot_coarse_radius(0.70, 3.5, 0.75f32.tan(), 2048.0, MAX_DILATION_TEXELS as f32);
+        assert_eq!(r, 14);
+        assert!(auto.uses_segments(r));
+        assert!(MAX_DILATION_TEXELS / DILATION_BLOCK >= SEGMENT_FILTER_FROM_RADIUS);
+    }
 }
 
 /// Registers the render-world side.
