@@ -266,7 +266,7 @@ fn showcase_terrain_receives_soft_shadows() {
     let world = harness.world_mut();
     let visibility = world.resource::<SsssTextures>().visibility.clone();
     let materials = world.resource::<Assets<ClipmapMaterial>>();
-    assert!(materials.len() >= 1);
+    assert!(!materials.is_empty());
     for (_, material) in materials.iter() {
         assert_eq!(
             material.extension.soft_visibility.as_ref(),

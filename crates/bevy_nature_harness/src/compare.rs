@@ -484,8 +484,8 @@ mod tests {
         assert!(structural < 0.5, "ssim of noise {structural}");
         let mut brighter = a.clone();
         for px in brighter.data.chunks_exact_mut(4) {
-            for c in 0..3 {
-                px[c] = px[c].saturating_add(10);
+            for c in &mut px[..3] {
+                *c = c.saturating_add(10);
             }
         }
         let shifted = ssim(&a, &brighter);

@@ -310,7 +310,7 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
             .read_image(textures.distance.clone(), SIZE, SIZE, 16)
             .unwrap(),
     );
-    let light = harness.world_mut().get::<SpotLight>(lamp).unwrap().clone();
+    let light = *harness.world_mut().get::<SpotLight>(lamp).unwrap();
     // The lamp's forward as Bevy extracts it: along z it is ±0 up to rounding, and the sign
     // decides the basis `orthonormalize` builds (the map's orientation about the axis).
     let forward = harness
@@ -372,7 +372,7 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
          worst σ difference {worst:.3} px"
     );
     assert!(
-        ground > (SIZE * SIZE / 2) as u32 && penumbra > 500,
+        ground > (SIZE * SIZE / 2) && penumbra > 500,
         "{ground} / {penumbra}"
     );
     // A pixel whose uv falls exactly on a coarse texel's border may round to its neighbour.

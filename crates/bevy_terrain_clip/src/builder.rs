@@ -376,8 +376,8 @@ mod tests {
         let mut sum = [0u32; 4];
         for y in 24..28 {
             for x in 20..24 {
-                for c in 0..4 {
-                    sum[c] += image.get_pixel(x, y).0[c] as u32;
+                for (s, v) in sum.iter_mut().zip(image.get_pixel(x, y).0) {
+                    *s += v as u32;
                 }
             }
         }

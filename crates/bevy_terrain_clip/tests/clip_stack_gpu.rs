@@ -96,6 +96,8 @@ fn settle_and_compare(
     harness.step();
     let clip = harness.world_mut().get::<ClipStackTexture>(entity).unwrap();
     let image = clip.layers.id();
+    // Per layer: its level and its valid rectangles (origin, size).
+    #[allow(clippy::type_complexity)]
     let layers: Vec<(u32, Vec<([i64; 2], [u32; 2])>)> = clip
         .stack
         .layers
@@ -270,7 +272,6 @@ fn several_virtual_textures_stream_at_once() {
             2,
             &mut images,
         );
-        drop(images);
         (world.spawn(imagery).id(), world.spawn(overlay).id())
     };
     harness.world_mut().spawn(Camera3d::default());
@@ -327,7 +328,6 @@ fn a_missing_tile_falls_back_to_coarser_layers_without_stalling() {
             center,
             &mut images,
         );
-        drop(images);
         world.spawn(clip).id()
     };
     harness.world_mut().spawn(Camera3d::default());

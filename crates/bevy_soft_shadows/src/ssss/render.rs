@@ -765,7 +765,7 @@ mod tests {
         let r = spot_coarse_radius(0.70, 3.5, 0.75f32.tan(), 2048.0, MAX_DILATION_TEXELS as f32);
         assert_eq!(r, 14);
         assert!(auto.uses_segments(r));
-        assert!(MAX_DILATION_TEXELS / DILATION_BLOCK >= SEGMENT_FILTER_FROM_RADIUS);
+        const { assert!(MAX_DILATION_TEXELS / DILATION_BLOCK >= SEGMENT_FILTER_FROM_RADIUS) };
     }
 }
 

@@ -84,7 +84,7 @@ fn main() {
     );
     let started = std::time::Instant::now();
     let progress = |done: usize, total: usize| {
-        if done == total || done % 16 == 0 {
+        if done == total || done.is_multiple_of(16) {
             eprint!(
                 "\r  {done}/{total} tiles ({:.0} %)",
                 100.0 * done as f64 / total as f64
