@@ -253,7 +253,7 @@ fn ssss_is_no_worse_than_bevys_pcss_against_the_area_light_reference() {
             .unwrap()
             .soft_shadow_size = size;
     };
-    let mut best_pcss = (f32::INFINITY, 0.0);
+    let mut best_pcss = (f32::INFINITY, 0.0, Vec::new());
     let dir = artifacts_dir().join("ssss_vs_pcss");
     std::fs::create_dir_all(&dir).ok();
     for size in [1.0f32, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0] {
@@ -266,7 +266,7 @@ fn ssss_is_no_worse_than_bevys_pcss_against_the_area_light_reference() {
         let e = rmse(&pcss, &reference);
         println!("PCSS soft_shadow_size {size}: RMSE {e:.4}");
         if e < best_pcss.0 {
-            best_pcss = (e, size);
+            best_pcss = (e, size, pcss);
         }
     }
     set_pcss(&mut harness, None);
@@ -277,6 +277,10 @@ fn ssss_is_no_worse_than_bevys_pcss_against_the_area_light_reference() {
         "RMSE vs area-light reference: SSSS {e_ssss:.4}, best PCSS {:.4} (size {}), hard {e_hard:.4}",
         best_pcss.0, best_pcss.1
     );
+    // Hard | Bevy's best PCSS | SSSS | area-light reference (docs/images/ssss_sun.png).
+    strip(&[&hard, &best_pcss.2, &ssss, &reference])
+        .save_png(dir.join("comparison.png"))
+        .ok();
     assert!(best_pcss.0 < e_hard, "PCSS softens the shadow at all");
     assert!(
         e_ssss <= best_pcss.0,

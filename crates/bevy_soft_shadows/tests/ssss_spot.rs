@@ -246,6 +246,10 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
     save("reference.png", &reference);
     save("pcss.png", &pcss);
     save("ssss.png", &ssss);
+    // Hard | Bevy's best spot PCSS | SSSS | area-light reference (docs/images/ssss_spot.png).
+    strip(&[&hard, &pcss, &ssss, &reference])
+        .save_png(dir.join("comparison.png"))
+        .ok();
 
     // 1. The spot light's dilated map (layer 0: no directional cascades, no point lights)
     //    against the CPU reference at exactly the radius the settings give.

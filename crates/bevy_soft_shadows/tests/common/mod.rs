@@ -234,3 +234,24 @@ pub fn rmse(a: &[f32], b: &[f32]) -> f32 {
     }
     (sum / n as f32).sqrt()
 }
+
+/// Linear renders side by side (sRGB, 4 px white gaps), for the comparison images in the docs.
+pub fn strip(images: &[&[f32]]) -> RgbaImage {
+    const GAP: u32 = 4;
+    let n = images.len() as u32;
+    let width = n * SIZE + (n - 1) * GAP;
+    let mut data = vec![255u8; (width * SIZE * 4) as usize];
+    for (k, image) in images.iter().enumerate() {
+        let x0 = k as u32 * (SIZE + GAP);
+        for y in 0..SIZE {
+            for x in 0..SIZE {
+                let src = ((y * SIZE + x) * 4) as usize;
+                let dst = ((y * width + x0 + x) * 4) as usize;
+                for c in 0..3 {
+                    data[dst + c] = bevy_soft_shadows::reference::linear_to_srgb(image[src + c]);
+                }
+            }
+        }
+    }
+    RgbaImage::new(width, SIZE, data)
+}
