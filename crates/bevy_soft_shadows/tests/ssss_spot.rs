@@ -429,3 +429,41 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
         "SSSS {e_ssss} is worse than Bevy's spot PCSS {e_pcss}"
     );
 }
+
+/// Bad input: SSSS on a spot light whose shadow maps are off has nothing to soften. It stays off
+/// (one warning): the passes write "inactive" (−1) for the receivers, which keep Bevy's lighting,
+/// and nothing panics.
+#[test]
+fn ssss_on_a_spot_light_without_shadow_maps_stays_off() {
+    let Some((mut harness, lamp, unshadowed)) = spot_scene("ssss_spot_no_shadows", false) else {
+        return;
+    };
+    harness
+        .world_mut()
+        .get_mut::<SpotLight>(lamp)
+        .unwrap()
+        .shadow_maps_enabled = false;
+    harness.world_mut().entity_mut(lamp).insert(settings());
+    // Receivers convert and compile asynchronously: give them time, then read the texture.
+    let mut image = Vec::new();
+    for _ in 0..30 {
+        image = to_linear(&harness.render().unwrap());
+    }
+    let textures = harness.world_mut().resource::<SsssTextures>().clone();
+    let visibility = floats(
+        &harness
+            .read_image(textures.visibility.clone(), SIZE, SIZE, 8)
+            .unwrap(),
+    );
+    let active = visibility.iter().step_by(2).filter(|&&v| v >= 0.0).count();
+    assert_eq!(active, 0, "SSSS ran for a light without shadow maps");
+    // Without shadow maps the lamp casts no shadow: the ground is lit as with the pole hidden.
+    let (col, row) = pixel_of(-2.0, 0.0);
+    let i = ((row * SIZE + col) * 4 + 1) as usize;
+    assert!(
+        (image[i] - unshadowed[i]).abs() < 0.02 * unshadowed[i],
+        "{} vs {}",
+        image[i],
+        unshadowed[i]
+    );
+}
