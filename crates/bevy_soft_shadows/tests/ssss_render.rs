@@ -290,10 +290,16 @@ fn ssss_is_no_worse_than_bevys_pcss_against_the_area_light_reference() {
 }
 
 /// The coarse dilated shadow map on the GPU against its CPU reference
-/// (`min_filter::coarse_dilate`) run on the same frame's shadow map, read back together.
+/// (`min_filter::coarse_dilate`) run on the same frame's shadow map, read back together — with
+/// every form of the min filter — and the distance pass against its CPU reference
+/// (`ssss::distance`) on that map, pixel by pixel.
 #[test]
-fn the_dilated_shadow_map_matches_its_cpu_reference() {
+fn the_dilation_and_distance_passes_match_their_cpu_references() {
+    use bevy::light::Cascades;
     use bevy::render::RenderApp;
+    use bevy_soft_shadows::ssss::distance::{
+        CoarseMap, DirectionalCascade, directional_penumbra_width, pixel_sigma,
+    };
     use bevy_soft_shadows::ssss::min_filter::{DepthConvention, coarse_dilate, coarse_radius};
     use bevy_soft_shadows::ssss::render::{SsssDilationFilter, SsssDilationReadback};
     let Some(mut harness) = pole_harness("ssss_dilation") else {
@@ -363,6 +369,97 @@ fn the_dilated_shadow_map_matches_its_cpu_reference() {
         matching.iter().any(|r| (r_min..=r_max).contains(r)),
         "R {matching:?} outside {r_min}..={r_max}"
     );
+    // The distance pass against its CPU reference (`ssss::distance`) on every ground pixel,
+    // with the cascade Bevy built for this view (the main world's `Cascades`) and the radius the
+    // pass derives from its texel size — which must be the one the map matched at.
+    let cascade = {
+        let world = harness.world_mut();
+        let camera = world
+            .query_filtered::<Entity, With<Camera3d>>()
+            .single(world)
+            .unwrap();
+        let cascades = world.get::<Cascades>(sun).unwrap();
+        let c = &cascades.cascades[&camera][0];
+        DirectionalCascade {
+            clip_from_world: c.clip_from_world,
+            texel_size: c.texel_size,
+        }
+    };
+    let radius = coarse_radius(
+        s.max_occluder_distance,
+        s.light_size,
+        cascade.texel_size,
+        64.0,
+    );
+    assert_eq!(
+        matching,
+        vec![radius],
+        "the map's radius is the one the cascade gives"
+    );
+    let textures = harness.world_mut().resource::<SsssTextures>().clone();
+    let distance = floats(
+        &harness
+            .read_image(textures.distance.clone(), SIZE, SIZE, 16)
+            .unwrap(),
+    );
+    let coarse = CoarseMap {
+        depth: &gpu,
+        width: coarse_size.x as usize,
+        height: coarse_size.y as usize,
+        map_size: fine_size.x as f32,
+        radius,
+    };
+    let m_per_px = VIEW_M / SIZE as f32;
+    let (mut ground, mut agree, mut penumbra, mut worst) = (0u32, 0u32, 0u32, 0.0f32);
+    for row in 0..SIZE {
+        for col in 0..SIZE {
+            let i = (row * SIZE + col) as usize * 4;
+            if (distance[i + 3] - 10.0).abs() > 1e-3 {
+                continue;
+            }
+            ground += 1;
+            let world = Vec3::new(
+                CENTRE.x - VIEW_M / 2.0 + (col as f32 + 0.5) * m_per_px,
+                0.0,
+                CENTRE.z - VIEW_M / 2.0 + (row as f32 + 0.5) * m_per_px,
+            );
+            let width = directional_penumbra_width(
+                &cascade,
+                &coarse,
+                world,
+                Vec3::Y,
+                sun_direction(),
+                s.light_size,
+            );
+            let sigma = pixel_sigma(
+                width,
+                SIZE as f32 / VIEW_M,
+                None,
+                s.min_kernel_px,
+                s.max_kernel_px,
+            );
+            let error = (distance[i + 1] - sigma)
+                .abs()
+                .max((distance[i + 2] - sigma).abs());
+            agree += (error <= 1e-3 * (1.0 + sigma)) as u32;
+            worst = worst.max(error);
+            penumbra += (sigma > 0.0) as u32;
+        }
+    }
+    println!(
+        "distance pass vs CPU: {agree} of {ground} ground pixels agree ({penumbra} in penumbra), \
+         worst σ difference {worst:.3} px"
+    );
+    assert!(
+        ground > SIZE * SIZE / 2 && penumbra > 500,
+        "{ground} / {penumbra}"
+    );
+    assert!(
+        agree as f32 >= 0.995 * ground as f32,
+        "the distance pass differs from its CPU reference at {} pixels",
+        ground - agree
+    );
+
     // Both forms of the filter give the same map (Auto picked one of them above).
     for filter in [SsssDilationFilter::Direct, SsssDilationFilter::Segments] {
         harness.world_mut().insert_resource(filter);

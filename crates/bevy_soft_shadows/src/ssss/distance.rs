@@ -6,11 +6,14 @@
 //! For spot lights the light space is Bevy's spot shadow projection ([`SpotProjection`]): an
 //! infinite reverse-Z perspective whose stored depth is `near / d`, `d` the distance along the
 //! spot's axis — so depths turn back into distances exactly, and eq. 6.1 applies as written.
+//! For a directional light it is a cascade's orthographic projection
+//! ([`DirectionalCascade`]), whose depth is linear along the light; eq. 6.1 takes its limit for
+//! a light at infinity.
 
 use super::kernel::KERNEL_REACH_SIGMAS;
 use super::min_filter::DILATION_BLOCK;
 use super::penumbra::{own_surface_gap, penumbra_sigma, penumbra_width, screen_penumbra_px};
-use bevy::math::{Mat3, Vec2, Vec3};
+use bevy::math::{Mat3, Mat4, Vec2, Vec3};
 
 /// Bevy's spot-light shadow projection, as `fetch_spot_shadow` builds it from the clustered
 /// light (without its depth and normal biases, which only the hard shadow lookup applies).
@@ -70,6 +73,69 @@ impl SpotProjection {
     pub fn texel_size(&self, distance: f32, map_size: f32) -> f32 {
         2.0 * distance * self.tan_outer / map_size
     }
+}
+
+/// One cascade of a directional light's shadow map, as Bevy uploads it (`Cascade`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DirectionalCascade {
+    /// World to the cascade's clip space (orthographic, reverse Z).
+    pub clip_from_world: Mat4,
+    /// World size of one shadow-map texel.
+    pub texel_size: f32,
+}
+
+impl DirectionalCascade {
+    /// Shadow-map coordinates (uv, v down) and stored depth of `world`, as Bevy's
+    /// `world_to_directional_light_local`; `None` outside the cascade's volume.
+    pub fn project(&self, world: Vec3) -> Option<(Vec2, f32)> {
+        let clip = self.clip_from_world * world.extend(1.0);
+        if clip.w <= 0.0 {
+            return None;
+        }
+        let ndc = clip.truncate() / clip.w;
+        if ndc.x < -1.0 || ndc.y < -1.0 || ndc.z < 0.0 || ndc.cmpgt(Vec3::ONE).any() {
+            return None;
+        }
+        Some((
+            Vec2::new(ndc.x, ndc.y) * Vec2::new(0.5, -0.5) + Vec2::splat(0.5),
+            ndc.z,
+        ))
+    }
+
+    /// Stored depth per metre along the light.
+    pub fn depth_per_metre(&self) -> f32 {
+        let m = self.clip_from_world;
+        Vec3::new(m.x_axis.z, m.y_axis.z, m.z_axis.z).length()
+    }
+}
+
+/// Eq. 6.1 for a light at infinity (angular diameter `angular_diameter`): the world width of the
+/// penumbra at receiver `world` (unit `normal`; `direction_to_light` unit) behind the blocker the
+/// coarse map holds at its texel, the gap measured along the light from the cascade's linear
+/// depth. Zero outside the cascade, with no blocker nearer the light, or when the "blocker" is
+/// the receiver's own surface across the dilation footprint ([`own_surface_gap`]).
+pub fn directional_penumbra_width(
+    cascade: &DirectionalCascade,
+    coarse: &CoarseMap,
+    world: Vec3,
+    normal: Vec3,
+    direction_to_light: Vec3,
+    angular_diameter: f32,
+) -> f32 {
+    let Some((uv, depth)) = cascade.project(world) else {
+        return 0.0;
+    };
+    let gap = (coarse.at(uv) - depth) / cascade.depth_per_metre().max(1e-8);
+    let reach = ((coarse.radius + 1) * DILATION_BLOCK) as f32 * cascade.texel_size;
+    let cos_nl = normal.dot(direction_to_light);
+    if cos_nl > 0.0 && gap <= own_surface_gap(reach, cos_nl) {
+        return 0.0;
+    }
+    directional_penumbra_width_of_gap(gap, angular_diameter)
+}
+
+fn directional_penumbra_width_of_gap(gap: f32, angular_diameter: f32) -> f32 {
+    super::penumbra::directional_penumbra_width(gap.max(0.0), angular_diameter)
 }
 
 /// The coarse dilated map of one light, as the distance pass reads it.
@@ -237,6 +303,44 @@ mod tests {
             0.0
         );
         assert!(spot_penumbra_width(&p, &coarse_near, receiver, normal, 0.5) > 0.0);
+    }
+
+    #[test]
+    fn a_directional_blocker_one_metre_up_gives_eq_6_1() {
+        // A cascade looking straight down: 20 m wide, depth 1 at y = 10 down to 0 at y = −10.
+        let view = Mat4::look_to_rh(Vec3::new(0.0, 10.0, 0.0), Vec3::NEG_Y, Vec3::Z);
+        let projection = Mat4::orthographic_rh(-10.0, 10.0, -10.0, 10.0, 20.0, 0.0);
+        let cascade = DirectionalCascade {
+            clip_from_world: projection * view,
+            texel_size: 20.0 / 2048.0,
+        };
+        assert!((cascade.depth_per_metre() - 0.05).abs() < 1e-6);
+        let (uv, depth) = cascade.project(Vec3::ZERO).unwrap();
+        assert!(uv.distance(Vec2::splat(0.5)) < 1e-5 && (depth - 0.5).abs() < 1e-5);
+        assert!(
+            cascade.project(Vec3::new(11.0, 0.0, 0.0)).is_none(),
+            "outside"
+        );
+        // A blocker 1 m above the receiver, a 0.1 rad light straight above.
+        let blocker = [0.5 + 0.05];
+        let coarse = CoarseMap {
+            depth: &blocker,
+            width: 1,
+            height: 1,
+            map_size: 2048.0,
+            radius: 2,
+        };
+        let w = directional_penumbra_width(&cascade, &coarse, Vec3::ZERO, Vec3::Y, Vec3::Y, 0.1);
+        assert!((w - 2.0 * 0.05f32.tan()).abs() < 1e-4, "{w}");
+        // No blocker above: nothing.
+        let none = [0.5];
+        let coarse_none = CoarseMap {
+            depth: &none,
+            ..coarse
+        };
+        let w =
+            directional_penumbra_width(&cascade, &coarse_none, Vec3::ZERO, Vec3::Y, Vec3::Y, 0.1);
+        assert_eq!(w, 0.0);
     }
 
     #[test]
