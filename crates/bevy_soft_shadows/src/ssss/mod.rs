@@ -11,6 +11,7 @@
 //!    depth rejection and lazy shadowing (§6.2.3, §6.3.2).
 
 pub mod blur;
+pub mod dilation;
 pub mod distance;
 pub mod kernel;
 pub mod min_filter;
@@ -34,4 +35,5 @@ pub(crate) fn build(app: &mut bevy::prelude::App) {
     }
     receiver::build(app);
     render::build(app);
+    dilation::build(app);
 }

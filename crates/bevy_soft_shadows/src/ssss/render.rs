@@ -8,7 +8,6 @@ use super::receiver::{SoftShadowCamera, SsssActive, SsssTextures};
 use crate::settings::ScreenSpaceSoftShadows;
 use bevy::asset::{embedded_asset, load_embedded_asset};
 use bevy::core_pipeline::{Core3d, Core3dSystems, FullscreenShader};
-use bevy::light::{Cascades, DirectionalLightShadowMap};
 use bevy::pbr::{
     GlobalClusterableObjectMeta, GpuLights, LATE_SHADOW_PASS, LightMeta, MeshPipeline,
     MeshPipelineKey, MeshPipelineSystems, MeshViewBindGroup, ViewKeyCache, ViewLightsUniformOffset,
@@ -136,11 +135,9 @@ struct ExtractedSsss {
 #[allow(clippy::type_complexity)]
 fn extract_ssss(
     mut extracted: ResMut<ExtractedSsss>,
-    directional: Extract<
-        Query<(&ScreenSpaceSoftShadows, Option<&Cascades>), With<DirectionalLight>>,
-    >,
+    directional: Extract<Query<&ScreenSpaceSoftShadows, With<DirectionalLight>>>,
+    dilation: Extract<Res<super::dilation::SsssDilationRadius>>,
     spots: Extract<Query<(Entity, &ScreenSpaceSoftShadows, &SpotLight, &RenderEntity)>>,
-    shadow_map: Extract<Res<DirectionalLightShadowMap>>,
     textures: Extract<Res<SsssTextures>>,
     active: Extract<Res<SsssActive>>,
     mut warned: Local<bool>,
@@ -152,24 +149,9 @@ fn extract_ssss(
     if !active.0 {
         return;
     }
-    let max_texels = super::min_filter::MAX_DILATION_TEXELS as f32;
-    if let Some((settings, cascades)) = directional.iter().next() {
+    extracted.max_radius = dilation.radius;
+    if let Some(settings) = directional.iter().next() {
         let settings = settings.sanitized().0;
-        // The radius the dilation pass computes per cascade (`min_filter.wgsl`); without
-        // cascades yet, assume the widest.
-        extracted.max_radius = cascades
-            .into_iter()
-            .flat_map(|c| c.cascades.values().flatten())
-            .map(|c| {
-                super::min_filter::coarse_radius(
-                    settings.max_occluder_distance,
-                    settings.light_size,
-                    c.texel_size,
-                    max_texels,
-                )
-            })
-            .max()
-            .unwrap_or(super::min_filter::MAX_DILATION_TEXELS / super::min_filter::DILATION_BLOCK);
         extracted.uniform = SsssUniform::new(&settings);
         return;
     }
@@ -189,16 +171,6 @@ fn extract_ssss(
     *warned = false;
     let settings = settings.sanitized().0;
     extracted.spot = Some(render_entity.id());
-    extracted.max_radius = super::min_filter::spot_coarse_radius(
-        settings.light_size,
-        settings.max_occluder_distance,
-        // Bevy clamps the outer angle just below π/2 for the shadow projection.
-        spot.outer_angle
-            .min(std::f32::consts::FRAC_PI_2 - 1e-4)
-            .tan(),
-        shadow_map.size as f32,
-        max_texels,
-    );
     extracted.uniform = SsssUniform {
         light_kind: LIGHT_KIND_SPOT,
         spot_radius: extracted.max_radius as u32,

@@ -1,0 +1,173 @@
+//! The dilation's coarse radius for the SSSS light, worked out in the main world each frame:
+//! the render world's extraction reads it (the spot light's radius in the uniform, the choice of
+//! min filter), Bevy diagnostics publish it (`ssss/dilation_radius`, `ssss/segment_filter`), and
+//! a window the cap cuts short gets a warning.
+
+use super::min_filter::{DILATION_BLOCK, MAX_DILATION_TEXELS, coarse_radius, spot_coarse_radius};
+use super::render::SsssDilationFilter;
+use crate::settings::ScreenSpaceSoftShadows;
+use bevy::diagnostic::{Diagnostic, DiagnosticPath, Diagnostics, RegisterDiagnostic};
+use bevy::light::{Cascades, DirectionalLightShadowMap, SimulationLightSystems};
+use bevy::prelude::*;
+
+/// The largest coarse dilation radius `R` over the SSSS light's shadow maps (coarse texels).
+pub const DILATION_RADIUS: DiagnosticPath = DiagnosticPath::const_new("ssss/dilation_radius");
+/// 1 while the segment min filter runs, 0 for the direct one.
+pub const SEGMENT_FILTER: DiagnosticPath = DiagnosticPath::const_new("ssss/segment_filter");
+
+/// The SSSS light's dilation, as this frame's settings and shadow maps give it.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SsssDilationRadius {
+    /// The largest coarse radius over the light's shadow maps (its cascades, or the spot's map).
+    pub radius: usize,
+    /// Whether `max_occluder_distance` asked for more than [`MAX_DILATION_TEXELS`] fine texels
+    /// somewhere, so the window stops short of the farthest blockers asked for.
+    pub capped: bool,
+}
+
+/// The radius for the light the render world shades: the first directional light with SSSS
+/// (over its cascades; the widest until it has any), else the first spot light with it.
+pub fn dilation_radius(
+    directional: Option<(&ScreenSpaceSoftShadows, Option<&Cascades>)>,
+    spot: Option<(&ScreenSpaceSoftShadows, &SpotLight)>,
+    shadow_map_size: f32,
+) -> SsssDilationRadius {
+    let cap = MAX_DILATION_TEXELS as f32;
+    let both = |f: &dyn Fn(f32) -> usize| SsssDilationRadius {
+        radius: f(cap),
+        capped: f(f32::INFINITY) > f(cap),
+    };
+    if let Some((settings, cascades)) = directional {
+        let s = settings.sanitized().0;
+        let texels: Vec<f32> = cascades
+            .into_iter()
+            .flat_map(|c| c.cascades.values().flatten())
+            .map(|c| c.texel_size)
+            .collect();
+        if texels.is_empty() {
+            return SsssDilationRadius {
+                radius: MAX_DILATION_TEXELS / DILATION_BLOCK,
+                capped: false,
+            };
+        }
+        return both(&|max| {
+            texels
+                .iter()
+                .map(|&t| coarse_radius(s.max_occluder_distance, s.light_size, t, max))
+                .max()
+                .unwrap_or(0)
+        });
+    }
+    if let Some((settings, spot)) = spot {
+        let s = settings.sanitized().0;
+        // Bevy clamps the outer angle just below π/2 for the shadow projection.
+        let tan_outer = spot
+            .outer_angle
+            .min(std::f32::consts::FRAC_PI_2 - 1e-4)
+            .tan();
+        return both(&|max| {
+            spot_coarse_radius(
+                s.light_size,
+                s.max_occluder_distance,
+                tan_outer,
+                shadow_map_size,
+                max,
+            )
+        });
+    }
+    SsssDilationRadius::default()
+}
+
+#[allow(clippy::type_complexity)]
+fn measure_dilation(
+    directional: Query<(&ScreenSpaceSoftShadows, Option<&Cascades>), With<DirectionalLight>>,
+    spots: Query<(&ScreenSpaceSoftShadows, &SpotLight)>,
+    shadow_map: Res<DirectionalLightShadowMap>,
+    filter: Res<SsssDilationFilter>,
+    mut dilation: ResMut<SsssDilationRadius>,
+    mut diagnostics: Diagnostics,
+    mut warned: Local<bool>,
+) {
+    let now = dilation_radius(
+        directional.iter().next(),
+        spots.iter().next(),
+        shadow_map.size as f32,
+    );
+    if now.capped && !*warned {
+        warn!(
+            "ScreenSpaceSoftShadows: max_occluder_distance needs a dilation wider than \
+             {MAX_DILATION_TEXELS} shadow-map texels; it is capped there, so penumbrae of the \
+             farthest blockers are cut short (lower max_occluder_distance or light_size, or \
+             use a coarser shadow map)"
+        );
+    }
+    *warned = now.capped;
+    if *dilation != now {
+        *dilation = now;
+    }
+    diagnostics.add_measurement(&DILATION_RADIUS, || now.radius as f64);
+    diagnostics.add_measurement(&SEGMENT_FILTER, || {
+        filter.uses_segments(now.radius) as u32 as f64
+    });
+}
+
+pub(crate) fn build(app: &mut App) {
+    app.init_resource::<SsssDilationRadius>()
+        .register_diagnostic(Diagnostic::new(DILATION_RADIUS))
+        .register_diagnostic(Diagnostic::new(SEGMENT_FILTER))
+        .add_systems(
+            PostUpdate,
+            measure_dilation.after(SimulationLightSystems::UpdateDirectionalLightCascades),
+        );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_radius_follows_the_light_and_reports_the_cap() {
+        let settings = ScreenSpaceSoftShadows {
+            light_size: 0.7,
+            max_occluder_distance: 3.5,
+            ..default()
+        };
+        let lamp = SpotLight {
+            outer_angle: 0.75,
+            ..default()
+        };
+        let r = dilation_radius(None, Some((&settings, &lamp)), 2048.0);
+        assert_eq!(
+            r,
+            SsssDilationRadius {
+                radius: 14,
+                capped: false
+            }
+        );
+        // A 1.76 m lamp asks for ~139 texels: capped at 64 (R = 16), and said so.
+        let wide = ScreenSpaceSoftShadows {
+            light_size: 1.76,
+            ..settings.clone()
+        };
+        let r = dilation_radius(None, Some((&wide, &lamp)), 2048.0);
+        assert_eq!(
+            r,
+            SsssDilationRadius {
+                radius: 16,
+                capped: true
+            }
+        );
+        // A directional light wins; before its cascades exist it assumes the widest window.
+        let sun = ScreenSpaceSoftShadows {
+            light_size: 0.1,
+            max_occluder_distance: 5.0,
+            ..default()
+        };
+        let r = dilation_radius(Some((&sun, None)), Some((&settings, &lamp)), 2048.0);
+        assert_eq!(r.radius, MAX_DILATION_TEXELS / DILATION_BLOCK);
+        assert_eq!(
+            dilation_radius(None, None, 2048.0),
+            SsssDilationRadius::default()
+        );
+    }
+}
