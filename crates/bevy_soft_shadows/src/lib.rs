@@ -11,11 +11,11 @@
 //! `SpotLight::soft_shadows_enabled`) and shadow filters.
 //!
 //! Add [`SoftShadowsPlugin`] and put [`ScreenSpaceSoftShadows`] (reflected, so inspectors can
-//! edit it) on a shadow-casting `DirectionalLight` or `SpotLight`. The plugin then adds the depth and normal
-//! prepasses to the 3D cameras and turns meshes' `StandardMaterial`s into
-//! [`SoftShadowMaterial`](ssss::receiver::SoftShadowMaterial)s, whose lighting uses the soft
+//! edit it) on a shadow-casting `DirectionalLight` or `SpotLight`. The plugin then adds the
+//! depth and normal prepasses to the 3D cameras and turns meshes' `StandardMaterial`s into
+//! [`SoftShadowMaterial`]s, whose lighting uses the soft
 //! visibility as that light's shadow term (opt out with
-//! [`NoSoftShadowReceiver`](ssss::receiver::NoSoftShadowReceiver)).
+//! [`NoSoftShadowReceiver`]).
 //!
 //! ```no_run
 //! use bevy::prelude::*;
@@ -32,7 +32,7 @@
 //! ```
 //!
 //! Modules: [`ssss`] (the algorithm as plain Rust — the CPU references — and its render passes),
-//! [`reference`] (the area-light ground truth the tests and the benchmark measure against).
+//! [`reference`](mod@reference) (the area-light ground truth the tests and the benchmark measure against).
 //!
 //! Other materials receive SSSS by calling `apply_soft_shadow` from the WGSL module
 //! `bevy_soft_shadows::receiver_functions` after `apply_pbr_lighting`, with the visibility read
@@ -55,6 +55,12 @@
 //!     ));
 //! }
 //! ```
+//!
+//! Diagnostics: `ssss/dilation_radius` (the min filter's coarse radius) and
+//! `ssss/segment_filter` (which form of the filter runs,
+//! [`SsssDilationFilter`](ssss::render::SsssDilationFilter)); with Bevy's
+//! `RenderDiagnosticsPlugin`, the GPU time of the `ssss` span and of its passes (`ssss_reduce`,
+//! `ssss_dilate`, `ssss_distance`, `ssss_blur_h`, `ssss_blur_v`).
 //!
 //! Limits: one SSSS light (a directional light if one has the component — the first
 //! shadow-casting directional light in Bevy's order — else the first spot light with it), one

@@ -3,7 +3,7 @@
 //! Offline, [`bake`] turns a tree's [`LeafSet`](leaves::LeafSet) into a
 //! [`BakedFoliage`](bake::BakedFoliage): leaves grouped in cells ([`cells`]), each cell's
 //! visibility from evenly spread viewpoints ([`visibility`]), each cell's leaves in a seeded
-//! random order, and per-vertex centroid offsets. [`format`] stores it as a versioned,
+//! random order, and per-vertex centroid offsets. [`format`](mod@format) stores it as a versioned,
 //! checksummed binary file.
 //!
 //! Every frame, per tree, the pruning pass keeps a prefix of each cell's list sized by distance
