@@ -19,9 +19,7 @@ use bevy_nature_harness::{RenderHarness, artifacts_dir};
 use bevy_soft_shadows::reference::{
     LinearAverage, disk_rise_fraction, jittered_positions, linear_to_srgb, rise_width,
 };
-use bevy_soft_shadows::ssss::distance::{
-    CoarseMap, SpotProjection, pixel_sigma, spot_penumbra_width,
-};
+use bevy_soft_shadows::ssss::distance::{CoarseMap, SpotProjection, spot_penumbra_width};
 use bevy_soft_shadows::ssss::min_filter::{
     DepthConvention, MAX_DILATION_TEXELS, coarse_dilate, spot_coarse_radius,
 };
@@ -253,30 +251,8 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
 
     // 1. The spot light's dilated map (layer 0: no directional cascades, no point lights)
     //    against the CPU reference at exactly the radius the settings give.
-    let unpad = |bytes: Vec<u8>, size: UVec2| -> Vec<f32> {
-        let stride = (size.x as usize * 4).div_ceil(256) * 256;
-        (0..size.y as usize)
-            .flat_map(|y| floats(&bytes[y * stride..y * stride + size.x as usize * 4]))
-            .collect()
-    };
-    let mut read = |coarse: bool| {
-        let mut size = UVec2::ZERO;
-        let bytes = harness
-            .read_render_buffer(|world| {
-                let r = world.get_resource::<SsssDilationReadback>()?;
-                let (buffer, s) = if coarse {
-                    r.coarse.clone()?
-                } else {
-                    r.fine.clone()?
-                };
-                size = s;
-                Some(buffer)
-            })
-            .unwrap();
-        (unpad(bytes, size), size)
-    };
-    let (fine, fine_size) = read(false);
-    let (gpu, coarse_size) = read(true);
+    let (fine, fine_size) = read_dilation(&mut harness, false);
+    let (gpu, coarse_size) = read_dilation(&mut harness, true);
     let radius = spot_coarse_radius(
         DIAMETER,
         MAX_OCCLUDER,
@@ -308,12 +284,6 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
 
     // 2. The distance pass against its CPU reference (`ssss::distance`), pixel by pixel on the
     //    ground: the same coarse map, Bevy's spot projection, eq. 6.1, eq. 6.2 and the mask.
-    let textures = harness.world_mut().resource::<SsssTextures>().clone();
-    let distance = floats(
-        &harness
-            .read_image(textures.distance.clone(), SIZE, SIZE, 16)
-            .unwrap(),
-    );
     let light = *harness.world_mut().get::<SpotLight>(lamp).unwrap();
     // The lamp's forward as Bevy extracts it: along z it is ±0 up to rounding, and the sign
     // decides the basis `orthonormalize` builds (the map's orientation about the axis).
@@ -336,55 +306,9 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
         radius,
     };
     let s = settings();
-    let m_per_px = VIEW_M / SIZE as f32;
-    let (mut ground, mut agree, mut penumbra, mut worst) = (0, 0, 0, 0.0f32);
-    for row in 0..SIZE {
-        for col in 0..SIZE {
-            let i = (row * SIZE + col) as usize * 4;
-            // Ground pixels only (the camera is 10 m above it); the pole's top is 6 m away.
-            if (distance[i + 3] - 10.0).abs() > 1e-3 {
-                continue;
-            }
-            ground += 1;
-            let world = Vec3::new(
-                CENTRE.x - VIEW_M / 2.0 + (col as f32 + 0.5) * m_per_px,
-                0.0,
-                CENTRE.z - VIEW_M / 2.0 + (row as f32 + 0.5) * m_per_px,
-            );
-            let width = spot_penumbra_width(&projection, &coarse, world, Vec3::Y, s.light_size);
-            // Orthographic top-down view: SIZE / VIEW_M pixels per metre, no eye-depth division;
-            // the ground faces the camera, so both kernel axes are σ.
-            let sigma = pixel_sigma(
-                width,
-                SIZE as f32 / VIEW_M,
-                None,
-                s.min_kernel_px,
-                s.max_kernel_px,
-            );
-            let error = (distance[i + 1] - sigma)
-                .abs()
-                .max((distance[i + 2] - sigma).abs());
-            if error <= 1e-3 * (1.0 + sigma) {
-                agree += 1;
-            }
-            worst = worst.max(error);
-            penumbra += (sigma > 0.0) as u32;
-        }
-    }
-    println!(
-        "distance pass vs CPU: {agree} of {ground} ground pixels agree ({penumbra} in penumbra), \
-         worst σ difference {worst:.3} px"
-    );
-    assert!(
-        ground > (SIZE * SIZE / 2) && penumbra > 500,
-        "{ground} / {penumbra}"
-    );
-    // A pixel whose uv falls exactly on a coarse texel's border may round to its neighbour.
-    assert!(
-        agree as f32 >= 0.995 * ground as f32,
-        "the distance pass differs from its CPU reference at {} pixels",
-        ground - agree
-    );
+    assert_distance_pass_matches(&mut harness, &s, |world| {
+        spot_penumbra_width(&projection, &coarse, world, Vec3::Y, s.light_size)
+    });
 
     // 3. Penumbra widths (10–90 %) across the side edge, in visibility (over the unshadowed
     //    render), against eq. 6.1.
@@ -392,6 +316,7 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
         visibility(&reference, &unshadowed),
         visibility(&ssss, &unshadowed),
     );
+    let m_per_px = VIEW_M / SIZE as f32;
     let k = disk_rise_fraction();
     let mut widths = Vec::new();
     for x in [-1.0f32, -2.0, -3.0] {

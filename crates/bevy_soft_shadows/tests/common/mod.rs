@@ -255,3 +255,91 @@ pub fn strip(images: &[&[f32]]) -> RgbaImage {
     }
     RgbaImage::new(width, SIZE, data)
 }
+
+/// A dilation readback (`SsssDilationReadback`) of the last frame: layer 0 of the shadow map
+/// (`coarse` false) or of the coarse dilated map, unpadded, with its size.
+pub fn read_dilation(harness: &mut RenderHarness, coarse: bool) -> (Vec<f32>, UVec2) {
+    use bevy_soft_shadows::ssss::render::SsssDilationReadback;
+    let mut size = UVec2::ZERO;
+    let bytes = harness
+        .read_render_buffer(|world| {
+            let r = world.get_resource::<SsssDilationReadback>()?;
+            let (buffer, s) = if coarse {
+                r.coarse.clone()?
+            } else {
+                r.fine.clone()?
+            };
+            size = s;
+            Some(buffer)
+        })
+        .unwrap();
+    let stride = (size.x as usize * 4).div_ceil(256) * 256;
+    let texels = (0..size.y as usize)
+        .flat_map(|y| floats(&bytes[y * stride..y * stride + size.x as usize * 4]))
+        .collect();
+    (texels, size)
+}
+
+/// The distance pass (GPU, `SsssTextures::distance`) against its CPU reference on every ground
+/// pixel of the top-down view: `width_at` gives the CPU's penumbra width at a ground point, and
+/// σ follows by `ssss::distance::pixel_sigma` (orthographic, both kernel axes equal on the
+/// ground). Asserts that ≥ 99.5 % agree (a uv on a coarse texel's border may round to its
+/// neighbour) and that there is a penumbra to compare; returns (agree, ground, in penumbra).
+pub fn assert_distance_pass_matches(
+    harness: &mut RenderHarness,
+    settings: &bevy_soft_shadows::ScreenSpaceSoftShadows,
+    width_at: impl Fn(Vec3) -> f32,
+) -> (u32, u32, u32) {
+    use bevy_soft_shadows::ssss::distance::pixel_sigma;
+    use bevy_soft_shadows::ssss::receiver::SsssTextures;
+    let textures = harness.world_mut().resource::<SsssTextures>().clone();
+    let distance = floats(
+        &harness
+            .read_image(textures.distance.clone(), SIZE, SIZE, 16)
+            .unwrap(),
+    );
+    let m_per_px = VIEW_M / SIZE as f32;
+    let (mut ground, mut agree, mut penumbra, mut worst) = (0u32, 0u32, 0u32, 0.0f32);
+    for row in 0..SIZE {
+        for col in 0..SIZE {
+            let i = (row * SIZE + col) as usize * 4;
+            // Ground pixels only: the camera is 10 m above the ground.
+            if (distance[i + 3] - 10.0).abs() > 1e-3 {
+                continue;
+            }
+            ground += 1;
+            let world = Vec3::new(
+                CENTRE.x - VIEW_M / 2.0 + (col as f32 + 0.5) * m_per_px,
+                0.0,
+                CENTRE.z - VIEW_M / 2.0 + (row as f32 + 0.5) * m_per_px,
+            );
+            let sigma = pixel_sigma(
+                width_at(world),
+                SIZE as f32 / VIEW_M,
+                None,
+                settings.min_kernel_px,
+                settings.max_kernel_px,
+            );
+            let error = (distance[i + 1] - sigma)
+                .abs()
+                .max((distance[i + 2] - sigma).abs());
+            agree += (error <= 1e-3 * (1.0 + sigma)) as u32;
+            worst = worst.max(error);
+            penumbra += (sigma > 0.0) as u32;
+        }
+    }
+    println!(
+        "distance pass vs CPU: {agree} of {ground} ground pixels agree ({penumbra} in penumbra), \
+         worst σ difference {worst:.3} px"
+    );
+    assert!(
+        ground > SIZE * SIZE / 2 && penumbra > 500,
+        "{ground} / {penumbra}"
+    );
+    assert!(
+        agree as f32 >= 0.995 * ground as f32,
+        "the distance pass differs from its CPU reference at {} pixels",
+        ground - agree
+    );
+    (agree, ground, penumbra)
+}
