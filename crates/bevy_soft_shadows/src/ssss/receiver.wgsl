@@ -1,12 +1,11 @@
-// A StandardMaterial whose directional light's shadow term is Screen Space Soft Shadows: Bevy's
+// A StandardMaterial whose SSSS light's shadow term is Screen Space Soft Shadows: Bevy's
 // lighting with the SSSS visibility at this fragment's pixel (receiver_functions.wgsl).
 #import bevy_pbr::{
     pbr_fragment::pbr_input_from_standard_material,
-    pbr_functions::{alpha_discard, main_pass_post_lighting_processing},
+    pbr_functions::alpha_discard,
     forward_io::{VertexOutput, FragmentOutput},
-    pbr_types::STANDARD_MATERIAL_FLAGS_UNLIT_BIT,
 }
-#import bevy_soft_shadows::receiver_functions::apply_pbr_lighting_soft
+#import bevy_soft_shadows::receiver_functions::soft_shaded_color
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var soft_visibility: texture_2d<f32>;
 
@@ -15,11 +14,6 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
     var pbr_input = pbr_input_from_standard_material(in, is_front);
     pbr_input.material.base_color = alpha_discard(pbr_input.material, pbr_input.material.base_color);
     var out: FragmentOutput;
-    if (pbr_input.material.flags & STANDARD_MATERIAL_FLAGS_UNLIT_BIT) != 0u {
-        out.color = pbr_input.material.base_color;
-    } else {
-        out.color = apply_pbr_lighting_soft(pbr_input, in.position.xy, soft_visibility);
-    }
-    out.color = main_pass_post_lighting_processing(pbr_input, out.color);
+    out.color = soft_shaded_color(pbr_input, in.position.xy, soft_visibility);
     return out;
 }

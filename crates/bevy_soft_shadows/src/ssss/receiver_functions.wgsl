@@ -7,14 +7,18 @@
 //
 //     apply_pbr_lighting_soft(pbr_input, in.position.xy, visibility)
 //
+// (or `soft_shaded_color` for the whole tail: unlit check, lighting, post-lighting processing),
 // with `visibility` the `SsssTextures::visibility` texture bound in the material (.r the soft
 // visibility, negative where SSSS is inactive; .g which light), or `apply_soft_shadow` on an
 // already lit colour. The light's direct contribution D is re-weighted from Bevy's
 // visibility v_b to v_s: color += exposure · D · (v_s − v_b) — the lighting Bevy would compute
 // had its shadow lookup returned v_s. Ambient, emissive and other lights are untouched.
 #import bevy_pbr::{
-    pbr_functions::{apply_pbr_lighting, calculate_diffuse_color, calculate_F0_dielectric},
-    pbr_types::PbrInput,
+    pbr_functions::{
+        apply_pbr_lighting, calculate_diffuse_color, calculate_F0_dielectric,
+        main_pass_post_lighting_processing,
+    },
+    pbr_types::{PbrInput, STANDARD_MATERIAL_FLAGS_UNLIT_BIT},
     mesh_view_bindings as view_bindings,
     mesh_view_types::{DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT, POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT},
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
@@ -97,4 +101,15 @@ fn soft_visibility_at(visibility: texture_2d<f32>, frag_xy: vec2<f32>) -> vec2<f
 fn apply_pbr_lighting_soft(pbr_input: PbrInput, frag_xy: vec2<f32>, visibility: texture_2d<f32>) -> vec4<f32> {
     return apply_soft_shadow(
         pbr_input, apply_pbr_lighting(pbr_input), frag_xy, soft_visibility_at(visibility, frag_xy));
+}
+
+// A receiving material's main-pass colour from its `PbrInput`: unlit materials keep their base
+// colour, lit ones get `apply_pbr_lighting_soft`, then Bevy's post-lighting processing — the
+// tail of Bevy's own PBR fragment stage, with the SSSS shadow term.
+fn soft_shaded_color(pbr_input: PbrInput, frag_xy: vec2<f32>, visibility: texture_2d<f32>) -> vec4<f32> {
+    var color = pbr_input.material.base_color;
+    if (pbr_input.material.flags & STANDARD_MATERIAL_FLAGS_UNLIT_BIT) == 0u {
+        color = apply_pbr_lighting_soft(pbr_input, frag_xy, visibility);
+    }
+    return main_pass_post_lighting_processing(pbr_input, color);
 }
