@@ -392,9 +392,20 @@ fn the_dilation_and_distance_passes_match_their_cpu_references() {
     });
 
     // Both forms of the filter give the same map (Auto picked one of them above).
+    let ran = |harness: &mut RenderHarness| {
+        harness
+            .app_mut()
+            .sub_app_mut(RenderApp)
+            .world()
+            .resource::<SsssDilationReadback>()
+            .filter
+    };
+    // R = 15: Auto runs the segments.
+    assert_eq!(ran(&mut harness), Some(SsssDilationFilter::Segments));
     for filter in [SsssDilationFilter::Direct, SsssDilationFilter::Segments] {
         harness.world_mut().insert_resource(filter);
         harness.run_frames(3).unwrap();
+        assert_eq!(ran(&mut harness), Some(filter), "the forced filter ran");
         let (map, _) = read_dilation(&mut harness, true);
         assert!(map == gpu, "the {filter:?} filter gives another map");
     }

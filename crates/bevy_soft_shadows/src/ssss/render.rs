@@ -115,6 +115,8 @@ pub struct SsssDilationReadback {
     pub fine: Option<(Buffer, UVec2)>,
     /// Layer 0 of the coarse dilated map: buffer and (width, height).
     pub coarse: Option<(Buffer, UVec2)>,
+    /// The form of the min filter that made it: `Direct` or `Segments`.
+    pub filter: Option<SsssDilationFilter>,
 }
 
 #[derive(Resource, Default)]
@@ -622,6 +624,11 @@ fn ssss(
         span.end(&mut pass);
     }
     if let Some(mut readback) = readback {
+        readback.filter = Some(if direct {
+            SsssDilationFilter::Direct
+        } else {
+            SsssDilationFilter::Segments
+        });
         copy_for_readback(
             &mut ctx,
             &pipelines,
