@@ -24,7 +24,7 @@
 use bevy::camera::visibility::VisibilityRange;
 use bevy::prelude::*;
 use bevy_nature::foliage::ForestSettings;
-use bevy_nature::foliage::forest::plugin::{ForestState, LEAF_TRIANGLES, MANAGER_MS};
+use bevy_nature::foliage::forest::systems::{ForestState, LEAF_TRIANGLES, MANAGER_MS};
 use bevy_nature::forest_scene::{
     ForestArgs, ForestScene, HlodForestRoot, ManagedForestRoot, camera_transform, spawn_forest,
 };

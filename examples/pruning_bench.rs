@@ -9,9 +9,9 @@
 
 use bevy::prelude::*;
 use bevy_nature::foliage::FoliagePruningSettings;
-use bevy_nature::foliage::pruning::material::{TRIANGLES_DRAWN, TRIANGLES_FULL};
 use bevy_nature::foliage::pruning::procedural::TreeSpecies;
 use bevy_nature::foliage::pruning::spawn::TreeAssets;
+use bevy_nature::foliage::pruning::systems::{TRIANGLES_DRAWN, TRIANGLES_FULL};
 use bevy_nature_harness::compare::{Comparison, coverage_against_background};
 use bevy_nature_harness::headless::HarnessConfig;
 use bevy_nature_harness::{ExampleArgs, RenderHarness, require_adapter};

@@ -10,7 +10,8 @@
 
 use bevy::camera::visibility::VisibilityRange;
 use bevy::prelude::*;
-use bevy_foliage::forest::hlod::decimated_leaf_mesh;
+use bevy_foliage::forest::hlod::decimated_leaves;
+use bevy_foliage::meshes::{bark_mesh, leaf_set_mesh};
 use bevy_foliage::pruning::bake::{BakeSettings, bake};
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
@@ -192,7 +193,11 @@ pub fn spawn_forest(
                 .iter()
                 .enumerate()
                 .map(|(i, (fraction, _))| {
-                    meshes.add(decimated_leaf_mesh(&tree.leaves, *fraction, 17 + i as u64))
+                    meshes.add(leaf_set_mesh(&decimated_leaves(
+                        &tree.leaves,
+                        *fraction,
+                        17 + i as u64,
+                    )))
                 })
                 .collect()
         } else {
@@ -200,7 +205,7 @@ pub fn spawn_forest(
         };
         types.push(Type {
             baked: baked_assets.add(baked),
-            bark: meshes.add(tree.bark.to_mesh()),
+            bark: meshes.add(bark_mesh(&tree.bark)),
             levels,
         });
     }

@@ -19,11 +19,12 @@
 use bevy::prelude::*;
 
 pub mod forest;
+pub mod meshes;
 pub mod pruning;
 pub mod rng;
 pub mod settings;
 
-pub use forest::plugin::{ForestBudget, ForestSettings, ForestTree, TreeLod};
+pub use forest::components::{ForestBudget, ForestSettings, ForestTree, TreeLod};
 pub use settings::{FoliagePruningSettings, ViewWeighting};
 
 /// The foliage plugin: registers the settings and keeps them valid.
@@ -41,8 +42,7 @@ impl Plugin for FoliagePlugin {
             );
         // The rendering side needs Bevy's asset and render plugins (absent in pure logic tests).
         if app.world().contains_resource::<AssetServer>() {
-            pruning::gpu::build(app);
-            pruning::material::build(app);
+            pruning::plugin::build(app);
             forest::plugin::build(app);
         }
     }

@@ -9,14 +9,14 @@ use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy_foliage::forest::cache::LodSlots;
-use bevy_foliage::forest::plugin::{ForestState, LEAF_TRIANGLES};
+use bevy_foliage::forest::systems::{ForestState, LEAF_TRIANGLES};
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
+use bevy_foliage::pruning::components::{ManagedPruning, PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::kept_index_total;
-use bevy_foliage::pruning::gpu::{
-    FoliageSlot, ManagedPruning, PrunedFoliage, PruningFrame, PruningParams, QUAD_TAG_BIT,
-};
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
+use bevy_foliage::pruning::render::PruningFrame;
+use bevy_foliage::pruning::store::{FoliageSlot, QUAD_TAG_BIT};
 use bevy_foliage::{
     FoliagePlugin, FoliagePruningSettings, ForestBudget, ForestSettings, ForestTree, TreeLod,
 };

@@ -7,10 +7,11 @@ use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
+use bevy_foliage::pruning::components::{FoliageCamera, PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::{FIXED_ONE, extract_indices};
-use bevy_foliage::pruning::gpu::{FoliageCamera, PrunedFoliage, PruningFrame, PruningParams};
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
+use bevy_foliage::pruning::render::PruningFrame;
 use bevy_foliage::rng::SplitMix64;
 use bevy_foliage::{FoliagePlugin, FoliagePruningSettings};
 use bevy_nature_harness::RenderHarness;
@@ -37,7 +38,7 @@ fn words(bytes: &[u8]) -> Vec<u32> {
 fn read_frame(
     harness: &mut RenderHarness,
 ) -> (
-    Vec<bevy_foliage::pruning::gpu::InstanceOutput>,
+    Vec<bevy_foliage::pruning::render::InstanceOutput>,
     Vec<u32>,
     Vec<u32>,
 ) {

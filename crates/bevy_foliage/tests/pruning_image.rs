@@ -6,8 +6,8 @@
 use bevy::camera::{PerspectiveProjection, Projection};
 use bevy::prelude::*;
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
+use bevy_foliage::pruning::components::{PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::kept_index_total;
-use bevy_foliage::pruning::gpu::{PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 use bevy_foliage::{FoliagePlugin, FoliagePruningSettings};

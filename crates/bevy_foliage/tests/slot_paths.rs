@@ -5,9 +5,10 @@
 
 use bevy::prelude::*;
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
-use bevy_foliage::pruning::gpu::{FoliageStore, PrunedFoliage};
+use bevy_foliage::pruning::components::PrunedFoliage;
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
+use bevy_foliage::pruning::store::FoliageStore;
 use bevy_foliage::{FoliagePlugin, FoliagePruningSettings};
 use bevy_nature_harness::RenderHarness;
 use bevy_nature_harness::compare::{Comparison, RgbaImage};

@@ -3,14 +3,17 @@
 //! - [`lod`]: desired LoD (eq. 4.2–4.3), LoD error and urgency (eq. 3.11–3.12);
 //! - [`cache`]: the LoD cache — slots over [0, 1], Algorithm 3, the double-buffered variant;
 //! - [`feedback`]: the frame-rate feedback exponent and its controller;
-//! - [`hlod`]: decimated leaf meshes for the `VisibilityRange` baseline of the benchmark;
+//! - [`hlod`]: decimated leaf sets for the `VisibilityRange` baseline of the benchmark;
 //! - [`manager`]: the per-frame ranking and serving under a budget, over plain arrays;
-//! - [`plugin`]: the ECS and rendering side — components on tree instances, the systems that run
-//!   the manager, and the pruning extractions the trees borrow.
+//!
+//! and on the ECS: [`components`] (tree instances, settings), [`systems`] (running the manager
+//! and drawing the trees from the pruning extractions they borrow) and the registration.
 
 pub mod cache;
+pub mod components;
 pub mod feedback;
 pub mod hlod;
 pub mod lod;
 pub mod manager;
-pub mod plugin;
+pub(crate) mod plugin;
+pub mod systems;

@@ -2,12 +2,17 @@
 //! This is the CPU reference of the vertex stage in `leaf_pulling.wgsl`, which computes the same
 //! formulas per vertex.
 //!
-//! **Area compensation** (eq. 3.7–3.9): a cell that keeps the fraction u = kept/full of its
-//! leaves scales each kept leaf's area by s = 1/u, so by √s linearly about its centroid. u is the
-//! fraction actually kept this frame (the thesis derives it from distance alone; the count kept
-//! also depends on visibility, so the actual fraction is what preserves the area). The linear
-//! scale is capped by [`FoliagePruningSettings::max_leaf_scale`]: a cell keeping 1 leaf of 30
-//! would otherwise draw it 5.5 times larger.
+//! **Area compensation** (eq. 3.7–3.9): a cell asked to keep the fraction u = LoD(cell) of its
+//! leaves (eq. 3.5, distance *and* visibility) scales each kept leaf's area by s = 1/u, so by √s
+//! linearly about its centroid. The thesis derives u from distance alone, which ignores that the
+//! count kept also depends on visibility. u is the fraction eq. 3.5 asks for rather than the
+//! count a cell ends up with: the kept counts are rounded with the remainder carried from cell to
+//! cell ([`super::extract`]), so a cell may keep one leaf more or less than asked — and a small
+//! cell none — while its neighbours make up for it; dividing by the fraction asked keeps the
+//! area of every run of cells, where dividing by the count kept would drop the area of every
+//! cell that rounded to zero. The linear scale is capped by
+//! [`FoliagePruningSettings::max_leaf_scale`]: a cell asked for 1 leaf of 30 would otherwise
+//! draw it 5.5 times larger.
 //!
 //! **Sub-pixel fade**: alpha-masked leaf textures lose their opacity in the coarse mip levels
 //! (the mask averages to below the cutoff), so distant crowns thin out. As the projected leaf
@@ -27,12 +32,10 @@
 //!
 //! [`FoliagePruningSettings::max_leaf_scale`]: crate::FoliagePruningSettings::max_leaf_scale
 
-use bevy::image::Image;
-use bevy::render::render_resource::TextureFormat;
-
-/// Linear scale of a kept leaf of a cell keeping `kept` of `full` indices (eq. 3.9, capped).
-pub fn compensation_scale(kept: u32, full: u32, max_scale: f32) -> f32 {
-    (full as f32 / kept.max(1) as f32).sqrt().min(max_scale)
+/// Linear scale of a kept leaf of a cell at `LoD(cell) = lod_fixed` (fixed point, see
+/// [`super::extract::cell_lod`]): `√(1/u)` (eq. 3.9), capped at `max_scale`.
+pub fn compensation_scale(lod_fixed: u32, max_scale: f32) -> f32 {
+    (65536.0 / lod_fixed.max(1) as f32).sqrt().min(max_scale)
 }
 
 /// Projected diameter in pixels of a leaf of radius `radius` (world units) at clip-space depth
@@ -61,47 +64,19 @@ pub fn fade_shrink(fade: f32, opaque_fraction: f32) -> f32 {
     (o / (o + fade * (1.0 - o))).sqrt()
 }
 
-/// The fraction of `image`'s texels whose alpha reaches `cutoff` (the opaque area of an
-/// alpha-masked leaf texture), or `None` if the format is not 8-bit RGBA or the data is missing.
-/// Pass it to [`leaf_material_textured`](super::material::leaf_material_textured).
-pub fn opaque_fraction(image: &Image, cutoff: f32) -> Option<f32> {
-    let format = image.texture_descriptor.format;
-    if !matches!(
-        format,
-        TextureFormat::Rgba8Unorm | TextureFormat::Rgba8UnormSrgb
-    ) {
-        return None;
-    }
-    let data = image.data.as_ref()?;
-    let size = image.texture_descriptor.size;
-    // Level 0 comes first in the data.
-    let texels = (size.width * size.height) as usize;
-    if data.len() < texels * 4 || texels == 0 {
-        return None;
-    }
-    let threshold = (cutoff.clamp(0.0, 1.0) * 255.0).round() as u8;
-    let opaque = data[..texels * 4]
-        .chunks_exact(4)
-        .filter(|t| t[3] >= threshold)
-        .count();
-    Some(opaque as f32 / texels as f32)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use bevy::asset::RenderAssetUsages;
-    use bevy::render::render_resource::{Extent3d, TextureDimension};
 
     #[test]
     fn compensation_preserves_area_until_the_cap() {
         // Keeping a quarter doubles each leaf linearly: 1/4 of the leaves × 4× the area.
-        assert!((compensation_scale(25, 100, 4.0) - 2.0).abs() < 1e-6);
-        assert_eq!(compensation_scale(100, 100, 4.0), 1.0);
+        assert!((compensation_scale(1 << 14, 4.0) - 2.0).abs() < 1e-6);
+        assert_eq!(compensation_scale(1 << 16, 4.0), 1.0);
         // 1 leaf of 30 would be √30 ≈ 5.48: capped.
-        assert_eq!(compensation_scale(6, 180, 4.0), 4.0);
-        // Nothing kept: never divides by zero.
-        assert!(compensation_scale(0, 30, 4.0).is_finite());
+        assert_eq!(compensation_scale(65536 / 30, 4.0), 4.0);
+        // LoD 0: never divides by zero.
+        assert!(compensation_scale(0, 4.0).is_finite());
     }
 
     #[test]
@@ -129,33 +104,5 @@ mod tests {
         // Area of a fully faded (solid) leaf = opaque area of the textured leaf.
         let s = fade_shrink(1.0, 0.49);
         assert!((s * s - 0.49).abs() < 1e-6);
-    }
-
-    #[test]
-    fn opaque_fraction_counts_texels_over_the_cutoff() {
-        let mut data = vec![255u8; 4 * 4 * 4];
-        for (i, t) in data.chunks_exact_mut(4).enumerate() {
-            t[3] = if i < 6 { 255 } else { 10 };
-        }
-        let image = Image::new(
-            Extent3d {
-                width: 4,
-                height: 4,
-                depth_or_array_layers: 1,
-            },
-            TextureDimension::D2,
-            data,
-            TextureFormat::Rgba8UnormSrgb,
-            RenderAssetUsages::all(),
-        );
-        assert_eq!(opaque_fraction(&image, 0.5), Some(6.0 / 16.0));
-        let float = Image::new_fill(
-            Extent3d::default(),
-            TextureDimension::D2,
-            &[0; 16],
-            TextureFormat::Rgba32Float,
-            RenderAssetUsages::all(),
-        );
-        assert_eq!(opaque_fraction(&float, 0.5), None);
     }
 }

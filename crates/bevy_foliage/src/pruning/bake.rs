@@ -205,6 +205,23 @@ impl BakedFoliage {
     }
 }
 
+impl BakedFoliage {
+    /// Centre of the crown in model space (mean of the cell box centres).
+    pub fn crown_center(&self) -> Vec3 {
+        let n = self.cell_boxes.len().max(1) as f32;
+        self.cell_boxes.iter().map(|b| b.center).sum::<Vec3>() / n
+    }
+
+    /// Radius, about [`crown_center`](Self::crown_center), of a sphere holding every cell box.
+    pub fn crown_radius(&self) -> f32 {
+        let c = self.crown_center();
+        self.cell_boxes
+            .iter()
+            .map(|b| (b.center - c).length() + b.half_extents.length())
+            .fold(0.0, f32::max)
+    }
+}
+
 /// Bakes `leaves`. `progress` is called as work completes (from worker threads too).
 pub fn bake(
     leaves: &LeafSet,

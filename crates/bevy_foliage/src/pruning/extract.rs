@@ -4,15 +4,30 @@
 //! 1. [`view_weights`]: the three stored viewpoints nearest the current view direction and
 //!    their weights (`FindCameras`, on the host in the thesis too).
 //! 2. [`cell_lod`]: `LoD(cell) = dist · Σ_k w_k · vis(cell, k)` (eq. 3.3–3.5).
-//! 3. [`kept_leaves`]: `u_n = round(leaves_n · LoD(cell))`.
+//! 3. [`carried_kept_leaves`]: `u_n ≈ leaves_n · LoD(cell)`, rounded with the remainder carried
+//!    from cell to cell (below).
 //! 4. [`exclusive_scan`]: output offsets `o_{n+1} = o_n + u_n` (eq. 3.6).
 //! 5. [`extract_indices`]: each cell copies the first `u_n` leaves of its stochastically ordered
 //!    list to its offset.
 //!
+//! **Rounding with a carry.** The thesis keeps `round(leaves_n · LoD)` leaves per cell. With few
+//! leaves per cell that loses the tree: at one leaf per cell and LoD 0.45 every cell rounds to
+//! zero, and even at LoD 0.98 a crown of one-leaf cells keeps only the cells at ≥ 0.5. Here the
+//! cells' wanted counts `e_n = leaves_n · LoD(cell)` are summed in cell order (an inclusive
+//! prefix sum `P_n`, the same scan the GPU runs for the offsets) and each cell keeps
+//! `u_n = ⌈P_n⌉ − ⌈P_{n−1}⌉`: the remainder a cell cannot keep is carried to the next one, like
+//! error diffusion. Every cell keeps within one leaf of what eq. 3.5 asks of it, any run of cells
+//! keeps within one leaf of the run's sum, and a tree asked for any leaves at all keeps at least
+//! one. The OBB tree orders cells depth first, so neighbours in the scan are neighbours in space
+//! and the carried leaves stay spread over the crown.
+//!
 //! **Fixed point.** LoD arithmetic is done in 16-bit fixed point with integer operations only
-//! (`vis` stored as `u16`, weights and the distance factor as fractions of 65,536). Integer
+//! (`vis` stored as `u16`, weights, the distance factor and LoD as fractions of 65,536). Integer
 //! arithmetic gives the same answer on every GPU and on the CPU, so the compacted index buffers
-//! can be compared exactly; the quantisation (1/65,536) is far below one leaf for any cell.
+//! can be compared exactly; the quantisation (1/65,536) is far below one leaf for any cell. The
+//! prefix sums of wanted leaves (in 1/65,536 of a leaf) wrap around `u32` on large trees; since
+//! a cell never holds 65,536 leaves, the difference of two wrapped sums, taken modulo 2¹⁶ leaves,
+//! is still exact.
 //!
 //! **View weighting** (the thesis does not give it; see [`ViewWeighting`]): the default weights
 //! the three nearest viewpoints by inverse angle, `w_k ∝ 1 / (θ_k + 0.01 rad)`, normalised. It is
@@ -96,22 +111,41 @@ pub fn quantize_visibility(v: f32) -> u16 {
     (v.clamp(0.0, 1.0) * 65535.0).round() as u16
 }
 
-/// `LoD(cell)` of eq. 3.5 in fixed point (`0..=65535`): `dist · Σ_k w_k · vis(cell, k)`.
-/// `vis` holds the cell's visibility per viewpoint.
+/// `LoD(cell)` of eq. 3.5 in fixed point (`0..=FIXED_ONE`): `dist · Σ_k w_k · vis(cell, k)`.
+/// `vis` holds the cell's visibility per viewpoint (`u16`, 65,535 = 1). [`KEEP_ALL`] gives
+/// [`FIXED_ONE`] whatever the visibility.
 pub fn cell_lod(vis: &[u16], weights: &ViewWeights, distance_fixed: u32) -> u32 {
     if distance_fixed == KEEP_ALL {
-        return FIXED_ONE - 1;
+        return FIXED_ONE;
     }
-    let view_lod: u32 = (0..3)
+    // Σ w_k vis_k ≤ 65,536 · 65,535 fits a u32; rescaled so that visibility 1 gives exactly 1.
+    let sum: u32 = (0..3)
         .map(|k| weights.weights[k] * vis[weights.views[k] as usize] as u32)
-        .sum::<u32>()
-        >> 16;
-    (view_lod * distance_fixed) >> 16
+        .sum();
+    let view_lod = (sum + 32_767) / 65_535;
+    if distance_fixed >= FIXED_ONE {
+        view_lod
+    } else {
+        (view_lod * distance_fixed + (1 << 15)) >> 16
+    }
 }
 
-/// `u_n = round(leaves · LoD)` in fixed point.
-pub fn kept_leaves(leaves: u32, lod_fixed: u32) -> u32 {
-    (leaves * lod_fixed + (1 << 15)) >> 16
+/// The leaves a cell of `leaves` leaves wants at LoD `lod_fixed`, in 1/65,536 of a leaf
+/// (wrapping: only differences of prefix sums are used).
+pub fn wanted_leaves(leaves: u32, lod_fixed: u32) -> u32 {
+    leaves.wrapping_mul(lod_fixed)
+}
+
+/// `⌈P / 65,536⌉` of a (wrapped) prefix sum `P` of wanted leaves, modulo 2¹⁶.
+fn carried_ceiling(prefix: u32) -> u32 {
+    prefix.wrapping_add(FIXED_ONE - 1) >> 16
+}
+
+/// Leaves kept by a cell whose exclusive and inclusive prefix sums of wanted leaves are
+/// `before` and `after`: `⌈after⌉ − ⌈before⌉` (the carried rounding described in the module
+/// documentation).
+pub fn carried_kept_leaves(before: u32, after: u32) -> u32 {
+    carried_ceiling(after).wrapping_sub(carried_ceiling(before)) & 0xFFFF
 }
 
 /// Exclusive prefix sum: `out[i] = Σ_{j<i} counts[j]`; returns the offsets and the total.
@@ -149,6 +183,9 @@ pub struct Extraction {
     pub kept_leaves: Vec<u32>,
     /// Indices kept per cell.
     pub kept_indices: Vec<u32>,
+    /// `LoD(cell)` of each cell (fixed point): the fraction of its leaves eq. 3.5 asks for,
+    /// which area compensation divides by.
+    pub lods: Vec<u32>,
     /// Output offset of each cell in the compacted index list.
     pub offsets: Vec<u32>,
     /// The compacted index list.
@@ -165,8 +202,9 @@ impl Extraction {
 /// Total indices kept for one tree (what the GPU writes into the draw arguments), without
 /// building the index list.
 pub fn kept_index_total(input: &PruningInput, weights: &ViewWeights, distance_fixed: u32) -> u32 {
-    (0..input.cell_count())
-        .map(|c| input.kept_in_cell(c, weights, distance_fixed).1)
+    input
+        .kept_per_cell(weights, distance_fixed)
+        .map(|(_, indices, _)| indices)
         .sum()
 }
 
@@ -176,16 +214,38 @@ impl PruningInput<'_> {
         self.cell_first_leaf.len().saturating_sub(1)
     }
 
-    /// Leaves and indices cell `c` keeps: `u_n = round(leaves_n · LoD(cell))` and the index
-    /// count of its first `u_n` stored leaves.
-    pub fn kept_in_cell(&self, c: usize, weights: &ViewWeights, distance_fixed: u32) -> (u32, u32) {
-        let first = self.cell_first_leaf[c];
-        let n = self.cell_first_leaf[c + 1] - first;
-        let vis = &self.visibility[c * self.views..(c + 1) * self.views];
-        let u = kept_leaves(n, cell_lod(vis, weights, distance_fixed));
-        let indices =
-            self.leaf_index_start[(first + u) as usize] - self.leaf_index_start[first as usize];
-        (u, indices)
+    /// Leaves in cell `c`.
+    pub fn cell_leaves(&self, c: usize) -> u32 {
+        self.cell_first_leaf[c + 1] - self.cell_first_leaf[c]
+    }
+
+    /// `LoD(cell)` of cell `c` (eq. 3.5, fixed point).
+    pub fn cell_lod(&self, c: usize, weights: &ViewWeights, distance_fixed: u32) -> u32 {
+        cell_lod(
+            &self.visibility[c * self.views..(c + 1) * self.views],
+            weights,
+            distance_fixed,
+        )
+    }
+
+    /// Per cell, in order: the leaves it keeps (carried rounding), the index count of those
+    /// leaves, and its `LoD(cell)`.
+    pub fn kept_per_cell<'s>(
+        &'s self,
+        weights: &'s ViewWeights,
+        distance_fixed: u32,
+    ) -> impl Iterator<Item = (u32, u32, u32)> + 's {
+        let mut prefix = 0u32;
+        (0..self.cell_count()).map(move |c| {
+            let lod = self.cell_lod(c, weights, distance_fixed);
+            let before = prefix;
+            prefix = prefix.wrapping_add(wanted_leaves(self.cell_leaves(c), lod));
+            let kept = carried_kept_leaves(before, prefix);
+            let first = self.cell_first_leaf[c] as usize;
+            let indices =
+                self.leaf_index_start[first + kept as usize] - self.leaf_index_start[first];
+            (kept, indices, lod)
+        })
     }
 }
 
@@ -196,9 +256,14 @@ pub fn extract_indices(
     distance_fixed: u32,
 ) -> Extraction {
     let cells = input.cell_count();
-    let (kept_leaves_v, kept_indices): (Vec<u32>, Vec<u32>) = (0..cells)
-        .map(|c| input.kept_in_cell(c, weights, distance_fixed))
-        .unzip();
+    let mut kept_leaves_v = Vec::with_capacity(cells);
+    let mut kept_indices = Vec::with_capacity(cells);
+    let mut lods = Vec::with_capacity(cells);
+    for (leaves, indices, lod) in input.kept_per_cell(weights, distance_fixed) {
+        kept_leaves_v.push(leaves);
+        kept_indices.push(indices);
+        lods.push(lod);
+    }
     let (offsets, total) = exclusive_scan(&kept_indices);
     let mut indices = vec![0u32; total as usize];
     for c in 0..cells {
@@ -210,6 +275,7 @@ pub fn extract_indices(
     Extraction {
         kept_leaves: kept_leaves_v,
         kept_indices,
+        lods,
         offsets,
         indices,
     }
@@ -254,28 +320,147 @@ mod tests {
         assert_eq!(distance_factor_fixed(200.0, 10.0, 110.0), 0);
     }
 
+    /// Cells of the given sizes, one leaf = one quad (6 indices), one viewpoint.
+    struct Cells {
+        cell_first_leaf: Vec<u32>,
+        leaf_index_start: Vec<u32>,
+        indices: Vec<u32>,
+        visibility: Vec<u16>,
+    }
+
+    impl Cells {
+        fn new(sizes: &[u32], visibility: &[u16]) -> Self {
+            let mut cell_first_leaf = vec![0];
+            for s in sizes {
+                cell_first_leaf.push(cell_first_leaf.last().unwrap() + s);
+            }
+            let leaves = *cell_first_leaf.last().unwrap();
+            Self {
+                cell_first_leaf,
+                leaf_index_start: (0..=leaves).map(|l| l * 6).collect(),
+                indices: (0..leaves * 6).collect(),
+                visibility: visibility.to_vec(),
+            }
+        }
+
+        fn input(&self) -> PruningInput<'_> {
+            PruningInput {
+                cell_first_leaf: &self.cell_first_leaf,
+                leaf_index_start: &self.leaf_index_start,
+                indices: &self.indices,
+                visibility: &self.visibility,
+                views: 1,
+            }
+        }
+    }
+
+    const ONE_VIEW: ViewWeights = ViewWeights {
+        views: [0; 3],
+        weights: [FIXED_ONE, 0, 0],
+    };
+
     #[test]
     fn full_lod_keeps_everything_and_zero_keeps_nothing() {
-        for n in [0, 1, 7, 31, 256, 4096] {
-            assert_eq!(
-                kept_leaves(
-                    n,
-                    cell_lod(
-                        &[65535],
-                        &ViewWeights {
-                            views: [0; 3],
-                            weights: [FIXED_ONE, 0, 0]
-                        },
-                        FIXED_ONE
-                    )
-                ),
-                n
-            );
-            assert_eq!(kept_leaves(n, 0), 0);
+        let sizes = [1, 7, 31, 256, 4096, 0, 3];
+        let cells = Cells::new(&sizes, &[65535; 7]);
+        for distance in [FIXED_ONE, KEEP_ALL] {
+            let e = extract_indices(&cells.input(), &ONE_VIEW, distance);
+            assert_eq!(e.kept_leaves, sizes.to_vec());
+            assert!(e.lods.iter().all(|&l| l == FIXED_ONE));
         }
-        // Half LoD keeps half (rounded).
-        assert_eq!(kept_leaves(31, FIXED_ONE / 2), 16);
-        assert_eq!(kept_leaves(30, FIXED_ONE / 2), 15);
+        let hidden = Cells::new(&sizes, &[0; 7]);
+        assert_eq!(
+            extract_indices(&hidden.input(), &ONE_VIEW, FIXED_ONE).leaves(),
+            0
+        );
+        // Pruning off keeps the hidden cells too.
+        assert_eq!(
+            extract_indices(&hidden.input(), &ONE_VIEW, KEEP_ALL).leaves(),
+            sizes.iter().sum::<u32>()
+        );
+        assert_eq!(extract_indices(&cells.input(), &ONE_VIEW, 0).leaves(), 0);
+    }
+
+    #[test]
+    fn one_leaf_cells_keep_the_fraction_asked_for_not_zero() {
+        // 560 leaves in 512 cells: the small tree that per-cell rounding left bare.
+        let sizes: Vec<u32> = (0..512).map(|c| 1 + (c % 11 == 0) as u32).collect();
+        let total: u32 = sizes.iter().sum();
+        let cells = Cells::new(&sizes, &vec![65535; 512]);
+        for factor in [0.98f32, 0.7, 0.45, 0.2, 0.01, 0.001] {
+            let distance = (factor * FIXED_ONE as f32).round() as u32;
+            let e = extract_indices(&cells.input(), &ONE_VIEW, distance);
+            let asked: f64 = sizes
+                .iter()
+                .zip(&e.lods)
+                .map(|(&n, &l)| n as f64 * l as f64 / FIXED_ONE as f64)
+                .sum();
+            let kept = e.leaves() as f64;
+            assert!(
+                kept >= asked && kept < asked + 1.0,
+                "factor {factor}: kept {kept} of {total}, eq. 3.5 asks {asked:.2}"
+            );
+            assert!(kept >= 1.0, "a tree asked for leaves keeps at least one");
+        }
+    }
+
+    #[test]
+    fn carried_rounding_stays_within_one_leaf_per_cell_and_per_run() {
+        let mut rng = crate::rng::SplitMix64::new(7);
+        for _ in 0..200 {
+            let n = 1 + rng.below(300) as usize;
+            let sizes: Vec<u32> = (0..n).map(|_| rng.below(200)).collect();
+            let vis: Vec<u16> = (0..n).map(|_| rng.below(65536) as u16).collect();
+            let distance = rng.below(FIXED_ONE + 1);
+            let cells = Cells::new(&sizes, &vis);
+            let e = extract_indices(&cells.input(), &ONE_VIEW, distance);
+            let wanted: Vec<f64> = sizes
+                .iter()
+                .zip(&e.lods)
+                .map(|(&s, &l)| s as f64 * l as f64 / FIXED_ONE as f64)
+                .collect();
+            let mut run_kept = 0.0;
+            let mut run_wanted = 0.0;
+            for c in 0..n {
+                let k = e.kept_leaves[c] as f64;
+                assert!(e.kept_leaves[c] <= sizes[c]);
+                assert!(
+                    (k - wanted[c]).abs() < 1.0,
+                    "cell {c}: {k} vs {}",
+                    wanted[c]
+                );
+                run_kept += k;
+                run_wanted += wanted[c];
+                // Any prefix (hence any run) keeps within one leaf of what it asks.
+                assert!(run_kept >= run_wanted - 1e-9 && run_kept < run_wanted + 1.0);
+                assert_eq!(e.kept_indices[c], e.kept_leaves[c] * 6);
+            }
+            assert_eq!(
+                kept_index_total(&cells.input(), &ONE_VIEW, distance),
+                e.indices.len() as u32
+            );
+        }
+    }
+
+    #[test]
+    fn wrapped_prefix_sums_give_the_same_counts() {
+        // Prefix sums of a large tree pass 2^32 (in 1/65,536 of a leaf): the wrapped u32
+        // arithmetic of the GPU gives the counts of exact arithmetic.
+        let mut rng = crate::rng::SplitMix64::new(3);
+        let (mut exact, mut wrapped) = (0u64, 0u32);
+        for _ in 0..5000 {
+            let leaves = rng.below(65_535);
+            let lod = rng.below(FIXED_ONE + 1);
+            let (e0, w0) = (exact, wrapped);
+            exact += leaves as u64 * lod as u64;
+            wrapped = wrapped.wrapping_add(wanted_leaves(leaves, lod));
+            let ceil = |p: u64| p.div_ceil(FIXED_ONE as u64);
+            assert_eq!(
+                carried_kept_leaves(w0, wrapped) as u64,
+                ceil(exact) - ceil(e0)
+            );
+        }
+        assert!(exact > u32::MAX as u64 * 100);
     }
 
     #[test]
@@ -292,7 +477,7 @@ mod tests {
             visibility: &visibility,
             views: 2,
         };
-        // View 0 only, full distance factor: cell 0 fully visible (3 leaves), cell 1 half → round(0.5) = 1.
+        // View 0 only, full distance factor: cell 0 fully visible (3 leaves), cell 1 half → ⌈0.5⌉ = 1.
         let w = ViewWeights {
             views: [0, 1, 1],
             weights: [FIXED_ONE, 0, 0],

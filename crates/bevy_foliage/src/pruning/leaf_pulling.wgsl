@@ -6,10 +6,10 @@
 // collapse outside the clip volume (culled before rasterisation). The instance is found through
 // its MeshTag (its slot, bit 31 set for quad slot meshes).
 //
-// Area preservation (Gumbau 2011, eq. 3.7-3.10): a kept leaf of a cell that keeps the fraction
-// u of its leaves is scaled about its centroid by sqrt(1/u), so the cell's total leaf area, and
-// with it the statistical coverage of the crown (Cook & Halstead 2007), is preserved. u is the
-// fraction actually kept in that cell this frame, and the scale is capped (`max_scale`).
+// Area preservation (Gumbau 2011, eq. 3.7-3.10): a kept leaf of a cell asked to keep the
+// fraction u = LoD(cell) of its leaves is scaled about its centroid by sqrt(1/u), so the cells'
+// total leaf area, and with it the statistical coverage of the crown (Cook & Halstead 2007), is
+// preserved; the scale is capped (`max_scale`).
 //
 // Sub-pixel fade (§3.4): as the leaf's projected diameter falls from `fade_start` to `fade_end`
 // pixels, its texture coordinates converge on its centre texel (one opaque colour instead of a
@@ -72,9 +72,9 @@ struct LeafParams {
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<storage, read> instances: array<Instance>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(101) var<storage, read> output: array<u32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(102) var<storage, read> draws: array<u32>;
-@group(#{MATERIAL_BIND_GROUP}) @binding(103) var<storage, read> cell_offsets: array<vec2<u32>>;
+// Per (instance, cell): kept index count, output offset, LoD(cell), 0.
+@group(#{MATERIAL_BIND_GROUP}) @binding(103) var<storage, read> cell_offsets: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var<storage, read> leaf_vertices: array<LeafVertex>;
-@group(#{MATERIAL_BIND_GROUP}) @binding(105) var<storage, read> cell_full: array<u32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(106) var<uniform> leaf_params: LeafParams;
 
 struct PulledLeafVertex {
@@ -110,10 +110,10 @@ fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeaf
     let v = leaf_vertices[output[inst.output_base + i]];
     var scale = 1.0;
     if leaf_params.area_compensation != 0u {
-        let kept = cell_offsets[inst.cell_offsets_base + v.cell].x;
-        let full = cell_full[inst.cell_base + v.cell];
-        // Area scale s = 1/u with u = kept/full (eq. 3.9); linear scale sqrt(s), capped.
-        scale = min(sqrt(f32(full) / f32(max(kept, 1u))), leaf_params.max_scale);
+        // Area scale s = 1/u (eq. 3.9) with u = LoD(cell), the fraction of the cell's leaves
+        // eq. 3.5 asks for; linear scale sqrt(s), capped.
+        let lod = cell_offsets[inst.cell_offsets_base + v.cell].z;
+        scale = min(sqrt(65536.0 / f32(max(lod, 1u))), leaf_params.max_scale);
     }
     let centroid = v.position - v.offset;
     let world_from_local = mesh_functions::get_world_from_local(instance_index);

@@ -1,27 +1,35 @@
 //! View-dependent stochastic pruning of foliage (Gumbau 2011, ch. 3; spec F1).
 //!
-//! Offline, [`bake`] turns a tree's [`LeafSet`](leaves::LeafSet) into a
-//! [`BakedFoliage`](bake::BakedFoliage): leaves grouped in cells ([`cells`]), each cell's
-//! visibility from evenly spread viewpoints ([`visibility`]), each cell's leaves in a seeded
-//! random order, and per-vertex centroid offsets. [`format`](mod@format) stores it as a versioned,
-//! checksummed binary file.
+//! The technique, split by role:
 //!
-//! Every frame, per tree, the pruning pass keeps a prefix of each cell's list sized by distance
-//! and view-dependent visibility and compacts the survivors into an index buffer;
-//! [`extract`] is the exact CPU reference of that pass.
-//!
-//! [`appearance`] holds how a kept leaf is drawn (area compensation, sub-pixel fade).
-//! [`procedural`] generates the thesis' four test trees at their leaf counts.
+//! - **The algorithm**, plain Rust with no render types: [`leaves`] (the leaf set), [`cells`]
+//!   (the cell cloud), [`visibility`] (per-cell visibility from evenly spread viewpoints),
+//!   [`bake`] (the whole bake into a [`BakedFoliage`](bake::BakedFoliage)), [`extract`] (the
+//!   per-frame extraction: the exact CPU reference of the GPU pass), [`appearance`] (area
+//!   compensation and the sub-pixel fade: the CPU reference of the leaf vertex stage),
+//!   [`format`](mod@format) (the versioned, checksummed `.foliage` file), and the tree sources
+//!   [`procedural`] and [`gltf`].
+//! - **Main world**: [`components`] (what a game puts on its entities), [`systems`] (pruning
+//!   inputs per tree, slot meshes, diagnostics), [`store`] (the shared GPU buffers),
+//!   [`slot_mesh`], [`spawn`] (one-call tree spawning) and [`asset`] (the `.foliage` loader).
+//! - **Render world**, beside its WGSL: [`render`] (`prune.wgsl`, the compute pass) and
+//!   [`material`] (`leaf*.wgsl`, the leaf material's vertex stages).
 
 pub mod appearance;
+pub mod asset;
 pub mod bake;
 pub mod cells;
+pub mod components;
 pub mod extract;
 pub mod format;
 pub mod gltf;
-pub mod gpu;
 pub mod leaves;
 pub mod material;
+pub(crate) mod plugin;
 pub mod procedural;
+pub mod render;
+pub mod slot_mesh;
 pub mod spawn;
+pub mod store;
+pub mod systems;
 pub mod visibility;

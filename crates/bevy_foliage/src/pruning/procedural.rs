@@ -208,38 +208,6 @@ impl MeshData {
     }
 }
 
-impl MeshData {
-    /// A Bevy mesh of this geometry.
-    pub fn to_mesh(&self) -> bevy::mesh::Mesh {
-        use bevy::asset::RenderAssetUsages;
-        use bevy::mesh::{Indices, Mesh, PrimitiveTopology};
-        let mut mesh = Mesh::new(
-            PrimitiveTopology::TriangleList,
-            RenderAssetUsages::default(),
-        );
-        mesh.insert_attribute(
-            Mesh::ATTRIBUTE_POSITION,
-            self.positions
-                .iter()
-                .map(|p| p.to_array())
-                .collect::<Vec<_>>(),
-        );
-        mesh.insert_attribute(
-            Mesh::ATTRIBUTE_NORMAL,
-            self.normals
-                .iter()
-                .map(|p| p.to_array())
-                .collect::<Vec<_>>(),
-        );
-        mesh.insert_attribute(
-            Mesh::ATTRIBUTE_UV_0,
-            self.uvs.iter().map(|p| p.to_array()).collect::<Vec<_>>(),
-        );
-        mesh.insert_indices(Indices::U32(self.indices.clone()));
-        mesh
-    }
-}
-
 /// A generated tree: bark geometry and leaves, in model space (ground at `y = 0`).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ProceduralTree {

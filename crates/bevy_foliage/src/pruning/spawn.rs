@@ -5,10 +5,11 @@
 //! `foliage_bake` binary and load the `.foliage` file through the `AssetServer`.
 
 use super::bake::{BakeError, BakeSettings, BakedFoliage, bake};
+use super::components::PrunedFoliage;
 use super::gltf::{GltfLeafSettings, GltfTreeError, load_gltf_tree};
-use super::gpu::PrunedFoliage;
 use super::material::{LeafMaterial, leaf_material};
 use super::procedural::{TreeSpecies, generate};
+use crate::meshes::bark_mesh;
 use bevy::ecs::system::SystemParam;
 use bevy::prelude::*;
 use std::path::{Path, PathBuf};
@@ -84,7 +85,10 @@ impl TreeAssets<'_> {
             baked.cell_count(),
             timings.total().as_secs_f64() * 1e3
         );
-        Ok((self.baked.add(baked), self.meshes.add(tree.bark.to_mesh())))
+        Ok((
+            self.baked.add(baked),
+            self.meshes.add(bark_mesh(&tree.bark)),
+        ))
     }
 
     /// Reads a glTF tree (`.gltf` or `.glb`) from disk, separates its leaves (see
@@ -112,7 +116,7 @@ impl TreeAssets<'_> {
             baked.cell_count(),
             timings.total().as_secs_f64() * 1e3
         );
-        let bark = (!tree.bark.indices.is_empty()).then(|| self.meshes.add(tree.bark.to_mesh()));
+        let bark = (!tree.bark.indices.is_empty()).then(|| self.meshes.add(bark_mesh(&tree.bark)));
         Ok((self.baked.add(baked), bark))
     }
 

@@ -1,0 +1,533 @@
+//! The forest's main-world systems: [`ForestTree`] instances drawn from per-type LoD caches that the
+//! [`ForestManager`] fills under a frame budget.
+//!
+//! How it maps onto the pruning pass: each cache slot (and copy) of a tree type is an
+//! *extraction* — a hidden [`PrunedFoliage`] entity marked [`ManagedPruning`], whose
+//! [`PruningParams`] the manager sets when it (re-)extracts the slot (from the viewpoint and
+//! desired LoD of the tree it extracts for) and otherwise leaves alone. The pruning pass writes
+//! each extraction's kept indices into its region; a forest tree draws a slot mesh whose
+//! `MeshTag` names the extraction it borrows, placed by its own transform. So GPU memory holds
+//! one kept-index region per slot and type, not one per tree (the pool of spec F2), and a whole
+//! forest of one type is drawn from a handful of extractions.
+//!
+//! The pruning pass runs before any camera draws in the same frame, so an extraction is never
+//! read while being written; the double-buffered cache variant (`double_buffered`) still keeps two
+//! copies per slot and lends only last frame's, as the thesis' GPU version does.
+//!
+//! Trees outside the frustum (or at LoD 0) are hidden, so they draw nothing and cast no shadow.
+
+use super::cache::{LodSlots, SLOT_LOD_ONE, SLOT_LOD_ZERO};
+use super::components::{ForestBudget, ForestSettings, ForestTree, TreeLod};
+use super::feedback::ExponentController;
+use super::manager::{Budget, ForestManager, Frustum, ManagerSettings, TreeInput, TreeLodState};
+use crate::pruning::bake::BakedFoliage;
+use crate::pruning::components::{FoliageCamera, ManagedPruning, PrunedFoliage, PruningParams};
+use crate::pruning::extract::{FIXED_ONE, KEEP_ALL, kept_index_total, view_weights};
+use crate::pruning::material::LeafMaterial;
+use crate::pruning::slot_mesh::SlotMeshes;
+use crate::pruning::store::{FoliageSlot, mesh_tag};
+use crate::settings::FoliagePruningSettings;
+use bevy::camera::visibility::NoFrustumCulling;
+use bevy::diagnostic::{DiagnosticPath, Diagnostics};
+use bevy::mesh::MeshTag;
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+use std::time::{Duration, Instant};
+
+/// The manager and its bookkeeping.
+#[derive(Resource)]
+pub struct ForestState {
+    /// The manager (one cache per type, in `types` order).
+    pub manager: ForestManager,
+    /// Tree types by index.
+    pub types: Vec<AssetId<BakedFoliage>>,
+    /// Per type, the crown's bounding sphere in model space (centre, radius), computed once.
+    pub type_spheres: Vec<(Vec3, f32)>,
+    /// Extraction entities by (type, slot, copy).
+    pub extractions: HashMap<(usize, usize, usize), Entity>,
+    /// The exponent controller.
+    pub controller: ExponentController,
+    /// What the last frame did.
+    pub last: super::manager::FrameReport,
+    /// Settings the manager was built with.
+    built_with: Option<ForestSettings>,
+    inputs: Vec<TreeInput>,
+    states: Vec<TreeLodState>,
+    entities: Vec<Entity>,
+    extraction_list: Vec<super::manager::Extraction>,
+}
+
+impl Default for ForestState {
+    fn default() -> Self {
+        Self {
+            manager: ForestManager::new(0, LodSlots::uniform(1), 0, false),
+            types: Vec::new(),
+            type_spheres: Vec::new(),
+            extractions: HashMap::default(),
+            controller: ExponentController::default(),
+            last: default(),
+            built_with: None,
+            inputs: Vec::new(),
+            states: Vec::new(),
+            entities: Vec::new(),
+            extraction_list: Vec::new(),
+        }
+    }
+}
+
+/// Extractions made this frame.
+pub const EXTRACTIONS: DiagnosticPath = DiagnosticPath::const_new("forest/extractions");
+/// Borrows made this frame.
+pub const BORROWS: DiagnosticPath = DiagnosticPath::const_new("forest/borrows");
+/// Trees in the view frustum.
+pub const VISIBLE_TREES: DiagnosticPath = DiagnosticPath::const_new("forest/visible_trees");
+/// Leaf triangles drawn by forest trees.
+pub const LEAF_TRIANGLES: DiagnosticPath = DiagnosticPath::const_new("forest/leaf_triangles");
+/// CPU time of the manager (ms).
+pub const MANAGER_MS: DiagnosticPath = DiagnosticPath::const_new("forest/manager_ms");
+/// Feedback exponent n.
+pub const EXPONENT: DiagnosticPath = DiagnosticPath::const_new("forest/exponent");
+/// Kept-index GPU bytes of the extractions, per visible tree.
+pub const GPU_BYTES_PER_VISIBLE: DiagnosticPath =
+    DiagnosticPath::const_new("forest/gpu_bytes_per_visible_tree");
+
+fn pruning_camera(
+    marked: &Query<(&Camera, &GlobalTransform), With<FoliageCamera>>,
+    cameras: &Query<(&Camera, &GlobalTransform), With<Camera3d>>,
+) -> Option<(Mat4, Vec3)> {
+    let (camera, transform) = marked.iter().next().or_else(|| {
+        cameras
+            .iter()
+            .filter(|(c, _)| c.is_active)
+            .min_by_key(|(c, _)| c.order)
+    })?;
+    let clip_from_world = camera.clip_from_view() * transform.to_matrix().inverse();
+    Some((clip_from_world, transform.translation()))
+}
+
+/// Runs the forest manager: ranks the visible trees by urgency, serves them within the budget
+/// (borrowing or re-extracting cache slots) and sets the extraction entities' pruning inputs.
+#[allow(clippy::too_many_arguments)]
+pub fn run_forest_manager(
+    mut commands: Commands,
+    mut state: ResMut<ForestState>,
+    settings: Res<ForestSettings>,
+    pruning: Res<FoliagePruningSettings>,
+    time: Res<Time<Real>>,
+    baked: Res<Assets<BakedFoliage>>,
+    mut diagnostics: Diagnostics,
+    marked: Query<(&Camera, &GlobalTransform), With<FoliageCamera>>,
+    cameras: Query<(&Camera, &GlobalTransform), With<Camera3d>>,
+    mut trees: Query<(
+        Entity,
+        &ForestTree,
+        &GlobalTransform,
+        &mut TreeLod,
+        &mut Visibility,
+    )>,
+    mut params: Query<&mut PruningParams, With<ManagedPruning>>,
+    mut asset_events: MessageReader<AssetEvent<BakedFoliage>>,
+) {
+    let started = Instant::now();
+    let state = &mut *state;
+    // A tree type whose data changed: new crown sphere, and its cached extractions are stale.
+    for event in asset_events.read() {
+        if let AssetEvent::Modified { id } = event
+            && let Some(ty) = state.types.iter().position(|t| t == id)
+            && let Some(data) = baked.get(*id)
+        {
+            state.type_spheres[ty] = (data.crown_center(), data.crown_radius());
+            if let Some(cache) = state.manager.caches.get_mut(ty) {
+                cache.clear();
+            }
+        }
+    }
+    // (Re)build the caches when the slot settings change.
+    if state.built_with.as_ref().is_none_or(|b| {
+        b.slots != settings.slots
+            || b.slot_bounds != settings.slot_bounds
+            || b.max_age_frames != settings.max_age_frames
+            || b.double_buffered != settings.double_buffered
+            || b.borrowing != settings.borrowing
+            || b.enabled != settings.enabled
+    }) {
+        let slots = settings.lod_slots().unwrap_or_else(|e| {
+            warn!(
+                "ForestSettings: {e}; using {} uniform slots",
+                settings.slots.max(1)
+            );
+            LodSlots::uniform(settings.slots.max(1))
+        });
+        let types = state.types.len();
+        state.manager = ForestManager::new(
+            types,
+            slots,
+            settings.max_age_frames as u64,
+            settings.double_buffered,
+        );
+        for (_, entity) in state.extractions.drain() {
+            commands.entity(entity).despawn();
+        }
+        for (.., mut lod, _) in &mut trees {
+            *lod = TreeLod::default();
+        }
+        state.states.clear();
+        state.entities.clear();
+        state.built_with = Some(settings.clone());
+    }
+    let Some((clip_from_world, camera)) = pruning_camera(&marked, &cameras) else {
+        return;
+    };
+    let frustum = Frustum::from_clip_from_world(clip_from_world);
+
+    // Gather the trees (new types get a cache).
+    state.inputs.clear();
+    let previous: HashMap<Entity, TreeLodState> = state
+        .entities
+        .iter()
+        .copied()
+        .zip(state.states.iter().copied())
+        .collect();
+    state.entities.clear();
+    state.states.clear();
+    for (entity, tree, transform, ..) in &trees {
+        let Some(data) = baked.get(&tree.baked) else {
+            continue;
+        };
+        let id = tree.baked.id();
+        let ty = match state.types.iter().position(|t| *t == id) {
+            Some(ty) => ty,
+            None => {
+                state.types.push(id);
+                state
+                    .type_spheres
+                    .push((data.crown_center(), data.crown_radius()));
+                let template = state.manager.caches.first().cloned().unwrap_or_else(|| {
+                    let slots = settings.lod_slots().unwrap_or(LodSlots::uniform(8));
+                    super::cache::LodCache::new(
+                        slots,
+                        settings.max_age_frames as u64,
+                        settings.double_buffered,
+                    )
+                });
+                let mut cache = template;
+                cache.clear();
+                state.manager.caches.push(cache);
+                state.types.len() - 1
+            }
+        };
+        let affine = transform.affine();
+        let scale = transform.scale().abs().max_element();
+        let (crown_center, crown_radius) = state.type_spheres[ty];
+        let (center, radius) = if affine.is_finite() && scale > 0.0 {
+            (affine.transform_point3(crown_center), crown_radius * scale)
+        } else {
+            // Not placeable: never visible.
+            (Vec3::splat(f32::INFINITY), 0.0)
+        };
+        state.inputs.push(TreeInput { ty, center, radius });
+        state.entities.push(entity);
+        state
+            .states
+            .push(previous.get(&entity).copied().unwrap_or_default());
+    }
+
+    // The feedback exponent.
+    let exponent = if settings.feedback {
+        let (fixed, _) = settings.feedback_settings.sanitized();
+        state.controller.update(time.delta_secs() * 1000.0, &fixed)
+    } else {
+        state.controller = ExponentController::default();
+        if settings.exponent.is_finite() && settings.exponent > 0.0 {
+            settings.exponent
+        } else {
+            1.0
+        }
+    };
+
+    let manager_settings = ManagerSettings {
+        near: pruning.near,
+        far: pruning.far,
+        min_distance: 1.0,
+        borrowing: settings.borrowing,
+    };
+    let budget = match settings.budget {
+        ForestBudget::Extractions(n) => Budget::Extractions(n),
+        ForestBudget::Milliseconds(ms) => {
+            Budget::Time(Duration::from_secs_f32(ms.clamp(0.0, 1000.0) / 1000.0))
+        }
+    };
+    state.extraction_list.clear();
+    let report = if settings.enabled {
+        let ForestState {
+            manager,
+            inputs,
+            states,
+            extraction_list,
+            ..
+        } = state;
+        manager.run_frame(
+            inputs,
+            states,
+            camera,
+            Some(&frustum),
+            exponent,
+            &manager_settings,
+            budget,
+            extraction_list,
+        )
+    } else {
+        let mut report_visible = 0;
+        // Manager off: every tree the manager would show (in the frustum, nearer than `far`)
+        // draws every leaf, from one extraction per type.
+        for (i, s) in state.states.iter_mut().enumerate() {
+            let tree = state.inputs[i];
+            s.visible = tree.center.is_finite()
+                && tree.center.distance(camera) - tree.radius < pruning.far
+                && frustum.intersects_sphere(tree.center, tree.radius);
+            if s.visible {
+                report_visible += 1;
+            }
+            if s.slot != Some(SLOT_LOD_ONE) {
+                s.slot = Some(SLOT_LOD_ONE);
+                s.stored_lod = 1.0;
+                state.extraction_list.push(super::manager::Extraction {
+                    tree: i,
+                    ty: tree.ty,
+                    slot: SLOT_LOD_ONE,
+                    copy: 0,
+                    lod: 1.0,
+                });
+            }
+        }
+        super::manager::FrameReport {
+            visible: report_visible,
+            ..default()
+        }
+    };
+    // Without borrowing every tree extracts its own LoD: its extraction is keyed by the tree.
+    let per_tree = settings.enabled && !settings.borrowing;
+
+    // Perform the extractions: set (or create) the extraction entities' pruning inputs.
+    let mut done: Vec<(usize, usize, usize)> = Vec::new();
+    for e in state.extraction_list.iter().rev() {
+        let key = if per_tree {
+            (e.ty, usize::MAX, state.entities[e.tree].to_bits() as usize)
+        } else {
+            (e.ty, e.slot, e.copy)
+        };
+        if !per_tree && !settings.enabled && done.contains(&key) {
+            continue;
+        }
+        done.push(key);
+        let tree_entity = state.entities[e.tree];
+        let Ok((_, tree, transform, ..)) = trees.get(tree_entity) else {
+            continue;
+        };
+        let Some(data) = baked.get(&tree.baked) else {
+            continue;
+        };
+        let local_camera = transform.affine().inverse().transform_point3(camera);
+        let new = PruningParams {
+            weights: view_weights(
+                local_camera - state.type_spheres[e.ty].0,
+                &data.view_directions,
+                pruning.view_weighting,
+            ),
+            distance_fixed: if !settings.enabled || !pruning.enabled || e.slot == SLOT_LOD_ONE {
+                // Full detail: every leaf, as with pruning off. The exact LoD 1 slot is full
+                // detail too: it holds the trees nearer than `near`, which cover the most
+                // pixels and may stand around the camera, where visibility baked from viewpoints
+                // outside the crown does not apply.
+                KEEP_ALL
+            } else {
+                ((e.lod.clamp(0.0, 1.0) * FIXED_ONE as f32).round() as u32).min(FIXED_ONE)
+            },
+        };
+        match state.extractions.get(&key) {
+            Some(&entity) => {
+                if let Ok(mut p) = params.get_mut(entity) {
+                    *p = new;
+                } else {
+                    commands.entity(entity).insert(new);
+                }
+            }
+            None => {
+                let entity = commands
+                    .spawn((
+                        Name::new(format!("forest extraction {key:?}")),
+                        PrunedFoliage {
+                            baked: tree.baked.clone(),
+                            material: tree.material.clone(),
+                        },
+                        ManagedPruning,
+                        new,
+                        Visibility::Hidden,
+                    ))
+                    .id();
+                state.extractions.insert(key, entity);
+            }
+        }
+    }
+    if per_tree {
+        // Trees gone from the forest release their extraction.
+        let alive: bevy::platform::collections::HashSet<usize> = state
+            .entities
+            .iter()
+            .map(|e| e.to_bits() as usize)
+            .collect();
+        state.extractions.retain(|&(_, slot, tree), entity| {
+            let keep = slot != usize::MAX || alive.contains(&tree);
+            if !keep {
+                commands.entity(*entity).despawn();
+            }
+            keep
+        });
+    }
+
+    // Write back the per-tree state.
+    for (i, &entity) in state.entities.iter().enumerate() {
+        let Ok((_, _, _, mut lod, mut visibility)) = trees.get_mut(entity) else {
+            continue;
+        };
+        let s = state.states[i];
+        let new = TreeLod {
+            slot: s.slot.map(|x| x as u32),
+            stored_lod: s.stored_lod,
+            desired_lod: s.desired_lod,
+            frames_since_update: s.frames_since_update,
+            urgency: s.urgency,
+            visible: s.visible,
+        };
+        if *lod != new {
+            *lod = new;
+        }
+        let shown = s.visible && !ForestManager::draws_nothing(&s);
+        let v = if shown {
+            Visibility::Inherited
+        } else {
+            Visibility::Hidden
+        };
+        if *visibility != v {
+            *visibility = v;
+        }
+    }
+    state.last = report;
+    let elapsed = started.elapsed().as_secs_f64() * 1e3;
+    diagnostics.add_measurement(&EXTRACTIONS, || report.extractions as f64);
+    diagnostics.add_measurement(&BORROWS, || report.borrows as f64);
+    diagnostics.add_measurement(&VISIBLE_TREES, || report.visible as f64);
+    diagnostics.add_measurement(&MANAGER_MS, || elapsed);
+    diagnostics.add_measurement(&EXPONENT, || exponent as f64);
+}
+
+/// Points every shown forest tree at the extraction it draws: its `MeshTag` (the extraction's
+/// instance slot) and the slot mesh that fits the extraction's kept count.
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+pub fn draw_forest_trees(
+    mut commands: Commands,
+    state: Res<ForestState>,
+    settings: Res<ForestSettings>,
+    baked: Res<Assets<BakedFoliage>>,
+    mut slot_meshes: ResMut<SlotMeshes>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut diagnostics: Diagnostics,
+    extractions: Query<(&FoliageSlot, &PruningParams, &PrunedFoliage), With<ManagedPruning>>,
+    trees: Query<(
+        Entity,
+        &ForestTree,
+        &TreeLod,
+        &Visibility,
+        Option<&MeshTag>,
+        Option<&Mesh3d>,
+        Option<&MeshMaterial3d<LeafMaterial>>,
+    )>,
+) {
+    let per_tree = settings.enabled && !settings.borrowing;
+    let index: HashMap<Entity, usize> = state
+        .entities
+        .iter()
+        .enumerate()
+        .map(|(i, e)| (*e, i))
+        .collect();
+    let mut kept_cache: HashMap<Entity, (u32, u32, u32)> = HashMap::default();
+    let (mut triangles, mut visible) = (0u64, 0u32);
+    for (entity, tree, lod, visibility, tag, mesh, material) in &trees {
+        if *visibility == Visibility::Hidden {
+            continue;
+        }
+        let Some(slot) = lod.slot.map(|s| s as usize) else {
+            continue;
+        };
+        if slot == SLOT_LOD_ZERO {
+            continue;
+        }
+        let Some(&i) = index.get(&entity) else {
+            continue;
+        };
+        let s = state.states[i];
+        let ty = state.inputs[i].ty;
+        let key = if per_tree {
+            (ty, usize::MAX, entity.to_bits() as usize)
+        } else {
+            (ty, slot, s.copy)
+        };
+        let Some(&extraction) = state.extractions.get(&key) else {
+            continue;
+        };
+        let Ok((foliage_slot, params, pruned)) = extractions.get(extraction) else {
+            // Created this frame: its slot is assigned next frame.
+            continue;
+        };
+        let (tag_value, kept, full) = *kept_cache.entry(extraction).or_insert_with(|| {
+            let tag = mesh_tag(foliage_slot.slot, &foliage_slot.ty);
+            let Some(data) = baked.get(&pruned.baked) else {
+                return (tag, 0, 0);
+            };
+            (
+                tag,
+                kept_index_total(
+                    &data.pruning_input(),
+                    &params.weights,
+                    params.distance_fixed,
+                ),
+                data.indices.len() as u32,
+            )
+        });
+        visible += 1;
+        triangles += kept as u64 / 3;
+        let handle = slot_meshes.fitting(kept, full, foliage_slot.ty.quads, &mut meshes);
+        let mut e = commands.entity(entity);
+        if tag.map(|t| t.0) != Some(tag_value) {
+            e.insert(MeshTag(tag_value));
+        }
+        if mesh.map(|m| m.0.id()) != Some(handle.id()) {
+            e.insert((Mesh3d(handle), NoFrustumCulling));
+        }
+        if material.map(|m| m.0.id()) != Some(tree.material.id()) {
+            e.insert(MeshMaterial3d(tree.material.clone()));
+        }
+    }
+    // Kept-index bytes of the extraction regions (each holds up to its type's full count).
+    let bytes: u64 = state
+        .extractions
+        .values()
+        .filter_map(|e| extractions.get(*e).ok())
+        .map(|(s, ..)| s.ty.full_index_count as u64 * 4)
+        .sum();
+    diagnostics.add_measurement(&LEAF_TRIANGLES, || triangles as f64);
+    diagnostics.add_measurement(&GPU_BYTES_PER_VISIBLE, || {
+        bytes as f64 / visible.max(1) as f64
+    });
+}
+
+/// Replaces unusable [`ForestSettings`] values, with a warning for each.
+pub fn sanitize_forest_settings(mut settings: ResMut<ForestSettings>) {
+    let (fixed, fixes) = settings.sanitized();
+    if !fixes.is_empty() {
+        for fix in &fixes {
+            warn!("ForestSettings: {fix}");
+        }
+        *settings = fixed;
+    }
+}

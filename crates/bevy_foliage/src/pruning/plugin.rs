@@ -1,0 +1,47 @@
+//! Registration of pruning: assets, the main-world systems in their order, the leaf material and
+//! the render-world pass.
+
+use super::asset::BakedFoliageLoader;
+use super::bake::BakedFoliage;
+use super::slot_mesh::SlotMeshes;
+use super::store::{FoliageStore, update_foliage_store};
+use super::systems::{
+    FoliageSystems, KEPT_PERCENT, TREES_PRUNED, TRIANGLES_DRAWN, TRIANGLES_FULL,
+    assign_slot_meshes, compute_pruning_params, refresh_leaf_materials,
+};
+use bevy::camera::visibility::VisibilitySystems;
+use bevy::diagnostic::{Diagnostic, RegisterDiagnostic};
+use bevy::prelude::*;
+use bevy::transform::TransformSystems;
+
+/// Registers everything pruning needs (called by `FoliagePlugin` when rendering is present).
+pub(crate) fn build(app: &mut App) {
+    for path in [TRIANGLES_DRAWN, TRIANGLES_FULL, KEPT_PERCENT, TREES_PRUNED] {
+        app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
+    }
+    app.init_asset::<BakedFoliage>()
+        .init_asset_loader::<BakedFoliageLoader>()
+        .init_resource::<FoliageStore>()
+        .init_resource::<SlotMeshes>()
+        .configure_sets(
+            PostUpdate,
+            (
+                FoliageSystems::PruningParams,
+                FoliageSystems::Store,
+                FoliageSystems::Draw,
+            )
+                .chain()
+                .after(TransformSystems::Propagate)
+                .before(VisibilitySystems::CheckVisibility),
+        )
+        .add_systems(
+            PostUpdate,
+            (
+                compute_pruning_params.in_set(FoliageSystems::PruningParams),
+                update_foliage_store.in_set(FoliageSystems::Store),
+                (assign_slot_meshes, refresh_leaf_materials).in_set(FoliageSystems::Draw),
+            ),
+        );
+    super::material::build(app);
+    super::render::build(app);
+}

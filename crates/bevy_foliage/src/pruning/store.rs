@@ -1,0 +1,303 @@
+//! The GPU buffers every pruned tree shares, owned by the main world: the baked data of every
+//! tree type concatenated (static), and per-instance regions of the output index buffer,
+//! per-cell offsets and indirect draw arguments (written by the GPU each frame). The pruning pass
+//! ([`super::render`]) and the leaf material ([`super::material`]) bind the same buffers, so the
+//! vertex stage reads exactly what the compute pass wrote.
+
+use super::bake::BakedFoliage;
+use super::components::{PrunedFoliage, PruningParams};
+use bevy::asset::{AssetId, RenderAssetUsages};
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+use bevy::render::storage::ShaderBuffer;
+
+/// Where a pruned tree's data lives in the shared buffers this frame (written by the plugin).
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FoliageSlot {
+    /// Instance record index (also the entity's `MeshTag`).
+    pub slot: u32,
+    /// Tree type layout.
+    pub ty: TypeSlot,
+    /// First output index of this instance.
+    pub output_base: u32,
+    /// First per-cell offset entry of this instance.
+    pub cell_offsets_base: u32,
+}
+
+/// Offsets of one tree type in the shared buffers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TypeSlot {
+    /// First entry in `cell_first_leaf`.
+    pub cell_base: u32,
+    /// Cells.
+    pub cell_count: u32,
+    /// Viewpoints.
+    pub view_count: u32,
+    /// First visibility entry.
+    pub visibility_base: u32,
+    /// First `leaf_index_start` entry.
+    pub leaf_base: u32,
+    /// First stored index.
+    pub index_base: u32,
+    /// Added to every written index (types share one vertex buffer).
+    pub vertex_base: u32,
+    /// Indices with every leaf kept.
+    pub full_index_count: u32,
+    /// Every leaf is a canonical quad ([`BakedFoliage::quad_leaves`]): drawn with quad slot
+    /// meshes.
+    pub quads: bool,
+}
+
+/// Set in a pruned tree's `MeshTag` when it is drawn with a quad slot mesh; the low bits are the
+/// instance slot.
+pub const QUAD_TAG_BIT: u32 = 1 << 31;
+
+/// The `MeshTag` of a tree drawing instance `slot` of a type laid out as `ty`.
+pub fn mesh_tag(slot: u32, ty: &TypeSlot) -> u32 {
+    if ty.quads { slot | QUAD_TAG_BIT } else { slot }
+}
+
+/// Words per packed leaf vertex in the `leaf_vertices` buffer:
+/// `position.xyz, cell, offset.xyz, leaf radius, normal.xyz, 0, uv.xy, leaf uv centre.xy`.
+pub const LEAF_VERTEX_WORDS: usize = 16;
+
+/// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf.wgsl`).
+pub const INSTANCE_WORDS: usize = 16;
+
+/// Handles of the shared pruning buffers.
+#[derive(Clone, Debug, Default)]
+pub struct StoreBuffers {
+    /// Per type, `cells + 1` leaf starts (per-type relative).
+    pub cell_first_leaf: Handle<ShaderBuffer>,
+    /// Per type, `cells × views` visibilities, one `u32` each.
+    pub visibility: Handle<ShaderBuffer>,
+    /// Per type, `leaves + 1` index starts.
+    pub leaf_index_start: Handle<ShaderBuffer>,
+    /// Per type, stored leaf indices.
+    pub stored_indices: Handle<ShaderBuffer>,
+    /// Per type, packed leaf vertices.
+    pub leaf_vertices: Handle<ShaderBuffer>,
+    /// Per-instance records (uploaded each frame).
+    pub instances: Handle<ShaderBuffer>,
+    /// Kept indices, one region per instance (GPU written).
+    pub output: Handle<ShaderBuffer>,
+    /// Per instance and cell: kept index count and output offset (GPU written).
+    pub cell_offsets: Handle<ShaderBuffer>,
+    /// Indexed-indirect draw arguments, five words per instance (GPU written).
+    pub draws: Handle<ShaderBuffer>,
+}
+
+/// The GPU buffers shared by every pruned tree, owned by the main world.
+#[derive(Resource, Default)]
+pub struct FoliageStore {
+    /// Layout of each uploaded tree type.
+    pub types: HashMap<AssetId<BakedFoliage>, TypeSlot>,
+    /// The buffers.
+    pub buffers: StoreBuffers,
+    /// Bumped whenever a buffer is replaced, so materials binding them are refreshed.
+    pub generation: u32,
+    /// Draw every type with triangle slot meshes, even quad-leaf types (for comparing the two
+    /// paths; takes effect for types uploaded afterwards).
+    pub force_triangle_slots: bool,
+    capacity: Capacity,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Capacity {
+    instances: u32,
+    output: u32,
+    cell_offsets: u32,
+}
+
+fn words_buffer(words: &[u32], label: &'static str) -> ShaderBuffer {
+    let data: &[u32] = if words.is_empty() { &[0] } else { words };
+    let mut buffer = ShaderBuffer::new(bytemuck::cast_slice(data), RenderAssetUsages::RENDER_WORLD);
+    buffer.buffer_description.label = Some(label);
+    buffer
+}
+
+fn gpu_only_buffer(words: u32, label: &'static str) -> ShaderBuffer {
+    let mut buffer =
+        ShaderBuffer::with_size(words.max(1) as usize * 4, RenderAssetUsages::RENDER_WORLD);
+    buffer.buffer_description.label = Some(label);
+    buffer
+}
+
+/// Main-world bookkeeping each frame: uploads new tree types, assigns instance slots and regions,
+/// grows the buffers when needed.
+pub fn update_foliage_store(
+    mut commands: Commands,
+    mut store: ResMut<FoliageStore>,
+    mut buffers: ResMut<Assets<ShaderBuffer>>,
+    baked: Res<Assets<BakedFoliage>>,
+    trees: Query<(Entity, &PrunedFoliage, Option<&FoliageSlot>), With<PruningParams>>,
+) {
+    let store = &mut *store;
+    let store_force_triangles = store.force_triangle_slots;
+    // New tree types.
+    let mut new_types: Vec<AssetId<BakedFoliage>> = Vec::new();
+    for (_, pruned, _) in &trees {
+        let id = pruned.baked.id();
+        if !store.types.contains_key(&id) && !new_types.contains(&id) && baked.contains(id) {
+            new_types.push(id);
+        }
+    }
+    if !new_types.is_empty() {
+        // Re-upload every type in a stable order (types are few; this happens rarely).
+        let mut ids: Vec<AssetId<BakedFoliage>> = store.types.keys().copied().collect();
+        ids.extend(new_types);
+        ids.retain(|id| baked.contains(*id));
+        ids.sort_by_key(|id| {
+            store
+                .types
+                .get(id)
+                .map(|s| s.vertex_base)
+                .unwrap_or(u32::MAX)
+        });
+        let (mut cfl, mut vis, mut lis, mut idx, mut verts) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        store.types.clear();
+        for id in ids {
+            let tree = baked.get(id).unwrap();
+            let slot = TypeSlot {
+                cell_base: cfl.len() as u32,
+                cell_count: tree.cell_count() as u32,
+                view_count: tree.view_count() as u32,
+                visibility_base: vis.len() as u32,
+                leaf_base: lis.len() as u32,
+                index_base: idx.len() as u32,
+                vertex_base: (verts.len() / LEAF_VERTEX_WORDS) as u32,
+                full_index_count: tree.indices.len() as u32,
+                quads: tree.quad_leaves() && !store_force_triangles,
+            };
+            cfl.extend_from_slice(&tree.cell_first_leaf);
+            vis.extend(tree.visibility.iter().map(|&v| v as u32));
+            lis.extend_from_slice(&tree.leaf_index_start);
+            idx.extend_from_slice(&tree.indices);
+            let mut vertex_cell = vec![0u32; tree.positions.len()];
+            for c in 0..tree.cell_count() {
+                let (a, b) = (tree.cell_first_leaf[c], tree.cell_first_leaf[c + 1]);
+                let (start, end) = (
+                    tree.leaf_index_start[a as usize],
+                    tree.leaf_index_start[b as usize],
+                );
+                for &v in &tree.indices[start as usize..end as usize] {
+                    vertex_cell[v as usize] = c as u32;
+                }
+            }
+            // Per vertex, its leaf's radius and the centre of its leaf's texture coordinates
+            // (for the sub-pixel fade, see `appearance`).
+            let mut leaf_radius = vec![0.0f32; tree.positions.len()];
+            let mut uv_centre = vec![Vec2::ZERO; tree.positions.len()];
+            let mut corners: Vec<u32> = Vec::new();
+            for leaf in 0..tree.leaf_count() {
+                let (start, end) = (
+                    tree.leaf_index_start[leaf] as usize,
+                    tree.leaf_index_start[leaf + 1] as usize,
+                );
+                corners.clear();
+                corners.extend_from_slice(&tree.indices[start..end]);
+                corners.sort_unstable();
+                corners.dedup();
+                let radius = corners
+                    .iter()
+                    .map(|&v| tree.centroid_offsets[v as usize].length())
+                    .fold(0.0f32, f32::max);
+                let centre = corners.iter().map(|&v| tree.uvs[v as usize]).sum::<Vec2>()
+                    / corners.len().max(1) as f32;
+                for &v in &corners {
+                    leaf_radius[v as usize] = radius;
+                    uv_centre[v as usize] = centre;
+                }
+            }
+            for v in 0..tree.positions.len() {
+                let (p, e, n, uv) = (
+                    tree.positions[v],
+                    tree.centroid_offsets[v],
+                    tree.normals[v],
+                    tree.uvs[v],
+                );
+                verts.extend_from_slice(&[
+                    p.x.to_bits(),
+                    p.y.to_bits(),
+                    p.z.to_bits(),
+                    vertex_cell[v],
+                    e.x.to_bits(),
+                    e.y.to_bits(),
+                    e.z.to_bits(),
+                    leaf_radius[v].to_bits(),
+                    n.x.to_bits(),
+                    n.y.to_bits(),
+                    n.z.to_bits(),
+                    0,
+                    uv.x.to_bits(),
+                    uv.y.to_bits(),
+                    uv_centre[v].x.to_bits(),
+                    uv_centre[v].y.to_bits(),
+                ]);
+            }
+            store.types.insert(id, slot);
+        }
+        let b = &mut store.buffers;
+        b.cell_first_leaf = buffers.add(words_buffer(&cfl, "foliage_cell_first_leaf"));
+        b.visibility = buffers.add(words_buffer(&vis, "foliage_visibility"));
+        b.leaf_index_start = buffers.add(words_buffer(&lis, "foliage_leaf_index_start"));
+        b.stored_indices = buffers.add(words_buffer(&idx, "foliage_stored_indices"));
+        b.leaf_vertices = buffers.add(words_buffer(&verts, "foliage_leaf_vertices"));
+        store.generation += 1;
+    }
+
+    // Instance slots in entity order; regions sized for every leaf kept.
+    let mut entities: Vec<(Entity, AssetId<BakedFoliage>, Option<FoliageSlot>)> = trees
+        .iter()
+        .filter(|(_, p, _)| store.types.contains_key(&p.baked.id()))
+        .map(|(e, p, s)| (e, p.baked.id(), s.copied()))
+        .collect();
+    entities.sort_by_key(|(e, _, _)| *e);
+    let mut need = Capacity::default();
+    for (slot, (entity, id, old)) in entities.iter().enumerate() {
+        let ty = store.types[id];
+        let new = FoliageSlot {
+            slot: slot as u32,
+            ty,
+            output_base: need.output,
+            cell_offsets_base: need.cell_offsets,
+        };
+        need.instances += 1;
+        need.output += ty.full_index_count;
+        need.cell_offsets += ty.cell_count;
+        if *old != Some(new) {
+            commands
+                .entity(*entity)
+                .insert((new, bevy::mesh::MeshTag(mesh_tag(slot as u32, &ty))));
+        }
+    }
+    let cap = store.capacity;
+    if need.instances > cap.instances
+        || need.output > cap.output
+        || need.cell_offsets > cap.cell_offsets
+    {
+        // Grow by half again so that adding trees one by one does not reallocate every frame.
+        let grow = |n: u32, have: u32| if n > have { n + n / 2 } else { have };
+        let cap = Capacity {
+            instances: grow(need.instances, cap.instances),
+            output: grow(need.output, cap.output),
+            cell_offsets: grow(need.cell_offsets, cap.cell_offsets),
+        };
+        let b = &mut store.buffers;
+        b.instances = buffers.add(gpu_only_buffer(
+            cap.instances * INSTANCE_WORDS as u32,
+            "foliage_instances",
+        ));
+        b.output = buffers.add(gpu_only_buffer(cap.output, "foliage_pruned_indices"));
+        b.cell_offsets = buffers.add(gpu_only_buffer(
+            cap.cell_offsets * 4,
+            "foliage_cell_offsets",
+        ));
+        let mut draws = gpu_only_buffer(cap.instances * 5, "foliage_pruned_draws");
+        draws.buffer_description.usage |= bevy::render::render_resource::BufferUsages::INDIRECT;
+        b.draws = buffers.add(draws);
+        store.capacity = cap;
+        store.generation += 1;
+    }
+}
