@@ -195,7 +195,7 @@ fn count_frames(
                 gpu_pass_ms,
                 diagnostics,
             };
-            if let Err(e) = crate::runner::write_atomically(path, &stats.to_json()) {
+            if let Err(e) = crate::stats::write_atomically(path, &stats.to_json()) {
                 error!("{e}");
             }
         }

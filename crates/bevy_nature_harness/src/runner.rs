@@ -19,6 +19,7 @@
 //! headless instead of failing to open a window.
 
 use crate::headless::{HarnessConfig, RenderHarness};
+use crate::stats::write_atomically;
 use bevy::prelude::*;
 use std::path::PathBuf;
 
@@ -278,17 +279,6 @@ impl ExampleRunner {
         scene(&mut app);
         app.run()
     }
-}
-
-/// Writes `text` to `path` through a temporary file and a rename.
-pub fn write_atomically(path: &std::path::Path, text: &str) -> Result<(), String> {
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent)
-            .map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
-    }
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, text).map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| format!("cannot rename to {}: {e}", path.display()))
 }
 
 #[cfg(test)]

@@ -120,6 +120,17 @@ pub fn collect_diagnostics(
     (gpu, other)
 }
 
+/// Writes `text` to `path` through a temporary file and a rename.
+pub fn write_atomically(path: &std::path::Path, text: &str) -> Result<(), String> {
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
+    }
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, text).map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("cannot rename to {}: {e}", path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -4,7 +4,6 @@
 //! (`clipmap.wgsl`). Make one with [`ClipStackTexture::material`]; build meshes whose texture
 //! coordinates are virtual-texture coordinates computed in f64 with [`flat_patch_mesh`].
 
-use crate::stack_gpu::ClipStackTexture;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::math::{DVec2, Vec4};
 use bevy::mesh::{Indices, PrimitiveTopology};
@@ -118,59 +117,6 @@ impl MaterialExtension for ClipmapExtension {
     }
 }
 
-/// The material parameters of a stack: each layer's coverage, shrunk by one texel when the
-/// layers are filtered linearly (so a bilinear footprint never reaches an invalid texel).
-pub fn clipmap_params(clip: &ClipStackTexture) -> ClipmapParams {
-    let mut params = ClipmapParams {
-        base_level: clip.stack.base_level,
-        layer_count: clip.stack.layers.len().min(MAX_LAYERS) as u32,
-        clip_size: clip.stack.clip_size as f32,
-        mips: if clip.linear_filtering {
-            clip.layer_mips
-        } else {
-            1
-        },
-        ..default()
-    };
-    let shrink = if clip.linear_filtering { 1.0 } else { 0.0 };
-    for (i, coverage) in clip
-        .stack
-        .coverage()
-        .into_iter()
-        .take(MAX_LAYERS)
-        .enumerate()
-    {
-        params.coverage[i] = match coverage {
-            Some((min, max)) => Vec4::new(
-                min[0] as f32 + shrink,
-                min[1] as f32 + shrink,
-                max[0] as f32 - shrink,
-                max[1] as f32 - shrink,
-            ),
-            None => Vec4::ZERO,
-        };
-    }
-    params
-}
-
-/// Keeps every stack's materials' coverage current.
-pub fn update_clipmap_materials(
-    stacks: Query<&ClipStackTexture>,
-    mut materials: ResMut<Assets<ClipmapMaterial>>,
-) {
-    for clip in &stacks {
-        let params = clipmap_params(clip);
-        for handle in clip.materials() {
-            let Some(material) = materials.get(handle) else {
-                continue;
-            };
-            if material.extension.params != params {
-                materials.get_mut(handle).unwrap().extension.params = params;
-            }
-        }
-    }
-}
-
 /// A flat terrain patch in the XZ plane: `quads × quads` cells over the world square
 /// `[world_min, world_min + size]`, positions relative to `anchor` (place the entity there), and
 /// texture coordinates `uv_of(world point)` evaluated in f64 — exact however far the patch is
@@ -236,9 +182,5 @@ pub(crate) fn build(app: &mut App) {
         bevy::asset::load_embedded_asset!(app, "clipmap_fragment.wgsl");
     let _ = SOFT_SHADER.set(soft.clone());
     app.insert_resource(ClipmapShaders(module, soft, forward));
-    app.add_plugins(MaterialPlugin::<ClipmapMaterial>::default())
-        .add_systems(
-            PostUpdate,
-            update_clipmap_materials.after(crate::stack_gpu::stream_clip_stacks),
-        );
+    app.add_plugins(MaterialPlugin::<ClipmapMaterial>::default());
 }

@@ -10,6 +10,7 @@
 
 use crate::cache::TileKey;
 use crate::clip::stack::{ClipStack, SubtileUpload, tile_of};
+use crate::material::{ClipmapExtension, ClipmapMaterial, ClipmapParams, MAX_LAYERS};
 use crate::settings::{ClipmapSettings, UpdateBudget};
 use crate::source::TileSource;
 use crate::tile_cache::TileCache;
@@ -134,7 +135,7 @@ pub struct ClipStackTexture {
     pub linear_filtering: bool,
     /// Mip levels per layer.
     pub layer_mips: u32,
-    materials: Vec<Handle<crate::material::ClipmapMaterial>>,
+    materials: Vec<Handle<ClipmapMaterial>>,
     /// Centre of detail in virtual-texture coordinates (f64; set it from the camera).
     pub center_uv: [f64; 2],
     /// Work allowed per frame: subtiles, bytes, or milliseconds of the streaming system.
@@ -248,14 +249,14 @@ impl ClipStackTexture {
     pub fn material(
         &mut self,
         look: StandardMaterial,
-        materials: &mut Assets<crate::material::ClipmapMaterial>,
-    ) -> Handle<crate::material::ClipmapMaterial> {
-        let handle = materials.add(crate::material::ClipmapMaterial {
+        materials: &mut Assets<ClipmapMaterial>,
+    ) -> Handle<ClipmapMaterial> {
+        let handle = materials.add(ClipmapMaterial {
             base: look,
-            extension: crate::material::ClipmapExtension {
+            extension: ClipmapExtension {
                 layers: self.layers.clone(),
                 base: self.base.clone(),
-                params: crate::material::clipmap_params(self),
+                params: clipmap_params(self),
                 soft_visibility: None,
             },
         });
@@ -264,7 +265,7 @@ impl ClipStackTexture {
     }
 
     /// The materials made with [`material`](Self::material).
-    pub fn materials(&self) -> &[Handle<crate::material::ClipmapMaterial>] {
+    pub fn materials(&self) -> &[Handle<ClipmapMaterial>] {
         &self.materials
     }
 
@@ -618,6 +619,59 @@ fn write_subtiles(
         .store(subtiles as u64, Ordering::Relaxed);
 }
 
+/// The material parameters of a stack: each layer's coverage, shrunk by one texel when the
+/// layers are filtered linearly (so a bilinear footprint never reaches an invalid texel).
+pub fn clipmap_params(clip: &ClipStackTexture) -> ClipmapParams {
+    let mut params = ClipmapParams {
+        base_level: clip.stack.base_level,
+        layer_count: clip.stack.layers.len().min(MAX_LAYERS) as u32,
+        clip_size: clip.stack.clip_size as f32,
+        mips: if clip.linear_filtering {
+            clip.layer_mips
+        } else {
+            1
+        },
+        ..default()
+    };
+    let shrink = if clip.linear_filtering { 1.0 } else { 0.0 };
+    for (i, coverage) in clip
+        .stack
+        .coverage()
+        .into_iter()
+        .take(MAX_LAYERS)
+        .enumerate()
+    {
+        params.coverage[i] = match coverage {
+            Some((min, max)) => Vec4::new(
+                min[0] as f32 + shrink,
+                min[1] as f32 + shrink,
+                max[0] as f32 - shrink,
+                max[1] as f32 - shrink,
+            ),
+            None => Vec4::ZERO,
+        };
+    }
+    params
+}
+
+/// Keeps every stack's materials' coverage current.
+pub fn update_clipmap_materials(
+    stacks: Query<&ClipStackTexture>,
+    mut materials: ResMut<Assets<ClipmapMaterial>>,
+) {
+    for clip in &stacks {
+        let params = clipmap_params(clip);
+        for handle in clip.materials() {
+            let Some(material) = materials.get(handle) else {
+                continue;
+            };
+            if material.extension.params != params {
+                materials.get_mut(handle).unwrap().extension.params = params;
+            }
+        }
+    }
+}
+
 /// Registers the clip stack streaming.
 pub(crate) fn build(app: &mut App) {
     for path in [
@@ -633,7 +687,7 @@ pub(crate) fn build(app: &mut App) {
     }
     app.add_systems(
         PostUpdate,
-        (follow_camera, stream_clip_stacks)
+        (follow_camera, stream_clip_stacks, update_clipmap_materials)
             .chain()
             .after(bevy::transform::TransformSystems::Propagate),
     );

@@ -4,11 +4,37 @@
 //! a window the cap cuts short gets a warning.
 
 use super::min_filter::{DILATION_BLOCK, MAX_DILATION_TEXELS, coarse_radius, spot_coarse_radius};
-use super::render::SsssDilationFilter;
 use crate::settings::ScreenSpaceSoftShadows;
 use bevy::diagnostic::{Diagnostic, DiagnosticPath, Diagnostics, RegisterDiagnostic};
 use bevy::light::{Cascades, DirectionalLightShadowMap, SimulationLightSystems};
 use bevy::prelude::*;
+use bevy::render::extract_resource::ExtractResource;
+
+/// How the separable min filter of the dilation runs. All give the same map bit for bit.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq, Reflect, ExtractResource)]
+#[reflect(Resource, Default)]
+pub enum SsssDilationFilter {
+    /// The direct filter below a coarse radius of
+    /// [`SEGMENT_FILTER_FROM_RADIUS`](super::min_filter::SEGMENT_FILTER_FROM_RADIUS), the
+    /// segments from it on (the largest radius of the light's cascades decides).
+    #[default]
+    Auto,
+    /// Van Herk / Gil-Werman segments: O(1) work per texel whatever the radius.
+    Segments,
+    /// The direct filter, 2R + 1 reads per texel and pass.
+    Direct,
+}
+
+impl SsssDilationFilter {
+    /// Whether the segment filter runs for a largest coarse radius of `max_radius`.
+    pub fn uses_segments(self, max_radius: usize) -> bool {
+        match self {
+            Self::Auto => max_radius >= super::min_filter::SEGMENT_FILTER_FROM_RADIUS,
+            Self::Segments => true,
+            Self::Direct => false,
+        }
+    }
+}
 
 /// The largest coarse dilation radius `R` over the SSSS light's shadow maps (coarse texels).
 pub const DILATION_RADIUS: DiagnosticPath = DiagnosticPath::const_new("ssss/dilation_radius");

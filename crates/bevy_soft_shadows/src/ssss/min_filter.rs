@@ -27,7 +27,7 @@ pub fn coarse_radius(
     (r / DILATION_BLOCK as f32).ceil() as usize
 }
 
-/// From this coarse radius on, [`SsssDilationFilter::Auto`](super::render::SsssDilationFilter)
+/// From this coarse radius on, [`SsssDilationFilter::Auto`](super::dilation::SsssDilationFilter)
 /// runs the segment filter ([`segment_filter_1d`]) instead of the direct one: the direct
 /// filter's cost grows with `2R + 1` reads per texel and pass, the segment filter's does not
 /// but starts higher. On llvmpipe (issue 6's note: `soft_shadows --bench [--spot]`, 512² coarse

@@ -4,6 +4,7 @@
 //! main pass, where the receivers read the result. GPU time is recorded as the `ssss` span
 //! (`render/ssss/elapsed_gpu` with `RenderDiagnosticsPlugin`).
 
+pub use super::dilation::SsssDilationFilter;
 use super::receiver::{SoftShadowCamera, SsssActive, SsssTextures};
 use crate::settings::ScreenSpaceSoftShadows;
 use bevy::asset::{embedded_asset, load_embedded_asset};
@@ -15,7 +16,6 @@ use bevy::pbr::{
 };
 use bevy::prelude::*;
 use bevy::render::diagnostic::RecordDiagnostics;
-use bevy::render::extract_resource::ExtractResource;
 use bevy::render::render_asset::RenderAssets;
 use bevy::render::render_resource::binding_types::{
     texture_2d, texture_2d_array, texture_storage_2d_array, uniform_buffer,
@@ -76,32 +76,6 @@ impl SsssUniform {
             light_kind: LIGHT_KIND_DIRECTIONAL,
             light_index: 0,
             spot_radius: 0,
-        }
-    }
-}
-
-/// How the separable min filter of the dilation runs. All give the same map bit for bit.
-#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq, Reflect, ExtractResource)]
-#[reflect(Resource, Default)]
-pub enum SsssDilationFilter {
-    /// The direct filter below a coarse radius of
-    /// [`SEGMENT_FILTER_FROM_RADIUS`](super::min_filter::SEGMENT_FILTER_FROM_RADIUS), the
-    /// segments from it on (the largest radius of the light's cascades decides).
-    #[default]
-    Auto,
-    /// Van Herk / Gil-Werman segments: O(1) work per texel whatever the radius.
-    Segments,
-    /// The direct filter, 2R + 1 reads per texel and pass.
-    Direct,
-}
-
-impl SsssDilationFilter {
-    /// Whether the segment filter runs for a largest coarse radius of `max_radius`.
-    pub fn uses_segments(self, max_radius: usize) -> bool {
-        match self {
-            Self::Auto => max_radius >= super::min_filter::SEGMENT_FILTER_FROM_RADIUS,
-            Self::Segments => true,
-            Self::Direct => false,
         }
     }
 }
