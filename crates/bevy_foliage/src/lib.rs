@@ -18,6 +18,7 @@
 
 use bevy::prelude::*;
 
+pub mod corpus;
 pub mod forest;
 pub mod meshes;
 pub mod pruning;

@@ -10,7 +10,7 @@ use bevy::render::RenderApp;
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy_foliage::forest::cache::LodSlots;
 use bevy_foliage::forest::systems::{ForestState, LEAF_TRIANGLES};
-use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
+use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::{ManagedPruning, PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::kept_index_total;
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
@@ -30,7 +30,7 @@ const SLOTS: u32 = 4;
 fn small_bake(species: TreeSpecies, leaves: usize) -> BakedFoliage {
     let tree = generate(&species.with_leaf_count(leaves));
     let settings = BakeSettings {
-        cell_depth: 5,
+        cells: CellCount::Depth(5),
         resolution: 64,
         ..default()
     };

@@ -6,7 +6,7 @@
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy::render::renderer::{RenderDevice, RenderQueue};
-use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
+use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::{FoliageCamera, PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::{FIXED_ONE, extract_indices};
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
@@ -20,7 +20,7 @@ use bevy_nature_harness::headless::read_buffer_now;
 fn small_bake(species: TreeSpecies, leaves: usize, depth: u32) -> BakedFoliage {
     let tree = generate(&species.with_leaf_count(leaves));
     let settings = BakeSettings {
-        cell_depth: depth,
+        cells: CellCount::Depth(depth),
         resolution: 64,
         ..default()
     };

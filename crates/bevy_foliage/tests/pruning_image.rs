@@ -5,7 +5,7 @@
 
 use bevy::camera::{PerspectiveProjection, Projection};
 use bevy::prelude::*;
-use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
+use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::{PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::kept_index_total;
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
@@ -52,7 +52,7 @@ fn area_compensation_keeps_crown_coverage_that_plain_pruning_loses() {
     let (baked, _) = bake(
         &tree.leaves,
         &BakeSettings {
-            cell_depth: 7,
+            cells: CellCount::Depth(7),
             resolution: 96,
             ..default()
         },

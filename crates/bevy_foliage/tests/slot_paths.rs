@@ -4,7 +4,7 @@
 //! images compared.
 
 use bevy::prelude::*;
-use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
+use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::PrunedFoliage;
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
@@ -71,7 +71,7 @@ fn quad_and_triangle_slot_meshes_draw_the_same_image() {
     let (baked, _) = bake(
         &tree.leaves,
         &BakeSettings {
-            cell_depth: 6,
+            cells: CellCount::Depth(6),
             resolution: 64,
             ..default()
         },

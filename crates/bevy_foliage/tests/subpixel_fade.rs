@@ -8,7 +8,7 @@ use bevy::asset::RenderAssetUsages;
 use bevy::image::{ImageSampler, ImageSamplerDescriptor};
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
-use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
+use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::PrunedFoliage;
 use bevy_foliage::pruning::material::opaque_fraction;
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material_textured};
@@ -138,7 +138,7 @@ fn subpixel_fade_keeps_the_density_that_alpha_mips_lose() {
     let (baked, _) = bake(
         &tree.leaves,
         &BakeSettings {
-            cell_depth: 6,
+            cells: CellCount::Depth(6),
             resolution: 64,
             ..default()
         },

@@ -9,10 +9,11 @@
 //! Prints progress on stderr and one JSON object per tree on stdout (bake time per stage, leaf
 //! count, GPU bytes).
 
-use bevy_foliage::pruning::bake::{BakeProgress, BakeSettings, BakeStage, bake};
+use bevy_foliage::pruning::bake::{BakeProgress, BakeSettings, BakeStage, CellCount, bake_masked};
 use bevy_foliage::pruning::format::save;
 use bevy_foliage::pruning::gltf::{GltfLeafSettings, load_gltf_tree};
 use bevy_foliage::pruning::leaves::LeafSet;
+use bevy_foliage::pruning::mask::AlphaMask;
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 use std::io::Write;
 use std::path::PathBuf;
@@ -35,11 +36,20 @@ fn main() {
             "--resolution" => {
                 settings.resolution = value("--resolution").parse().expect("--resolution N")
             }
-            "--depth" => settings.cell_depth = value("--depth").parse().expect("--depth D"),
+            "--depth" => {
+                settings.cells = CellCount::Depth(value("--depth").parse().expect("--depth D"))
+            }
+            "--leaves-per-cell" => {
+                settings.cells = CellCount::LeavesPerCell(
+                    value("--leaves-per-cell")
+                        .parse()
+                        .expect("--leaves-per-cell N"),
+                )
+            }
             "--leaf-material" => gltf_settings.leaf_materials.push(value("--leaf-material")),
             "--help" | "-h" => {
                 eprintln!(
-                    "foliage_bake [--out DIR] [--resolution N] [--depth D] [olea|fraxinus|quercus|cedrus ...]"
+                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [olea|fraxinus|quercus|cedrus ...]"
                 );
                 return;
             }
@@ -50,27 +60,38 @@ fn main() {
     if names.is_empty() {
         names = all.iter().map(|s| s.name.to_string()).collect();
     }
+    // (file stem, leaves, alpha mask) per bake: a glTF tree gives one per leaf material.
+    let mut jobs: Vec<(String, LeafSet, Option<AlphaMask>)> = Vec::new();
     for name in names {
-        let (label, leaves): (String, LeafSet) = if name.ends_with(".gltf")
-            || name.ends_with(".glb")
-        {
+        if name.ends_with(".gltf") || name.ends_with(".glb") {
             let path = PathBuf::from(&name);
             let bytes = std::fs::read(&path).unwrap_or_else(|e| {
                 eprintln!("{name}: {e}");
                 std::process::exit(1)
             });
-            match load_gltf_tree(&bytes, path.parent(), &gltf_settings) {
-                Ok(tree) => (
-                    path.file_stem()
-                        .unwrap_or_default()
-                        .to_string_lossy()
-                        .into_owned(),
-                    tree.leaves,
-                ),
+            let tree = match load_gltf_tree(&bytes, path.parent(), &gltf_settings) {
+                Ok(tree) => tree,
                 Err(e) => {
                     eprintln!("{name}: {e}");
                     std::process::exit(1)
                 }
+            };
+            for note in &tree.notes {
+                eprintln!("{name}: {note}");
+            }
+            let stem = path
+                .file_stem()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned();
+            let groups = tree.leaf_groups.len();
+            for (i, group) in tree.leaf_groups.iter().enumerate() {
+                let label = if groups == 1 {
+                    stem.clone()
+                } else {
+                    format!("{stem}_{i}")
+                };
+                jobs.push((label, group.leaves.clone(), tree.leaf_mask(group)));
             }
         } else {
             let lower = name.to_ascii_lowercase();
@@ -81,7 +102,7 @@ fn main() {
                     eprintln!("unknown tree '{name}' (olea, fraxinus, quercus, cedrus, or a .gltf/.glb file)");
                     std::process::exit(2)
                 });
-            (
+            jobs.push((
                 species
                     .name
                     .split_whitespace()
@@ -89,8 +110,11 @@ fn main() {
                     .unwrap_or("tree")
                     .to_ascii_lowercase(),
                 generate(species).leaves,
-            )
-        };
+                None,
+            ));
+        }
+    }
+    for (label, leaves, mask) in jobs {
         let species_name = label.as_str();
         let progress = |p: BakeProgress| {
             let stage = match p.stage {
@@ -101,7 +125,7 @@ fn main() {
             eprint!("\r{species_name}: {stage} {}/{}        ", p.done, p.total);
             let _ = std::io::stderr().flush();
         };
-        let (baked, timings) = match bake(&leaves, &settings, &progress) {
+        let (baked, timings) = match bake_masked(&leaves, mask.as_ref(), &settings, &progress) {
             Ok(result) => result,
             Err(e) => {
                 eprintln!("\n{species_name}: {e}");

@@ -36,14 +36,14 @@ impl bevy::asset::AssetLoader for BakedFoliageLoader {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pruning::bake::{BakeSettings, bake};
+    use crate::pruning::bake::{BakeSettings, CellCount, bake};
     use crate::pruning::format::{encode, save};
     use crate::pruning::procedural::{TreeSpecies, generate};
 
     fn sample() -> BakedFoliage {
         let tree = generate(&TreeSpecies::fraxinus().with_leaf_count(500));
         let settings = BakeSettings {
-            cell_depth: 4,
+            cells: CellCount::Depth(4),
             resolution: 48,
             ..Default::default()
         };

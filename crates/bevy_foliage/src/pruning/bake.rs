@@ -1,7 +1,9 @@
 //! The bake (Gumbau 2011, §3.3, F1 steps 1–4): leaf set in, [`BakedFoliage`] out.
 //!
-//! 1. Cell cloud: OBB tree over the leaves ([`super::cells`]).
-//! 2. Cell visibility from evenly spread viewpoints ([`super::visibility`]), in parallel.
+//! 1. Cell cloud: OBB tree over the leaves ([`super::cells`]), as many cells as the leaf count
+//!    calls for ([`CellCount`]).
+//! 2. Cell visibility from evenly spread viewpoints ([`super::visibility`]), in parallel, through
+//!    the leaf texture's alpha mask when there is one ([`bake_masked`]).
 //! 3. Stochastic order: each cell's leaves shuffled with a seeded RNG (Cook & Halstead 2007), so
 //!    any prefix of a cell's list is an unbiased sample of the cell.
 //! 4. Per-vertex centroid offsets `e_i` (eq. 3.10) for area-preserving scaling.
@@ -12,18 +14,71 @@
 use super::cells::{Obb, build_cells};
 use super::extract::quantize_visibility;
 use super::leaves::{LeafSet, SkippedLeaves};
-use super::visibility::{VisibilityInput, cell_visibility, fibonacci_directions};
+use super::mask::AlphaMask;
+use super::visibility::{LeafTriangle, VisibilityInput, cell_visibility, fibonacci_directions};
 use crate::rng::SplitMix64;
 use bevy::asset::Asset;
 use bevy::math::{Vec2, Vec3};
 use bevy::reflect::TypePath;
 use std::time::{Duration, Instant};
 
+/// The leaves per cell [`CellCount::default`] aims at. Measured on the test corpus: see
+/// [`CellCount`].
+pub const DEFAULT_LEAVES_PER_CELL: u32 = 32;
+
+/// Deepest OBB tree [`CellCount::LeavesPerCell`] builds (4,096 cells).
+pub const MAX_AUTO_CELL_DEPTH: u32 = 12;
+
+/// How many cells the cell cloud has.
+///
+/// The thesis splits every tree into 512 cells (depth 9), for trees of 16,000 to 131,000
+/// leaves: 31 to 256 leaves per cell. A cell is the unit of view-dependent LoD, and its kept
+/// count is a whole number of leaves: with one or two leaves per cell (a 560-leaf tree in 512
+/// cells) a cell keeps all or nothing, and the crown's visibility is resolved finer than the
+/// leaves can follow. The default therefore sizes the tree to the leaves: depth
+/// `round(log2(leaves / leaves_per_cell))`, so every tree gets cells of 23–45 leaves (up to
+/// [`MAX_AUTO_CELL_DEPTH`]), the thesis' own Olea gets its 512 cells, and a 560-leaf tree gets
+/// 16 cells of 35 leaves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellCount {
+    /// About this many leaves per cell.
+    LeavesPerCell(u32),
+    /// A fixed OBB tree depth: `2^depth` cells (9 → 512, the thesis' value), fewer when there
+    /// are fewer leaves than that.
+    Depth(u32),
+}
+
+impl Default for CellCount {
+    fn default() -> Self {
+        Self::LeavesPerCell(DEFAULT_LEAVES_PER_CELL)
+    }
+}
+
+impl CellCount {
+    /// The OBB tree depth for `leaves` leaves. Never so shallow that a cell would hold 65,536
+    /// leaves or more (the kept counts are 16-bit).
+    pub fn depth(self, leaves: usize) -> u32 {
+        let min_depth = (leaves as f64 / 65_535.0).log2().ceil().max(0.0) as u32;
+        match self {
+            Self::Depth(d) => d,
+            Self::LeavesPerCell(per_cell) => {
+                let cells = leaves as f64 / per_cell.max(1) as f64;
+                let d = if cells > 1.0 {
+                    cells.log2().round() as u32
+                } else {
+                    0
+                };
+                d.min(MAX_AUTO_CELL_DEPTH).max(min_depth)
+            }
+        }
+    }
+}
+
 /// Parameters of the bake.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BakeSettings {
-    /// OBB tree depth: `2^depth` cells (9 → 512, the thesis' value).
-    pub cell_depth: u32,
+    /// How many cells (by default about [`DEFAULT_LEAVES_PER_CELL`] leaves each).
+    pub cells: CellCount,
     /// Number of viewpoints (16 in the thesis).
     pub views: usize,
     /// Raster resolution of each visibility view, pixels per side.
@@ -37,7 +92,7 @@ pub struct BakeSettings {
 impl Default for BakeSettings {
     fn default() -> Self {
         Self {
-            cell_depth: 9,
+            cells: CellCount::default(),
             views: 16,
             resolution: 256,
             seed: 0x5EED,
@@ -222,17 +277,31 @@ impl BakedFoliage {
     }
 }
 
-/// Bakes `leaves`. `progress` is called as work completes (from worker threads too).
+/// Bakes `leaves` as opaque leaves. `progress` is called as work completes (from worker
+/// threads too).
 pub fn bake(
     leaves: &LeafSet,
     settings: &BakeSettings,
     progress: &(dyn Fn(BakeProgress) + Sync),
 ) -> Result<(BakedFoliage, BakeTimings), BakeError> {
-    if settings.cell_depth > 16 {
-        return Err(BakeError::Settings(format!(
-            "cell_depth {} > 16",
-            settings.cell_depth
-        )));
+    bake_masked(leaves, None, settings, progress)
+}
+
+/// Bakes `leaves` whose texture has the alpha mask `mask` (the leaf material's texture and
+/// cutoff): the visibility pass draws only their opaque texels, as the material does.
+pub fn bake_masked(
+    leaves: &LeafSet,
+    mask: Option<&AlphaMask>,
+    settings: &BakeSettings,
+    progress: &(dyn Fn(BakeProgress) + Sync),
+) -> Result<(BakedFoliage, BakeTimings), BakeError> {
+    if let CellCount::Depth(d) = settings.cells
+        && d > 16
+    {
+        return Err(BakeError::Settings(format!("cell depth {d} > 16")));
+    }
+    if settings.cells == CellCount::LeavesPerCell(0) {
+        return Err(BakeError::Settings("0 leaves per cell".into()));
     }
     if settings.views == 0 || settings.views > 256 {
         return Err(BakeError::Settings(format!(
@@ -260,7 +329,7 @@ pub fn bake(
         total: 1,
     });
     let centroids: Vec<Vec3> = (0..leaves.len()).map(|i| leaves.centroid(i)).collect();
-    let cells = build_cells(&centroids, settings.cell_depth, |i| {
+    let cells = build_cells(&centroids, settings.cells.depth(leaves.len()), |i| {
         leaves
             .leaf_vertices(i as usize)
             .into_iter()
@@ -268,7 +337,7 @@ pub fn bake(
     });
     if let Some(big) = cells.iter().find(|c| c.leaves.len() >= 1 << 16) {
         return Err(BakeError::Settings(format!(
-            "a cell holds {} leaves (at most 65535): raise cell_depth",
+            "a cell holds {} leaves (at most 65535): use more cells",
             big.leaves.len()
         )));
     }
@@ -337,12 +406,22 @@ pub fn bake(
 
     // 2. Visibility.
     let t = Instant::now();
-    let cell_triangles: Vec<Vec<[Vec3; 3]>> = cells
+    let cell_triangles: Vec<Vec<LeafTriangle>> = cells
         .iter()
         .map(|cell| {
             cell.leaves
                 .iter()
-                .flat_map(|&l| leaves.triangles(l as usize))
+                .flat_map(|&l| {
+                    let range = leaves.leaves[l as usize].clone();
+                    leaves.indices[range.start as usize..range.end as usize]
+                        .chunks_exact(3)
+                        .map(|t| LeafTriangle {
+                            positions: [0, 1, 2].map(|k| leaves.positions[t[k] as usize]),
+                            uvs: [0, 1, 2].map(|k| {
+                                leaves.uvs.get(t[k] as usize).copied().unwrap_or(Vec2::ZERO)
+                            }),
+                        })
+                })
                 .collect()
         })
         .collect();
@@ -367,6 +446,7 @@ pub fn bake(
     let vis = cell_visibility(
         &VisibilityInput {
             cell_triangles: &cell_triangles,
+            mask,
             center,
             radius,
             resolution: settings.resolution,
@@ -394,7 +474,7 @@ mod tests {
     fn small_bake() -> BakedFoliage {
         let tree = generate(&TreeSpecies::olea().with_leaf_count(2000));
         let settings = BakeSettings {
-            cell_depth: 6,
+            cells: CellCount::Depth(6),
             resolution: 96,
             ..default()
         };

@@ -24,6 +24,7 @@ pub mod extract;
 pub mod format;
 pub mod gltf;
 pub mod leaves;
+pub mod mask;
 pub mod material;
 pub(crate) mod plugin;
 pub mod procedural;

@@ -9,12 +9,18 @@
 //! - a coverage pass draws each cell alone (no depth needed: a pixel counts once however many of
 //!   the cell's own leaves cover it, like the thesis' second, depth-equal pass).
 //!
+//! Leaves are rasterised through their texture's alpha mask when the tree has one
+//! ([`AlphaMask`]): a pixel whose interpolated texture coordinates land on a texel under the
+//! material's cutoff is not drawn, in either pass, exactly as the leaf material discards it. A
+//! card's transparent part then hides nothing, and a cell is measured by its opaque pixels.
+//!
 //! Views are orthographic (a distant viewer) along directions spread evenly over the whole
 //! sphere by a Fibonacci lattice, so that trees seen from below or from the air are covered as
 //! well as trees seen from the side. A cell invisible from a view because it covers no pixel at
 //! all (smaller than a pixel) gets visibility 1: nothing hides it, so it must not be pruned as if
 //! it were occluded. Views are processed in parallel.
 
+use super::mask::AlphaMask;
 use bevy::math::{Vec2, Vec3};
 
 /// `count` unit directions spread evenly over the sphere (Fibonacci lattice). Direction `k`
@@ -73,12 +79,13 @@ impl OrthoView {
     }
 }
 
-/// Calls `plot(x, y, depth)` for every pixel whose centre is inside the triangle
-/// (edge functions; pixels on a shared edge go to one triangle only, by the top-left rule).
+/// Calls `plot(x, y, depth, barycentrics)` for every pixel whose centre is inside the triangle
+/// (edge functions; pixels on a shared edge go to one triangle only, by the top-left rule). The
+/// barycentric weights are those of the triangle's corners in the order given.
 pub fn rasterize_triangle(
     tri: [(Vec2, f32); 3],
     resolution: u32,
-    mut plot: impl FnMut(u32, u32, f32),
+    mut plot: impl FnMut(u32, u32, f32, Vec3),
 ) {
     let [(mut a, za), (mut b, zb), (c, zc)] = tri;
     let (mut za, mut zb) = (za, zb);
@@ -86,7 +93,8 @@ pub fn rasterize_triangle(
     if area == 0.0 || !area.is_finite() {
         return;
     }
-    if area < 0.0 {
+    let swapped = area < 0.0;
+    if swapped {
         std::mem::swap(&mut a, &mut b);
         std::mem::swap(&mut za, &mut zb);
         area = -area;
@@ -111,8 +119,28 @@ pub fn rasterize_triangle(
             let inside = |w: f32, own: bool| w > 0.0 || (w == 0.0 && own);
             if inside(w0, own_bc) && inside(w1, own_ca) && inside(w2, own_ab) {
                 let z = (w0 * za + w1 * zb + w2 * zc) / area;
-                plot(x, y, z);
+                let w = Vec3::new(w0, w1, w2) / area;
+                plot(x, y, z, if swapped { Vec3::new(w.y, w.x, w.z) } else { w });
             }
+        }
+    }
+}
+
+/// A leaf triangle: corner positions and texture coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LeafTriangle {
+    /// Corner positions (model space).
+    pub positions: [Vec3; 3],
+    /// Corner texture coordinates.
+    pub uvs: [Vec2; 3],
+}
+
+impl LeafTriangle {
+    /// A triangle with zero texture coordinates (for untextured leaves).
+    pub fn untextured(positions: [Vec3; 3]) -> Self {
+        Self {
+            positions,
+            uvs: [Vec2::ZERO; 3],
         }
     }
 }
@@ -120,7 +148,9 @@ pub fn rasterize_triangle(
 /// Input of the visibility bake: leaf triangles grouped by cell.
 pub struct VisibilityInput<'a> {
     /// For each cell, its triangles.
-    pub cell_triangles: &'a [Vec<[Vec3; 3]>],
+    pub cell_triangles: &'a [Vec<LeafTriangle>],
+    /// The leaves' alpha mask: texels under its cutoff are not drawn. `None`: leaves are opaque.
+    pub mask: Option<&'a AlphaMask>,
     /// Centre of a sphere bounding every triangle.
     pub center: Vec3,
     /// Its radius.
@@ -136,12 +166,21 @@ pub fn cell_visibility_for_view(input: &VisibilityInput, direction: Vec3) -> Vec
     let pixels = (res * res) as usize;
     let mut depth = vec![f32::NEG_INFINITY; pixels];
     let mut owner = vec![u32::MAX; pixels];
-    let project = |t: &[Vec3; 3]| [view.project(t[0]), view.project(t[1]), view.project(t[2])];
+    let project = |t: &LeafTriangle| {
+        let p = &t.positions;
+        [view.project(p[0]), view.project(p[1]), view.project(p[2])]
+    };
+    // Whether the leaf is drawn at barycentrics `w` of triangle `t`: its mask texel is opaque.
+    let drawn = |t: &LeafTriangle, w: Vec3| {
+        input
+            .mask
+            .is_none_or(|m| m.opaque_at(t.uvs[0] * w.x + t.uvs[1] * w.y + t.uvs[2] * w.z))
+    };
     for (cell, triangles) in input.cell_triangles.iter().enumerate() {
         for t in triangles {
-            rasterize_triangle(project(t), res, |x, y, z| {
+            rasterize_triangle(project(t), res, |x, y, z, w| {
                 let i = (y * res + x) as usize;
-                if z > depth[i] {
+                if z > depth[i] && drawn(t, w) {
                     depth[i] = z;
                     owner[i] = cell as u32;
                 }
@@ -163,9 +202,9 @@ pub fn cell_visibility_for_view(input: &VisibilityInput, direction: Vec3) -> Vec
         .map(|(cell, triangles)| {
             let mut covered = 0u32;
             for t in triangles {
-                rasterize_triangle(project(t), res, |x, y, _| {
+                rasterize_triangle(project(t), res, |x, y, _, w| {
                     let i = (y * res + x) as usize;
-                    if stamp[i] != cell as u32 {
+                    if stamp[i] != cell as u32 && drawn(t, w) {
                         stamp[i] = cell as u32;
                         covered += 1;
                     }
@@ -225,11 +264,19 @@ pub fn cell_visibility(
 mod tests {
     use super::*;
 
-    fn square(z: f32, half: f32) -> Vec<[Vec3; 3]> {
+    /// A square card at depth `z`, texture coordinates spanning the unit square.
+    fn square(z: f32, half: f32) -> Vec<LeafTriangle> {
         let p = |x: f32, y: f32| Vec3::new(x, y, z);
+        let t = |x: f32, y: f32| Vec2::new(x, y);
         vec![
-            [p(-half, -half), p(half, -half), p(half, half)],
-            [p(-half, -half), p(half, half), p(-half, half)],
+            LeafTriangle {
+                positions: [p(-half, -half), p(half, -half), p(half, half)],
+                uvs: [t(0.0, 1.0), t(1.0, 1.0), t(1.0, 0.0)],
+            },
+            LeafTriangle {
+                positions: [p(-half, -half), p(half, half), p(-half, half)],
+                uvs: [t(0.0, 1.0), t(1.0, 0.0), t(0.0, 0.0)],
+            },
         ]
     }
 
@@ -250,8 +297,12 @@ mod tests {
         let view = OrthoView::new(Vec3::Z, Vec3::ZERO, 1.0, res);
         let mut hits = vec![0u8; (res * res) as usize];
         for t in square(0.0, 0.5) {
-            let tri = [view.project(t[0]), view.project(t[1]), view.project(t[2])];
-            rasterize_triangle(tri, res, |x, y, _| hits[(y * res + x) as usize] += 1);
+            let p = t.positions;
+            let tri = [view.project(p[0]), view.project(p[1]), view.project(p[2])];
+            rasterize_triangle(tri, res, |x, y, _, w| {
+                assert!((w.x + w.y + w.z - 1.0).abs() < 1e-5 && w.min_element() >= -1e-6);
+                hits[(y * res + x) as usize] += 1
+            });
         }
         assert!(hits.iter().all(|&h| h <= 1), "shared diagonal drawn twice");
         let covered = hits.iter().filter(|&&h| h == 1).count();
@@ -268,6 +319,7 @@ mod tests {
         let cells = vec![front, back];
         let input = VisibilityInput {
             cell_triangles: &cells,
+            mask: None,
             center: Vec3::ZERO,
             radius: 1.0,
             resolution: 64,
@@ -283,5 +335,69 @@ mod tests {
         let dirs = [Vec3::Z, -Vec3::Z];
         let all = cell_visibility(&input, &dirs, 2, &|_| {});
         assert_eq!(all, vec![1.0, 0.0, from_front[1], 1.0]);
+    }
+
+    #[test]
+    fn barycentrics_interpolate_the_corners_whatever_the_winding() {
+        let view = OrthoView::new(Vec3::Z, Vec3::ZERO, 1.0, 32);
+        for t in square(0.0, 0.8) {
+            for order in [[0, 1, 2], [1, 0, 2]] {
+                let p = order.map(|i| t.positions[i]);
+                let tri = [view.project(p[0]), view.project(p[1]), view.project(p[2])];
+                rasterize_triangle(tri, 32, |x, y, _, w| {
+                    // The interpolated position is the pixel centre.
+                    let at = p[0] * w.x + p[1] * w.y + p[2] * w.z;
+                    let (pixel, _) = view.project(at);
+                    assert!((pixel - Vec2::new(x as f32 + 0.5, y as f32 + 0.5)).length() < 1e-3);
+                });
+            }
+        }
+    }
+
+    #[test]
+    fn a_cards_transparent_part_hides_nothing() {
+        // Front card: opaque only on the left quarter of its texture; back card: fully opaque
+        // and the same size. Without the mask the front card hides the whole back card.
+        let front = square(1.0, 0.5);
+        let back = square(0.0, 0.5);
+        let cells = vec![front, back];
+        let alpha: Vec<u8> = (0..64).map(|i| if i % 8 < 2 { 255 } else { 0 }).collect();
+        let mask = AlphaMask::new(8, 8, &alpha, 0.5).unwrap();
+        let solid = VisibilityInput {
+            cell_triangles: &cells,
+            mask: None,
+            center: Vec3::ZERO,
+            radius: 1.0,
+            resolution: 64,
+        };
+        assert_eq!(cell_visibility_for_view(&solid, Vec3::Z)[1], 0.0);
+        // The back card is masked too: its opaque quarter is exactly behind the front card's.
+        let masked = VisibilityInput {
+            mask: Some(&mask),
+            ..solid
+        };
+        let vis = cell_visibility_for_view(&masked, Vec3::Z);
+        assert_eq!(vis[0], 1.0);
+        assert_eq!(vis[1], 0.0, "opaque parts aligned: hidden");
+        // Shift the back card so its opaque quarter sits behind the front card's transparent
+        // part: fully visible.
+        let shifted: Vec<LeafTriangle> = square(0.0, 0.5)
+            .into_iter()
+            .map(|mut t| {
+                for p in &mut t.positions {
+                    p.x += 0.5;
+                }
+                t
+            })
+            .collect();
+        let cells = vec![square(1.0, 0.5), shifted];
+        let vis = cell_visibility_for_view(
+            &VisibilityInput {
+                cell_triangles: &cells,
+                ..masked
+            },
+            Vec3::Z,
+        );
+        assert_eq!(vis[1], 1.0, "behind the transparent part: visible");
     }
 }
