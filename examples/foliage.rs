@@ -8,9 +8,9 @@
 //! Toggle `enabled` in the panel's FoliagePruningSettings to compare with full detail.
 
 use bevy::prelude::*;
-use bevy_nature::foliage::FoliagePruningSettings;
 use bevy_nature::foliage::pruning::procedural::TreeSpecies;
 use bevy_nature::foliage::pruning::spawn::TreeAssets;
+use bevy_nature::foliage::{FoliagePruningSettings, LodDistances};
 use bevy_nature_harness::ExampleRunner;
 
 fn main() -> AppExit {
@@ -20,8 +20,10 @@ fn main() -> AppExit {
             app.add_plugins(bevy_nature::NaturePlugins)
                 .insert_resource(ClearColor(Color::srgb(0.55, 0.7, 0.9)))
                 .insert_resource(FoliagePruningSettings {
-                    near: 15.0,
-                    far: 160.0,
+                    distances: LodDistances::World {
+                        near: 15.0,
+                        far: 160.0,
+                    },
                     ..default()
                 })
                 .add_systems(Startup, setup)

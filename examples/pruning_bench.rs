@@ -8,10 +8,10 @@
 //! ```
 
 use bevy::prelude::*;
-use bevy_nature::foliage::FoliagePruningSettings;
 use bevy_nature::foliage::pruning::procedural::TreeSpecies;
 use bevy_nature::foliage::pruning::spawn::TreeAssets;
 use bevy_nature::foliage::pruning::systems::{TRIANGLES_DRAWN, TRIANGLES_FULL};
+use bevy_nature::foliage::{FoliagePruningSettings, LodDistances};
 use bevy_nature_harness::compare::{Comparison, coverage_against_background};
 use bevy_nature_harness::headless::HarnessConfig;
 use bevy_nature_harness::{ExampleArgs, RenderHarness, require_adapter};
@@ -31,8 +31,10 @@ fn main() {
         .add_plugins(bevy_nature::NaturePlugins)
         .insert_resource(ClearColor(Color::srgb_u8(SKY[0], SKY[1], SKY[2])))
         .insert_resource(FoliagePruningSettings {
-            near: 15.0,
-            far: 160.0,
+            distances: LodDistances::World {
+                near: 15.0,
+                far: 160.0,
+            },
             ..default()
         })
         .add_systems(Startup, setup);

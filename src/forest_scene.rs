@@ -144,8 +144,8 @@ pub fn spawn_forest(
     mut pruning: ResMut<FoliagePruningSettings>,
 ) {
     let (near, far) = scene.kind.near_far();
-    pruning.near = near;
-    pruning.far = far;
+    // The thesis' scenes are set in metres (table 3.5): world distances.
+    pruning.distances = bevy_foliage::LodDistances::World { near, far };
     let side = scene.kind.side();
     commands.spawn((
         Name::new("ground"),

@@ -83,12 +83,11 @@ fn spawn_showcase(
     mut commands: Commands,
     options: Res<ShowcaseOptions>,
     mut trees: TreeAssets,
-    mut images: ResMut<Assets<Image>>,
     mut clip_materials: ResMut<Assets<bevy_terrain_clip::material::ClipmapMaterial>>,
 ) {
     use layout::*;
     if options.terrain {
-        spawn_terrain(&mut commands, &mut trees, &mut images, &mut clip_materials);
+        spawn_terrain(&mut commands, &mut trees, &mut clip_materials);
     } else {
         let TreeAssets {
             meshes, materials, ..
@@ -219,7 +218,6 @@ fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets) {
 fn spawn_terrain(
     commands: &mut Commands,
     trees: &mut TreeAssets,
-    images: &mut Assets<Image>,
     clip_materials: &mut Assets<bevy_terrain_clip::material::ClipmapMaterial>,
 ) {
     use bevy::math::DVec2;
@@ -235,7 +233,7 @@ fn spawn_terrain(
         origin_m: DVec2::splat(-size_m / 2.0),
         size_m,
     };
-    let mut clip = ClipStackTexture::new(source, 1024, 128, 128, [0.5, 0.5], images);
+    let mut clip = ClipStackTexture::new(source, 1024, 128, 128, [0.5, 0.5], &mut trees.images);
     clip.mapping = Some(mapping);
     let material = clip.material(
         StandardMaterial {

@@ -19,12 +19,14 @@
 use bevy::prelude::*;
 
 pub mod corpus;
+pub mod distance;
 pub mod forest;
 pub mod meshes;
 pub mod pruning;
 pub mod rng;
 pub mod settings;
 
+pub use distance::LodDistances;
 pub use forest::components::{ForestBudget, ForestSettings, ForestTree, TreeLod};
 pub use settings::{FoliagePruningSettings, ViewWeighting};
 
@@ -52,7 +54,7 @@ impl Plugin for FoliagePlugin {
 /// Everything a game usually imports.
 pub mod prelude {
     pub use crate::{
-        FoliagePlugin, FoliagePruningSettings, ForestBudget, ForestSettings, ForestTree, TreeLod,
-        ViewWeighting,
+        FoliagePlugin, FoliagePruningSettings, ForestBudget, ForestSettings, ForestTree,
+        LodDistances, TreeLod, ViewWeighting,
     };
 }

@@ -1,5 +1,6 @@
 //! Settings of the per-frame pruning (Gumbau 2011, §3.4).
 
+use crate::distance::LodDistances;
 use bevy::prelude::*;
 
 /// How the three stored viewpoints nearest the current view direction are weighted when the
@@ -17,17 +18,20 @@ pub enum ViewWeighting {
 
 /// Global settings of view-dependent stochastic pruning.
 ///
-/// `near`/`far` are the distances of eq. 3.4: closer than `near` a tree keeps every visible leaf,
-/// farther than `far` it keeps none (its impostor or nothing takes over), linear in between.
+/// `distances` are those of eq. 3.4: nearer than `near` a tree keeps every visible leaf,
+/// farther than `far` it keeps none, linear in between — by default measured by the crown's size
+/// on screen, so trees of any size and unit prune alike ([`LodDistances`]).
 #[derive(Resource, Clone, Debug, PartialEq, Reflect)]
 #[reflect(Resource, Default, Debug, PartialEq)]
 pub struct FoliagePruningSettings {
     /// Prune at all. Off draws every leaf of every tree (full detail), e.g. to compare.
     pub enabled: bool,
-    /// Distance (m) under which the distance factor is 1.
-    pub near: f32,
-    /// Distance (m) over which the distance factor is 0. Must exceed `near`.
-    pub far: f32,
+    /// `near` and `far` of eq. 3.4 (and of the forest manager's eq. 4.2).
+    pub distances: LodDistances,
+    /// Shadow views draw the shadow light's own selection of leaves, so pruning for the camera
+    /// does not thin the shadows ([`crate::pruning::selection`]). Off: shadows draw the camera's
+    /// selection (one extraction per tree instead of two).
+    pub shadow_selection: bool,
     /// Interpolation of the baked per-view visibility between viewpoints.
     pub view_weighting: ViewWeighting,
     /// Enlarge kept leaves so the total leaf area is preserved (eq. 3.7–3.9).
@@ -54,8 +58,8 @@ impl Default for FoliagePruningSettings {
     fn default() -> Self {
         Self {
             enabled: true,
-            near: 10.0,
-            far: 250.0,
+            distances: LodDistances::default(),
+            shadow_selection: true,
             view_weighting: ViewWeighting::InverseAngle,
             area_compensation: true,
             subpixel_fade: true,
@@ -73,28 +77,10 @@ impl FoliagePruningSettings {
         let default = Self::default();
         let mut out = self.clone();
         let mut fixes = Vec::new();
-        if !out.near.is_finite() {
-            fixes.push(format!(
-                "near = {} is not finite: using {}",
-                out.near, default.near
-            ));
-            out.near = default.near;
-        }
-        if out.near < 0.0 {
-            fixes.push(format!("near = {} is negative: using 0", out.near));
-            out.near = 0.0;
-        }
-        if !out.far.is_finite() || out.far <= out.near {
-            let far = if default.far > out.near {
-                default.far
-            } else {
-                out.near * 2.0 + 1.0
-            };
-            fixes.push(format!(
-                "far = {} must be finite and beyond near = {}: using {far}",
-                out.far, out.near
-            ));
-            out.far = far;
+        let (distances, fix) = out.distances.sanitized();
+        if let Some(fix) = fix {
+            fixes.push(fix);
+            out.distances = distances;
         }
         if !(out.max_leaf_scale.is_finite() && out.max_leaf_scale >= 1.0) {
             fixes.push(format!(
@@ -120,18 +106,6 @@ impl FoliagePruningSettings {
         }
         (out, fixes)
     }
-
-    /// The distance factor of eq. 3.4 for a tree at distance `d`: 1 under `near`, 0 over `far`,
-    /// `1 − (d − near)/(far − near)` between.
-    pub fn distance_factor(&self, d: f32) -> f32 {
-        if d <= self.near {
-            1.0
-        } else if d >= self.far {
-            0.0
-        } else {
-            1.0 - (d - self.near) / (self.far - self.near)
-        }
-    }
 }
 
 /// Replaces invalid settings with corrected ones, logging each correction once.
@@ -150,40 +124,29 @@ mod tests {
     use super::*;
 
     #[test]
-    fn distance_factor_follows_eq_3_4() {
-        let s = FoliagePruningSettings {
-            near: 10.0,
-            far: 110.0,
-            ..default()
-        };
-        assert_eq!(s.distance_factor(0.0), 1.0);
-        assert_eq!(s.distance_factor(10.0), 1.0);
-        assert!((s.distance_factor(35.0) - 0.75).abs() < 1e-6);
-        assert!((s.distance_factor(60.0) - 0.5).abs() < 1e-6);
-        assert_eq!(s.distance_factor(110.0), 0.0);
-        assert_eq!(s.distance_factor(1e9), 0.0);
-    }
-
-    #[test]
     fn absurd_settings_are_corrected() {
         let bad = FoliagePruningSettings {
-            near: f32::NAN,
-            far: -5.0,
+            distances: LodDistances::World {
+                near: f32::NAN,
+                far: -5.0,
+            },
             ..default()
         };
         let (fixed, fixes) = bad.sanitized();
-        assert_eq!(fixes.len(), 2, "{fixes:?}");
-        assert_eq!(fixed.near, 10.0);
-        assert!(fixed.far > fixed.near);
+        assert_eq!(fixes.len(), 1, "{fixes:?}");
+        let (near, far) = fixed.distances.range();
+        assert!(near >= 0.0 && far > near);
 
         let inverted = FoliagePruningSettings {
-            near: 500.0,
-            far: 100.0,
+            distances: LodDistances::ScreenSize {
+                near: 0.01,
+                far: 0.5,
+            },
             ..default()
         };
         let (fixed, fixes) = inverted.sanitized();
         assert_eq!(fixes.len(), 1);
-        assert!(fixed.far > 500.0);
+        assert_eq!(fixed.distances, LodDistances::default());
 
         let bad_leaf = FoliagePruningSettings {
             max_leaf_scale: 0.5,
@@ -205,9 +168,15 @@ mod tests {
     fn plugin_corrects_settings_at_runtime() {
         let mut app = App::new();
         app.add_plugins(crate::FoliagePlugin);
-        app.world_mut().resource_mut::<FoliagePruningSettings>().far = f32::INFINITY;
+        app.world_mut()
+            .resource_mut::<FoliagePruningSettings>()
+            .distances = LodDistances::World {
+            near: 10.0,
+            far: f32::INFINITY,
+        };
         app.update();
         let s = app.world().resource::<FoliagePruningSettings>();
-        assert!(s.far.is_finite() && s.far > s.near, "{s:?}");
+        let (near, far) = s.distances.range();
+        assert!(far.is_finite() && far > near, "{s:?}");
     }
 }

@@ -18,7 +18,8 @@ use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 use bevy_foliage::pruning::render::PruningFrame;
 use bevy_foliage::pruning::store::{FoliageSlot, QUAD_TAG_BIT};
 use bevy_foliage::{
-    FoliagePlugin, FoliagePruningSettings, ForestBudget, ForestSettings, ForestTree, TreeLod,
+    FoliagePlugin, FoliagePruningSettings, ForestBudget, ForestSettings, ForestTree, LodDistances,
+    TreeLod,
 };
 use bevy_nature_harness::RenderHarness;
 use bevy_nature_harness::compare::Comparison;
@@ -50,8 +51,10 @@ fn forest_trees_draw_borrowed_extractions_within_the_budget() {
     };
     harness.app_mut().add_plugins(FoliagePlugin);
     harness.app_mut().insert_resource(FoliagePruningSettings {
-        near: 10.0,
-        far: 110.0,
+        distances: LodDistances::World {
+            near: 10.0,
+            far: 110.0,
+        },
         ..default()
     });
     harness.app_mut().insert_resource(ForestSettings {
@@ -192,17 +195,20 @@ fn forest_trees_draw_borrowed_extractions_within_the_budget() {
         let ty = handles.iter().position(|h| h == baked).unwrap();
         let expected = kept_index_total(
             &types[ty].pruning_input(),
-            &params.weights,
-            params.distance_fixed,
+            &params.camera.weights,
+            params.camera.distance_fixed,
         );
         assert_eq!(
-            draws[slot.slot as usize * 5],
+            draws[slot.camera.slot as usize * 5],
             expected,
             "extraction {slot:?}"
         );
     }
     let world = harness.world_mut();
-    let slots_in_use: Vec<u32> = baked_assets.iter().map(|(_, s, ..)| s.slot).collect();
+    let slots_in_use: Vec<u32> = baked_assets
+        .iter()
+        .map(|(_, s, ..)| s.camera.slot)
+        .collect();
     for &tree in &trees {
         if world.get::<Visibility>(tree) == Some(&Visibility::Hidden) {
             continue;

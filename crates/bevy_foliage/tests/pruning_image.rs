@@ -10,7 +10,7 @@ use bevy_foliage::pruning::components::{PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::kept_index_total;
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
-use bevy_foliage::{FoliagePlugin, FoliagePruningSettings};
+use bevy_foliage::{FoliagePlugin, FoliagePruningSettings, LodDistances};
 use bevy_nature_harness::compare::{Comparison, RgbaImage, coverage_against_background};
 use bevy_nature_harness::{RenderHarness, artifacts_dir};
 
@@ -42,8 +42,7 @@ fn area_compensation_keeps_crown_coverage_that_plain_pruning_loses() {
     let (near, far) = (8.0, 60.0);
     harness.app_mut().add_plugins(FoliagePlugin);
     harness.app_mut().insert_resource(FoliagePruningSettings {
-        near,
-        far,
+        distances: LodDistances::World { near, far },
         ..default()
     });
     harness.app_mut().insert_resource(ClearColor(SKY));
@@ -131,8 +130,8 @@ fn area_compensation_keeps_crown_coverage_that_plain_pruning_loses() {
             .unwrap();
         let kept = kept_index_total(
             &baked.pruning_input(),
-            &params.weights,
-            params.distance_fixed,
+            &params.camera.weights,
+            params.camera.distance_fixed,
         ) as f64
             / baked.indices.len() as f64;
         let plain = render_variant(&mut harness, true, false);

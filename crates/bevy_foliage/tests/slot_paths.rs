@@ -9,7 +9,7 @@ use bevy_foliage::pruning::components::PrunedFoliage;
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 use bevy_foliage::pruning::store::FoliageStore;
-use bevy_foliage::{FoliagePlugin, FoliagePruningSettings};
+use bevy_foliage::{FoliagePlugin, FoliagePruningSettings, LodDistances};
 use bevy_nature_harness::RenderHarness;
 use bevy_nature_harness::compare::{Comparison, RgbaImage};
 
@@ -17,8 +17,10 @@ fn render(baked: &BakedFoliage, force_triangles: bool) -> Option<RgbaImage> {
     let mut harness = RenderHarness::for_test("slot_paths", 96, 96)?;
     harness.app_mut().add_plugins(FoliagePlugin);
     harness.app_mut().insert_resource(FoliagePruningSettings {
-        near: 5.0,
-        far: 60.0,
+        distances: LodDistances::World {
+            near: 5.0,
+            far: 60.0,
+        },
         ..default()
     });
     let world = harness.world_mut();

@@ -13,6 +13,7 @@
 
 use super::cache::{CacheAction, LodCache, LodSlots, SLOT_LOD_ZERO};
 use super::lod::{desired_lod, lod_error, urgency};
+use crate::distance::{LodDistances, LodView};
 use bevy::math::{Vec3, Vec4};
 use std::time::{Duration, Instant};
 
@@ -44,7 +45,8 @@ pub struct TreeLodState {
     pub urgency: f32,
     /// Inside the view frustum this frame.
     pub visible: bool,
-    /// Distance to the camera this frame.
+    /// LoD distance from the camera this frame (world distance to the crown's centre, or
+    /// inverse screen size).
     pub distance: f32,
 }
 
@@ -112,11 +114,12 @@ impl Frustum {
 /// Settings of the manager.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ManagerSettings {
-    /// Distance of LoD 1 (eq. 4.2).
-    pub near: f32,
-    /// Distance of LoD 0.
-    pub far: f32,
-    /// Distances are floored at this in the urgency (eq. 3.12).
+    /// `near` (LoD 1) and `far` (LoD 0) of eq. 4.2, in world distance or screen size.
+    pub distances: LodDistances,
+    /// The camera's projection, for screen-size distances.
+    pub view: LodView,
+    /// LoD distances (world units, or inverse screen sizes: see [`LodDistances::lod_distance`])
+    /// are floored at this in the urgency (eq. 3.12).
     pub min_distance: f32,
     /// Share extractions between trees of a type through the LoD cache.
     pub borrowing: bool,
@@ -125,8 +128,11 @@ pub struct ManagerSettings {
 impl Default for ManagerSettings {
     fn default() -> Self {
         Self {
-            near: 10.0,
-            far: 250.0,
+            distances: LodDistances::World {
+                near: 10.0,
+                far: 250.0,
+            },
+            view: LodView::default(),
             min_distance: 1.0,
             borrowing: true,
         }
@@ -212,16 +218,21 @@ impl ForestManager {
         let frame = self.frame;
         let mut report = FrameReport::default();
         self.candidates.clear();
+        let (near, far) = settings.distances.range();
         for (i, (tree, state)) in trees.iter().zip(states.iter_mut()).enumerate() {
             let Some(cache) = self.caches.get(tree.ty) else {
                 continue;
             };
             state.frames_since_update = state.frames_since_update.saturating_add(1);
-            let distance = (tree.center.distance(camera) - tree.radius).max(0.0);
+            let distance = settings.distances.lod_distance(
+                tree.center.distance(camera),
+                tree.radius,
+                &settings.view,
+            );
             state.distance = distance;
             state.visible = distance.is_finite()
                 && frustum.is_none_or(|f| f.intersects_sphere(tree.center, tree.radius));
-            state.desired_lod = desired_lod(distance, settings.near, settings.far, exponent);
+            state.desired_lod = desired_lod(distance, near, far, exponent);
             state.urgency = 0.0;
             if !state.visible {
                 continue;
@@ -367,8 +378,11 @@ mod tests {
 
     fn settings(borrowing: bool) -> ManagerSettings {
         ManagerSettings {
-            near: 10.0,
-            far: 150.0,
+            distances: LodDistances::World {
+                near: 10.0,
+                far: 150.0,
+            },
+            view: LodView::default(),
             min_distance: 1.0,
             borrowing,
         }
@@ -515,8 +529,9 @@ mod tests {
     #[test]
     fn borrowing_never_hands_a_tree_a_lod_outside_its_slot() {
         let trees = forest(5000, 3, 3);
-        let mut states = vec![TreeLodState::default(); trees.len()];
         for double_buffered in [false, true] {
+            // Each manager starts from fresh trees (states name the slots of their manager).
+            let mut states = vec![TreeLodState::default(); trees.len()];
             let mut m = ForestManager::new(
                 3,
                 LodSlots::from_bounds(vec![0.0, 0.2, 0.4, 0.55, 0.7, 0.8, 0.9, 0.95, 1.0]).unwrap(),

@@ -5,7 +5,7 @@ use super::systems::{
     BORROWS, EXPONENT, EXTRACTIONS, ForestState, GPU_BYTES_PER_VISIBLE, LEAF_TRIANGLES, MANAGER_MS,
     VISIBLE_TREES, draw_forest_trees, run_forest_manager, sanitize_forest_settings,
 };
-use crate::pruning::systems::FoliageSystems;
+use crate::pruning::systems::{FoliageSystems, track_shadow_light};
 use bevy::diagnostic::{Diagnostic, RegisterDiagnostic};
 use bevy::prelude::*;
 
@@ -34,7 +34,9 @@ pub(crate) fn build(app: &mut App) {
             PostUpdate,
             (
                 // It writes the extraction entities' pruning inputs, which the store lays out.
-                run_forest_manager.in_set(FoliageSystems::PruningParams),
+                run_forest_manager
+                    .in_set(FoliageSystems::PruningParams)
+                    .after(track_shadow_light),
                 draw_forest_trees.in_set(FoliageSystems::Draw),
             ),
         );

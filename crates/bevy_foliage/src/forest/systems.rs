@@ -21,11 +21,15 @@ use super::components::{ForestBudget, ForestSettings, ForestTree, TreeLod};
 use super::feedback::ExponentController;
 use super::manager::{Budget, ForestManager, Frustum, ManagerSettings, TreeInput, TreeLodState};
 use crate::pruning::bake::BakedFoliage;
-use crate::pruning::components::{FoliageCamera, ManagedPruning, PrunedFoliage, PruningParams};
-use crate::pruning::extract::{FIXED_ONE, KEEP_ALL, kept_index_total, view_weights};
+use crate::pruning::components::{
+    FoliageCamera, FoliageShadowLight, ManagedPruning, PrunedFoliage, PruningParams,
+};
+use crate::pruning::extract::{KEEP_ALL, view_weights};
 use crate::pruning::material::LeafMaterial;
+use crate::pruning::selection::{Selection, ShadowLight, factor_fixed};
 use crate::pruning::slot_mesh::SlotMeshes;
 use crate::pruning::store::{FoliageSlot, mesh_tag};
+use crate::pruning::systems::{drawn_index_bound, pruning_camera};
 use crate::settings::FoliagePruningSettings;
 use bevy::camera::visibility::NoFrustumCulling;
 use bevy::diagnostic::{DiagnosticPath, Diagnostics};
@@ -91,20 +95,6 @@ pub const EXPONENT: DiagnosticPath = DiagnosticPath::const_new("forest/exponent"
 pub const GPU_BYTES_PER_VISIBLE: DiagnosticPath =
     DiagnosticPath::const_new("forest/gpu_bytes_per_visible_tree");
 
-fn pruning_camera(
-    marked: &Query<(&Camera, &GlobalTransform), With<FoliageCamera>>,
-    cameras: &Query<(&Camera, &GlobalTransform), With<Camera3d>>,
-) -> Option<(Mat4, Vec3)> {
-    let (camera, transform) = marked.iter().next().or_else(|| {
-        cameras
-            .iter()
-            .filter(|(c, _)| c.is_active)
-            .min_by_key(|(c, _)| c.order)
-    })?;
-    let clip_from_world = camera.clip_from_view() * transform.to_matrix().inverse();
-    Some((clip_from_world, transform.translation()))
-}
-
 /// Runs the forest manager: ranks the visible trees by urgency, serves them within the budget
 /// (borrowing or re-extracting cache slots) and sets the extraction entities' pruning inputs.
 #[allow(clippy::too_many_arguments)]
@@ -113,6 +103,7 @@ pub fn run_forest_manager(
     mut state: ResMut<ForestState>,
     settings: Res<ForestSettings>,
     pruning: Res<FoliagePruningSettings>,
+    shadow_light: Res<FoliageShadowLight>,
     time: Res<Time<Real>>,
     baked: Res<Assets<BakedFoliage>>,
     mut diagnostics: Diagnostics,
@@ -175,7 +166,7 @@ pub fn run_forest_manager(
         state.entities.clear();
         state.built_with = Some(settings.clone());
     }
-    let Some((clip_from_world, camera)) = pruning_camera(&marked, &cameras) else {
+    let Some((clip_from_world, camera, view)) = pruning_camera(&marked, &cameras) else {
         return;
     };
     let frustum = Frustum::from_clip_from_world(clip_from_world);
@@ -246,8 +237,9 @@ pub fn run_forest_manager(
     };
 
     let manager_settings = ManagerSettings {
-        near: pruning.near,
-        far: pruning.far,
+        distances: pruning.distances,
+        view,
+        // 1 m, or a crown filling the view height.
         min_distance: 1.0,
         borrowing: settings.borrowing,
     };
@@ -283,7 +275,10 @@ pub fn run_forest_manager(
         for (i, s) in state.states.iter_mut().enumerate() {
             let tree = state.inputs[i];
             s.visible = tree.center.is_finite()
-                && tree.center.distance(camera) - tree.radius < pruning.far
+                && pruning
+                    .distances
+                    .lod_distance(tree.center.distance(camera), tree.radius, &view)
+                    < pruning.distances.range().1
                 && frustum.intersects_sphere(tree.center, tree.radius);
             if s.visible {
                 report_visible += 1;
@@ -327,22 +322,51 @@ pub fn run_forest_manager(
         let Some(data) = baked.get(&tree.baked) else {
             continue;
         };
-        let local_camera = transform.affine().inverse().transform_point3(camera);
-        let new = PruningParams {
-            weights: view_weights(
-                local_camera - state.type_spheres[e.ty].0,
-                &data.view_directions,
-                pruning.view_weighting,
-            ),
-            distance_fixed: if !settings.enabled || !pruning.enabled || e.slot == SLOT_LOD_ONE {
-                // Full detail: every leaf, as with pruning off. The exact LoD 1 slot is full
-                // detail too: it holds the trees nearer than `near`, which cover the most
-                // pixels and may stand around the camera, where visibility baked from viewpoints
-                // outside the crown does not apply.
-                KEEP_ALL
-            } else {
-                ((e.lod.clamp(0.0, 1.0) * FIXED_ONE as f32).round() as u32).min(FIXED_ONE)
-            },
+        let local_from_world = transform.affine().inverse();
+        let crown_center = state.type_spheres[e.ty].0;
+        let weights_towards = |direction: Vec3| {
+            view_weights(direction, &data.view_directions, pruning.view_weighting)
+        };
+        let new = if !settings.enabled || !pruning.enabled || e.slot == SLOT_LOD_ONE {
+            // Full detail: every leaf, as with pruning off, and shadows draw the same. The
+            // exact LoD 1 slot is full detail too: it holds the trees nearer than `near`, which
+            // cover the most pixels and may stand around the camera, where visibility baked from
+            // viewpoints outside the crown does not apply.
+            PruningParams {
+                camera: Selection {
+                    weights: weights_towards(
+                        local_from_world.transform_point3(camera) - crown_center,
+                    ),
+                    distance_fixed: KEEP_ALL,
+                },
+                light: None,
+            }
+        } else {
+            let distance_fixed = factor_fixed(e.lod);
+            PruningParams {
+                camera: Selection {
+                    weights: weights_towards(
+                        local_from_world.transform_point3(camera) - crown_center,
+                    ),
+                    distance_fixed,
+                },
+                // The light's own selection at the same LoD, seen from the tree extracted for
+                // (trees borrowing it stand turned otherwise, as for the camera's).
+                light: shadow_light
+                    .0
+                    .filter(|_| pruning.shadow_selection)
+                    .map(|light| Selection {
+                        weights: weights_towards(match light {
+                            ShadowLight::Directional { toward_light } => {
+                                local_from_world.transform_vector3(toward_light)
+                            }
+                            ShadowLight::Positional { position } => {
+                                local_from_world.transform_point3(position) - crown_center
+                            }
+                        }),
+                        distance_fixed,
+                    }),
+            }
         };
         match state.extractions.get(&key) {
             Some(&entity) => {
@@ -450,7 +474,7 @@ pub fn draw_forest_trees(
         .enumerate()
         .map(|(i, e)| (*e, i))
         .collect();
-    let mut kept_cache: HashMap<Entity, (u32, u32, u32)> = HashMap::default();
+    let mut kept_cache: HashMap<Entity, (u32, u32, u32, u32)> = HashMap::default();
     let (mut triangles, mut visible) = (0u64, 0u32);
     for (entity, tree, lod, visibility, tag, mesh, material) in &trees {
         if *visibility == Visibility::Hidden {
@@ -479,24 +503,17 @@ pub fn draw_forest_trees(
             // Created this frame: its slot is assigned next frame.
             continue;
         };
-        let (tag_value, kept, full) = *kept_cache.entry(extraction).or_insert_with(|| {
-            let tag = mesh_tag(foliage_slot.slot, &foliage_slot.ty);
+        let (tag_value, kept, bound, full) = *kept_cache.entry(extraction).or_insert_with(|| {
+            let tag = mesh_tag(foliage_slot.camera.slot, &foliage_slot.ty);
             let Some(data) = baked.get(&pruned.baked) else {
-                return (tag, 0, 0);
+                return (tag, 0, 0, 0);
             };
-            (
-                tag,
-                kept_index_total(
-                    &data.pruning_input(),
-                    &params.weights,
-                    params.distance_fixed,
-                ),
-                data.indices.len() as u32,
-            )
+            let (kept, bound) = drawn_index_bound(data, params);
+            (tag, kept, bound, data.indices.len() as u32)
         });
         visible += 1;
         triangles += kept as u64 / 3;
-        let handle = slot_meshes.fitting(kept, full, foliage_slot.ty.quads, &mut meshes);
+        let handle = slot_meshes.fitting(bound, full, foliage_slot.ty.quads, &mut meshes);
         let mut e = commands.entity(entity);
         if tag.map(|t| t.0) != Some(tag_value) {
             e.insert(MeshTag(tag_value));
@@ -513,7 +530,7 @@ pub fn draw_forest_trees(
         .extractions
         .values()
         .filter_map(|e| extractions.get(*e).ok())
-        .map(|(s, ..)| s.ty.full_index_count as u64 * 4)
+        .map(|(s, ..)| s.ty.full_index_count as u64 * 4 * (1 + s.light.is_some() as u64))
         .sum();
     diagnostics.add_measurement(&LEAF_TRIANGLES, || triangles as f64);
     diagnostics.add_measurement(&GPU_BYTES_PER_VISIBLE, || {

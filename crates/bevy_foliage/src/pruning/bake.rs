@@ -261,18 +261,30 @@ impl BakedFoliage {
 }
 
 impl BakedFoliage {
-    /// Centre of the crown in model space (mean of the cell box centres).
+    /// Centre of the crown in model space: the centre of the leaves' bounding box.
     pub fn crown_center(&self) -> Vec3 {
-        let n = self.cell_boxes.len().max(1) as f32;
-        self.cell_boxes.iter().map(|b| b.center).sum::<Vec3>() / n
+        let (lo, hi) = self
+            .positions
+            .iter()
+            .filter(|p| p.is_finite())
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(*p), hi.max(*p))
+            });
+        if lo.is_finite() {
+            (lo + hi) * 0.5
+        } else {
+            Vec3::ZERO
+        }
     }
 
-    /// Radius, about [`crown_center`](Self::crown_center), of a sphere holding every cell box.
+    /// Radius, about [`crown_center`](Self::crown_center), of the sphere holding every leaf:
+    /// the crown's bounding sphere, whose projected diameter is the crown's screen size.
     pub fn crown_radius(&self) -> f32 {
         let c = self.crown_center();
-        self.cell_boxes
+        self.positions
             .iter()
-            .map(|b| (b.center - c).length() + b.half_extents.length())
+            .filter(|p| p.is_finite())
+            .map(|p| p.distance(c))
             .fold(0.0, f32::max)
     }
 }

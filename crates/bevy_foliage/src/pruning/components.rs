@@ -2,8 +2,8 @@
 //! [`FoliageCamera`]) and what the plugin writes on them each frame ([`PruningParams`]).
 
 use super::bake::BakedFoliage;
-use super::extract::ViewWeights;
 use super::material::LeafMaterial;
+use super::selection::{Selection, ShadowLight};
 use bevy::prelude::*;
 
 /// Tags a tree instance whose leaves are pruned every frame. The entity's `GlobalTransform`
@@ -22,14 +22,25 @@ pub struct PrunedFoliage {
 #[derive(Component, Clone, Copy, Debug, Default)]
 pub struct FoliageCamera;
 
-/// This frame's pruning inputs of one tree instance (written by the plugin).
+/// This frame's pruning inputs of one tree instance (written by the plugin; see
+/// [`super::selection`]).
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PruningParams {
-    /// Viewpoints and weights.
-    pub weights: ViewWeights,
-    /// Distance factor (eq. 3.4), fraction of 65536.
-    pub distance_fixed: u32,
+    /// What the camera views (main pass and prepasses) draw.
+    pub camera: Selection,
+    /// What shadow views draw; `None`: the camera's selection.
+    pub light: Option<Selection>,
 }
+
+/// Marks the light whose shadow views draw the light's own leaf selection. Without one, the
+/// first shadow-casting directional light does (else the first spot, else point light). Other
+/// shadow-casting lights draw that same selection.
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct FoliageLight;
+
+/// The light shadow views select leaves for this frame (written by the plugin).
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq)]
+pub struct FoliageShadowLight(pub Option<ShadowLight>);
 
 /// Marks a [`PrunedFoliage`] entity whose [`PruningParams`] are written by someone else (the
 /// forest manager's cache extractions) instead of from the pruning camera every frame, and that

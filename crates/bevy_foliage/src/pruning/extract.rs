@@ -94,18 +94,6 @@ pub fn view_weights(direction: Vec3, views: &[Vec3], weighting: ViewWeighting) -
     }
 }
 
-/// The distance factor of eq. 3.4 as a fraction of [`FIXED_ONE`].
-pub fn distance_factor_fixed(distance: f32, near: f32, far: f32) -> u32 {
-    let f = if distance <= near {
-        1.0
-    } else if distance >= far {
-        0.0
-    } else {
-        1.0 - (distance - near) / (far - near)
-    };
-    ((f * FIXED_ONE as f32).round() as u32).min(FIXED_ONE)
-}
-
 /// Quantises a visibility in `[0, 1]` to `u16`.
 pub fn quantize_visibility(v: f32) -> u16 {
     (v.clamp(0.0, 1.0) * 65535.0).round() as u16
@@ -311,13 +299,6 @@ mod tests {
         assert!(w.weights[0] > FIXED_ONE * 9 / 10);
         let n = view_weights(Vec3::X, &views, ViewWeighting::Nearest);
         assert_eq!(n.weights, [FIXED_ONE, 0, 0]);
-    }
-
-    #[test]
-    fn distance_factor_matches_eq_3_4() {
-        assert_eq!(distance_factor_fixed(5.0, 10.0, 110.0), FIXED_ONE);
-        assert_eq!(distance_factor_fixed(60.0, 10.0, 110.0), FIXED_ONE / 2);
-        assert_eq!(distance_factor_fixed(200.0, 10.0, 110.0), 0);
     }
 
     /// Cells of the given sizes, one leaf = one quad (6 indices), one viewpoint.

@@ -1,5 +1,5 @@
-// Prepass / shadow vertex stage of pruned leaves: the same pulled vertices, so shadows are cast
-// by exactly the pruned set the camera sees.
+// Prepass / shadow vertex stage of pruned leaves: the camera's pulled vertices in the camera's
+// prepasses, the shadow light's selection in shadow views (see `leaf_pulling.wgsl`).
 #import bevy_pbr::prepass_io::VertexOutput
 #import bevy_foliage::leaf_pulling::{SlotVertex, pull_leaf_vertex}
 

@@ -38,6 +38,10 @@ struct Instance {
     index_base: u32,
     vertex_base: u32,
     cell_offsets_base: u32,
+    shadow_slot: u32,
+    pad_a: u32,
+    pad_b: u32,
+    pad_c: u32,
 }
 
 struct LeafVertex {
@@ -91,7 +95,13 @@ struct PulledLeafVertex {
 fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeafVertex {
     var out: PulledLeafVertex;
     let tag = mesh_functions::get_tag(instance_index);
-    let slot = tag & 0x7fffffffu;
+    var slot = tag & 0x7fffffffu;
+    // Shadow views draw the light's selection (`selection.rs`). A shadow map's view is not the
+    // camera it resolves LoD for: Bevy sets `lod_view_world_position` to the camera's position
+    // for shadow views and to the view's own for camera views.
+    if any(view.world_position != view.lod_view_world_position) {
+        slot = instances[slot].shadow_slot;
+    }
     let vertex = u32(slot_position.x);
     // Quad slot meshes (tag bit 31): vertex 4k + c is corner c of kept leaf k, whose six kept
     // indices are a b c a c d; its index is 6k + [0, 1, 2, 5][c].

@@ -5,7 +5,8 @@
 //! - **The algorithm**, plain Rust with no render types: [`leaves`] (the leaf set), [`cells`]
 //!   (the cell cloud), [`visibility`] (per-cell visibility from evenly spread viewpoints),
 //!   [`bake`] (the whole bake into a [`BakedFoliage`](bake::BakedFoliage)), [`extract`] (the
-//!   per-frame extraction: the exact CPU reference of the GPU pass), [`appearance`] (area
+//!   per-frame extraction: the exact CPU reference of the GPU pass), [`selection`] (which
+//!   leaves the camera's and the light's views get), [`appearance`] (area
 //!   compensation and the sub-pixel fade: the CPU reference of the leaf vertex stage),
 //!   [`format`](mod@format) (the versioned, checksummed `.foliage` file), and the tree sources
 //!   [`procedural`] and [`gltf`].
@@ -29,6 +30,7 @@ pub mod material;
 pub(crate) mod plugin;
 pub mod procedural;
 pub mod render;
+pub mod selection;
 pub mod slot_mesh;
 pub mod spawn;
 pub mod store;

@@ -3,11 +3,12 @@
 
 use super::asset::BakedFoliageLoader;
 use super::bake::BakedFoliage;
+use super::components::FoliageShadowLight;
 use super::slot_mesh::SlotMeshes;
 use super::store::{FoliageStore, update_foliage_store};
 use super::systems::{
     FoliageSystems, KEPT_PERCENT, TREES_PRUNED, TRIANGLES_DRAWN, TRIANGLES_FULL,
-    assign_slot_meshes, compute_pruning_params, refresh_leaf_materials,
+    assign_slot_meshes, compute_pruning_params, refresh_leaf_materials, track_shadow_light,
 };
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::diagnostic::{Diagnostic, RegisterDiagnostic};
@@ -23,6 +24,7 @@ pub(crate) fn build(app: &mut App) {
         .init_asset_loader::<BakedFoliageLoader>()
         .init_resource::<FoliageStore>()
         .init_resource::<SlotMeshes>()
+        .init_resource::<FoliageShadowLight>()
         .configure_sets(
             PostUpdate,
             (
@@ -37,7 +39,9 @@ pub(crate) fn build(app: &mut App) {
         .add_systems(
             PostUpdate,
             (
-                compute_pruning_params.in_set(FoliageSystems::PruningParams),
+                (track_shadow_light, compute_pruning_params)
+                    .chain()
+                    .in_set(FoliageSystems::PruningParams),
                 update_foliage_store.in_set(FoliageSystems::Store),
                 (assign_slot_meshes, refresh_leaf_materials).in_set(FoliageSystems::Draw),
             ),

@@ -132,10 +132,21 @@ impl TreeSpecies {
         ]
     }
 
-    /// The same species with a different leaf count (for quick tests).
+    /// The same species with a different leaf count and the same total leaf area: the leaves
+    /// grow (or shrink) by `√(old / new)`, so a crown with fewer leaves for speed keeps the
+    /// coverage of the full count (the probability that a ray through the crown meets a leaf
+    /// depends on the leaf area per volume, not on the count).
     pub fn with_leaf_count(mut self, leaf_count: usize) -> Self {
+        if leaf_count > 0 && self.leaf_count > 0 {
+            self.leaf_size *= (self.leaf_count as f32 / leaf_count as f32).sqrt();
+        }
         self.leaf_count = leaf_count;
         self
+    }
+
+    /// Total leaf area (m²) of the species' leaves at their mean size.
+    pub fn leaf_area(&self) -> f32 {
+        self.leaf_count as f32 * self.leaf_size * self.leaf_size * self.leaf_aspect
     }
 
     /// Centre of the crown envelope.
@@ -367,6 +378,22 @@ mod tests {
         let mut other = species.clone();
         other.seed += 1;
         assert_ne!(generate(&other).leaves.positions, a.leaves.positions);
+    }
+
+    #[test]
+    fn fewer_leaves_keep_the_crowns_leaf_area() {
+        let full = TreeSpecies::quercus();
+        let reduced = full.clone().with_leaf_count(4000);
+        assert!((reduced.leaf_area() / full.leaf_area() - 1.0).abs() < 1e-4);
+        let area = |s: &TreeSpecies| {
+            let t = generate(s);
+            (0..t.leaves.len()).map(|l| t.leaves.area(l)).sum::<f32>()
+        };
+        let (a_reduced, a_more) = (area(&reduced), area(&full.clone().with_leaf_count(12_000)));
+        assert!(
+            (a_reduced / a_more - 1.0).abs() < 0.05,
+            "generated leaf area {a_reduced} vs {a_more}"
+        );
     }
 
     #[test]

@@ -30,6 +30,10 @@ struct Instance {
     index_base: u32,       // first entry of this type in `stored_indices`
     vertex_base: u32,      // added to every index written (types share one vertex buffer)
     cell_offsets_base: u32, // first `cell_offsets` entry of this instance
+    shadow_slot: u32,      // the record shadow views draw (the light's selection, or this one)
+    pad_a: u32,
+    pad_b: u32,
+    pad_c: u32,
 }
 
 struct DrawIndexedIndirect {

@@ -1,11 +1,14 @@
 //! The per-frame pruning pass in the render world: thin code around `prune.wgsl`.
 //!
-//! Each frame one instance record per tree is uploaded and two dispatches (`count_and_scan`,
-//! `compact`) write each tree's kept indices into its region of the shared output buffer and its
-//! indexed-indirect draw arguments. The pass runs once per frame before any camera renders.
+//! Each frame one instance record per extraction — the camera's selection of every tree, and
+//! while there is a shadow light the light's selection too ([`super::selection`]) — is uploaded,
+//! and two dispatches (`count_and_scan`, `compact`) write each extraction's kept indices into its
+//! region of the shared output buffer and its indexed-indirect draw arguments. The pass runs once
+//! per frame before any camera renders; a camera record names the record shadow views draw.
 
 use super::components::PruningParams;
-use super::store::{FoliageSlot, FoliageStore, INSTANCE_WORDS, StoreBuffers, TypeSlot};
+use super::selection::Selection;
+use super::store::{FoliageSlot, FoliageStore, INSTANCE_WORDS, Region, StoreBuffers, TypeSlot};
 use bevy::asset::{embedded_asset, load_embedded_asset};
 use bevy::core_pipeline::schedule::camera_driver;
 use bevy::prelude::*;
@@ -25,23 +28,25 @@ use bevy::render::renderer::{
 use bevy::render::storage::{GpuShaderBuffer, ShaderBuffer};
 use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems};
 
-/// Layout of one instance's output for this frame (render world).
+/// Layout of one extraction's output for this frame (render world).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct InstanceOutput {
     /// The main-world tree entity.
     pub entity: Entity,
     /// Tree type.
     pub slot: TypeSlot,
-    /// First output index of this instance.
+    /// First output index of this extraction.
     pub output_base: u32,
     /// Index of its draw arguments in [`PruningFrame::draws`] (its slot).
     pub draw: u32,
+    /// The shadow light's selection (else the camera's).
+    pub light: bool,
 }
 
 /// This frame's pruning work and its outputs (render world).
 #[derive(Resource, Default)]
 pub struct PruningFrame {
-    /// Instances, in slot order.
+    /// Extractions, camera selections first.
     pub instances: Vec<InstanceOutput>,
     /// Kept indices of every instance.
     pub output: Option<Buffer>,
@@ -138,7 +143,7 @@ fn extract_pruning(
     extracted
         .instances
         .extend(trees.iter().map(|(e, s, p)| (e, *s, *p)));
-    extracted.instances.sort_by_key(|(_, s, _)| s.slot);
+    extracted.instances.sort_by_key(|(_, s, _)| s.camera.slot);
     extracted.buffers = store.buffers.clone();
 }
 
@@ -183,25 +188,24 @@ fn prepare_pruning(
     }
     let slots = extracted
         .instances
-        .last()
-        .map(|(_, s, _)| s.slot + 1)
+        .iter()
+        .map(|(_, s, _)| s.light.unwrap_or(s.camera).slot.max(s.camera.slot) + 1)
+        .max()
         .unwrap_or(0);
     // Slots without a live instance this frame (e.g. hidden) draw nothing: zero records.
     let mut records = vec![0u32; slots as usize * INSTANCE_WORDS];
     let mut max_cells = 0;
-    for (entity, slot, params) in &extracted.instances {
-        let w = &params.weights;
-        let ty = &slot.ty;
-        let r = &mut records[slot.slot as usize * INSTANCE_WORDS..][..INSTANCE_WORDS];
-        r.copy_from_slice(&[
+    let mut write = |region: &Region, ty: &TypeSlot, selection: &Selection, shadow_slot: u32| {
+        let w = &selection.weights;
+        records[region.slot as usize * INSTANCE_WORDS..][..INSTANCE_WORDS].copy_from_slice(&[
             w.views[0],
             w.views[1],
             w.views[2],
-            params.distance_fixed,
+            selection.distance_fixed,
             w.weights[0],
             w.weights[1],
             w.weights[2],
-            slot.output_base,
+            region.output_base,
             ty.cell_base,
             ty.cell_count,
             ty.view_count,
@@ -209,15 +213,41 @@ fn prepare_pruning(
             ty.leaf_base,
             ty.index_base,
             ty.vertex_base,
-            slot.cell_offsets_base,
+            region.cell_offsets_base,
+            shadow_slot,
+            0,
+            0,
+            0,
         ]);
-        max_cells = max_cells.max(ty.cell_count);
+    };
+    for (entity, slot, params) in &extracted.instances {
+        let ty = &slot.ty;
+        // Shadow views read the light's record when the tree has a light selection.
+        let shadow_slot = match (slot.light, params.light) {
+            (Some(region), Some(_)) => region.slot,
+            _ => slot.camera.slot,
+        };
+        write(&slot.camera, ty, &params.camera, shadow_slot);
         frame.instances.push(InstanceOutput {
             entity: *entity,
             slot: *ty,
-            output_base: slot.output_base,
-            draw: slot.slot,
+            output_base: slot.camera.output_base,
+            draw: slot.camera.slot,
+            light: false,
         });
+        if let Some(region) = slot.light {
+            // Without a light selection the record keeps nothing (shadows read the camera's).
+            let selection = params.light.unwrap_or(Selection::NONE);
+            write(&region, ty, &selection, region.slot);
+            frame.instances.push(InstanceOutput {
+                entity: *entity,
+                slot: *ty,
+                output_base: region.output_base,
+                draw: region.slot,
+                light: true,
+            });
+        }
+        max_cells = max_cells.max(ty.cell_count);
     }
     if (records.len() * 4) as u64 > instances.size() {
         return; // The store grows next frame.

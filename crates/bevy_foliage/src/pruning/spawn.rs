@@ -70,6 +70,21 @@ pub struct GltfTreeAssets {
     pub bark: Vec<(Handle<Mesh>, Handle<StandardMaterial>)>,
     /// What the reader left out or changed (also logged).
     pub notes: Vec<String>,
+    /// Per leaf material, in the order of `leaves`: what its bake made and took.
+    pub stats: Vec<GltfBakeStats>,
+}
+
+/// What one leaf material's bake made and took.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GltfBakeStats {
+    /// Leaves baked.
+    pub leaves: usize,
+    /// Cells.
+    pub cells: usize,
+    /// Bake time per stage.
+    pub timings: super::bake::BakeTimings,
+    /// Opaque share of the leaves' texture (1 for opaque leaves).
+    pub opaque_fraction: f32,
 }
 
 /// The default look of bark.
@@ -175,6 +190,12 @@ impl TreeAssets<'_> {
                 }
                 None => default_leaf_material(),
             };
+            out.stats.push(GltfBakeStats {
+                leaves: baked.leaf_count(),
+                cells: baked.cell_count(),
+                timings,
+                opaque_fraction: opaque,
+            });
             out.leaves.push((
                 self.baked.add(baked),
                 self.leaf_materials

@@ -5,23 +5,34 @@
 //! vertex stage reads exactly what the compute pass wrote.
 
 use super::bake::BakedFoliage;
-use super::components::{PrunedFoliage, PruningParams};
+use super::components::{FoliageShadowLight, PrunedFoliage, PruningParams};
+use crate::settings::FoliagePruningSettings;
 use bevy::asset::{AssetId, RenderAssetUsages};
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::render::storage::ShaderBuffer;
 
+/// One extraction's place in the shared buffers: its instance record (and draw arguments), its
+/// region of kept indices and its region of per-cell counts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Region {
+    /// Instance record index.
+    pub slot: u32,
+    /// First output index.
+    pub output_base: u32,
+    /// First per-cell entry.
+    pub cell_offsets_base: u32,
+}
+
 /// Where a pruned tree's data lives in the shared buffers this frame (written by the plugin).
 #[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FoliageSlot {
-    /// Instance record index (also the entity's `MeshTag`).
-    pub slot: u32,
     /// Tree type layout.
     pub ty: TypeSlot,
-    /// First output index of this instance.
-    pub output_base: u32,
-    /// First per-cell offset entry of this instance.
-    pub cell_offsets_base: u32,
+    /// The camera's selection; its slot is the entity's `MeshTag`.
+    pub camera: Region,
+    /// The shadow light's selection, while there is a shadow light ([`super::selection`]).
+    pub light: Option<Region>,
 }
 
 /// Offsets of one tree type in the shared buffers.
@@ -61,8 +72,8 @@ pub fn mesh_tag(slot: u32, ty: &TypeSlot) -> u32 {
 /// `position.xyz, cell, offset.xyz, leaf radius, normal.xyz, 0, uv.xy, leaf uv centre.xy`.
 pub const LEAF_VERTEX_WORDS: usize = 16;
 
-/// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf.wgsl`).
-pub const INSTANCE_WORDS: usize = 16;
+/// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf_pulling.wgsl`).
+pub const INSTANCE_WORDS: usize = 20;
 
 /// Handles of the shared pruning buffers.
 #[derive(Clone, Debug, Default)]
@@ -130,6 +141,8 @@ pub fn update_foliage_store(
     mut store: ResMut<FoliageStore>,
     mut buffers: ResMut<Assets<ShaderBuffer>>,
     baked: Res<Assets<BakedFoliage>>,
+    shadow_light: Res<FoliageShadowLight>,
+    settings: Res<FoliagePruningSettings>,
     trees: Query<(Entity, &PrunedFoliage, Option<&FoliageSlot>), With<PruningParams>>,
 ) {
     let store = &mut *store;
@@ -247,29 +260,46 @@ pub fn update_foliage_store(
         store.generation += 1;
     }
 
-    // Instance slots in entity order; regions sized for every leaf kept.
+    // Instance slots in entity order, camera selections first, then (while there is a shadow
+    // light) the light selections in the same order; regions sized for every leaf kept.
     let mut entities: Vec<(Entity, AssetId<BakedFoliage>, Option<FoliageSlot>)> = trees
         .iter()
         .filter(|(_, p, _)| store.types.contains_key(&p.baked.id()))
         .map(|(e, p, s)| (e, p.baked.id(), s.copied()))
         .collect();
     entities.sort_by_key(|(e, _, _)| *e);
+    let with_light = shadow_light.0.is_some() && settings.shadow_selection;
     let mut need = Capacity::default();
-    for (slot, (entity, id, old)) in entities.iter().enumerate() {
-        let ty = store.types[id];
-        let new = FoliageSlot {
-            slot: slot as u32,
-            ty,
+    let region = |ty: &TypeSlot, need: &mut Capacity| {
+        let r = Region {
+            slot: need.instances,
             output_base: need.output,
             cell_offsets_base: need.cell_offsets,
         };
         need.instances += 1;
         need.output += ty.full_index_count;
         need.cell_offsets += ty.cell_count;
+        r
+    };
+    let cameras: Vec<Region> = entities
+        .iter()
+        .map(|(_, id, _)| region(&store.types[id], &mut need))
+        .collect();
+    let lights: Vec<Option<Region>> = entities
+        .iter()
+        .map(|(_, id, _)| with_light.then(|| region(&store.types[id], &mut need)))
+        .collect();
+    for (i, (entity, id, old)) in entities.iter().enumerate() {
+        let ty = store.types[id];
+        let new = FoliageSlot {
+            ty,
+            camera: cameras[i],
+            light: lights[i],
+        };
         if *old != Some(new) {
             commands
                 .entity(*entity)
-                .insert((new, bevy::mesh::MeshTag(mesh_tag(slot as u32, &ty))));
+                .insert((new, bevy::mesh::MeshTag(mesh_tag(cameras[i].slot, &ty))));
         }
     }
     let cap = store.capacity;

@@ -4,27 +4,101 @@
 //! publish the leaf counts as diagnostics.
 
 use super::bake::BakedFoliage;
-use super::components::{FoliageCamera, ManagedPruning, PrunedFoliage, PruningParams};
-use super::extract::{
-    FIXED_ONE, KEEP_ALL, ViewWeights, distance_factor_fixed, kept_index_total, view_weights,
+use super::components::{
+    FoliageCamera, FoliageLight, FoliageShadowLight, ManagedPruning, PrunedFoliage, PruningParams,
 };
+use super::extract::kept_index_total;
 use super::material::{LeafExtension, LeafMaterial, LeafParams};
+use super::selection::{ShadowLight, TreeView, select};
 use super::slot_mesh::SlotMeshes;
 use super::store::{FoliageSlot, FoliageStore};
+use crate::distance::LodView;
 use crate::settings::FoliagePruningSettings;
 use bevy::camera::visibility::NoFrustumCulling;
 use bevy::diagnostic::{DiagnosticPath, Diagnostics};
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 
-/// Computes [`PruningParams`] for every pruned tree from the pruning camera.
+/// The pruning camera: the one marked [`FoliageCamera`], else the active 3D camera with the
+/// lowest `order`. Returns its position and the LoD view of its projection.
+pub fn pruning_camera(
+    marked: &Query<(&Camera, &GlobalTransform), With<FoliageCamera>>,
+    cameras: &Query<(&Camera, &GlobalTransform), With<Camera3d>>,
+) -> Option<(Mat4, Vec3, LodView)> {
+    let (camera, transform) = marked.iter().next().or_else(|| {
+        cameras
+            .iter()
+            .filter(|(c, _)| c.is_active)
+            .min_by_key(|(c, _)| c.order)
+    })?;
+    let clip_from_view = camera.clip_from_view();
+    Some((
+        clip_from_view * transform.to_matrix().inverse(),
+        transform.translation(),
+        LodView::from_clip_from_view(clip_from_view),
+    ))
+}
+
+/// Finds the light whose shadow views draw the light's leaf selection: the one marked
+/// [`FoliageLight`], else the first shadow-casting directional light, spot light, point light.
+#[allow(clippy::type_complexity)]
+pub fn track_shadow_light(
+    mut shadow: ResMut<FoliageShadowLight>,
+    marked: Query<(Entity, &GlobalTransform, Has<DirectionalLight>), With<FoliageLight>>,
+    directional: Query<(Entity, &DirectionalLight, &GlobalTransform)>,
+    spots: Query<(Entity, &SpotLight, &GlobalTransform)>,
+    points: Query<(Entity, &PointLight, &GlobalTransform)>,
+) {
+    let toward = |t: &GlobalTransform| ShadowLight::Directional {
+        toward_light: -t.forward().as_vec3(),
+    };
+    let at = |t: &GlobalTransform| ShadowLight::Positional {
+        position: t.translation(),
+    };
+    let found = marked
+        .iter()
+        .min_by_key(|(e, ..)| *e)
+        .map(|(_, t, is_directional)| if is_directional { toward(t) } else { at(t) })
+        .or_else(|| {
+            directional
+                .iter()
+                .filter(|(_, l, _)| l.shadow_maps_enabled)
+                .min_by_key(|(e, ..)| *e)
+                .map(|(_, _, t)| toward(t))
+        })
+        .or_else(|| {
+            spots
+                .iter()
+                .filter(|(_, l, _)| l.shadow_maps_enabled)
+                .min_by_key(|(e, ..)| *e)
+                .map(|(_, _, t)| at(t))
+        })
+        .or_else(|| {
+            points
+                .iter()
+                .filter(|(_, l, _)| l.shadow_maps_enabled)
+                .min_by_key(|(e, ..)| *e)
+                .map(|(_, _, t)| at(t))
+        })
+        .filter(|l| match l {
+            ShadowLight::Directional { toward_light } => toward_light.is_finite(),
+            ShadowLight::Positional { position } => position.is_finite(),
+        });
+    if shadow.0 != found {
+        shadow.0 = found;
+    }
+}
+
+/// Computes [`PruningParams`] for every pruned tree from the pruning camera and the shadow
+/// light ([`super::selection`]).
 #[allow(clippy::too_many_arguments)]
 pub fn compute_pruning_params(
     mut commands: Commands,
     mut asset_events: MessageReader<AssetEvent<BakedFoliage>>,
     settings: Res<FoliagePruningSettings>,
+    shadow_light: Res<FoliageShadowLight>,
     baked: Res<Assets<BakedFoliage>>,
-    marked: Query<&GlobalTransform, With<FoliageCamera>>,
+    marked: Query<(&Camera, &GlobalTransform), With<FoliageCamera>>,
     cameras: Query<(&Camera, &GlobalTransform), With<Camera3d>>,
     mut trees: Query<
         (
@@ -37,61 +111,37 @@ pub fn compute_pruning_params(
     >,
     mut crowns: Local<HashMap<AssetId<BakedFoliage>, (Vec3, f32)>>,
 ) {
-    let camera = marked.iter().next().copied().or_else(|| {
-        cameras
-            .iter()
-            .filter(|(c, _)| c.is_active)
-            .min_by_key(|(c, _)| c.order)
-            .map(|(_, t)| *t)
-    });
     for event in asset_events.read() {
         if let AssetEvent::Modified { id } | AssetEvent::Removed { id } = event {
             crowns.remove(id);
         }
     }
-    let Some(camera) = camera else { return };
-    let camera_position = camera.translation();
+    let Some((_, camera, view)) = pruning_camera(&marked, &cameras) else {
+        return;
+    };
     for (entity, pruned, transform, params) in &mut trees {
         let Some(tree) = baked.get(&pruned.baked) else {
             continue;
         };
-        let affine = transform.affine();
-        let new = if !affine.is_finite()
-            || !camera_position.is_finite()
-            || affine.matrix3.determinant() == 0.0
-        {
-            // A tree that cannot be placed draws nothing (and says so once, on insertion).
-            if params.is_none() {
-                warn!(
-                    "PrunedFoliage {entity}: transform is not finite or singular; the tree is not drawn"
-                );
-            }
-            PruningParams {
-                weights: ViewWeights {
-                    views: [0; 3],
-                    weights: [FIXED_ONE, 0, 0],
-                },
-                distance_fixed: 0,
-            }
-        } else {
-            let local_camera = affine.inverse().transform_point3(camera_position);
-            // The crown sphere, once per tree type (and again if the asset changes).
-            let (crown_center, crown_radius) = *crowns
-                .entry(pruned.baked.id())
-                .or_insert_with(|| (tree.crown_center(), tree.crown_radius()));
-            let direction = local_camera - crown_center;
-            let distance = camera_position.distance(transform.translation());
-            // Inside the crown the visibility baked from viewpoints around it does not apply:
-            // keep every leaf.
-            let inside_crown = direction.length() < crown_radius;
-            PruningParams {
-                weights: view_weights(direction, &tree.view_directions, settings.view_weighting),
-                distance_fixed: if settings.enabled && !inside_crown {
-                    distance_factor_fixed(distance, settings.near, settings.far)
-                } else {
-                    KEEP_ALL
-                },
-            }
+        // The crown sphere, once per tree type (and again if the asset changes).
+        let (crown_center, crown_radius) = *crowns
+            .entry(pruned.baked.id())
+            .or_insert_with(|| (tree.crown_center(), tree.crown_radius()));
+        let (camera_selection, light) = select(
+            &TreeView {
+                view_directions: &tree.view_directions,
+                crown_center,
+                crown_radius,
+                world_from_local: transform.affine(),
+            },
+            camera,
+            &view,
+            shadow_light.0,
+            &settings,
+        );
+        let new = PruningParams {
+            camera: camera_selection,
+            light,
         };
         match params {
             Some(mut p) => {
@@ -100,10 +150,28 @@ pub fn compute_pruning_params(
                 }
             }
             None => {
+                // A tree that cannot be placed draws nothing; say so once, on insertion.
+                let affine = transform.affine();
+                if !affine.is_finite() || affine.matrix3.determinant() == 0.0 {
+                    warn!(
+                        "PrunedFoliage {entity}: transform is not finite or singular; the tree is not drawn"
+                    );
+                }
                 commands.entity(entity).insert(new);
             }
         }
     }
+}
+
+/// Indices a pruned tree draws at most this frame, over its camera's and light's selections:
+/// the slot mesh must hold both.
+pub fn drawn_index_bound(tree: &BakedFoliage, params: &PruningParams) -> (u32, u32) {
+    let input = tree.pruning_input();
+    let camera = kept_index_total(&input, &params.camera.weights, params.camera.distance_fixed);
+    let light = params.light.map_or(0, |l| {
+        kept_index_total(&input, &l.weights, l.distance_fixed)
+    });
+    (camera, camera.max(light))
 }
 
 /// Leaf triangles drawn this frame, over all pruned trees.
@@ -141,16 +209,12 @@ pub fn assign_slot_meshes(
         let Some(tree) = baked.get(&pruned.baked) else {
             continue;
         };
-        let kept = kept_index_total(
-            &tree.pruning_input(),
-            &params.weights,
-            params.distance_fixed,
-        );
+        let (kept, bound) = drawn_index_bound(tree, params);
         drawn += kept as u64 / 3;
         full += tree.indices.len() as u64 / 3;
         count += 1;
         let quads = store.types.get(&pruned.baked.id()).is_some_and(|t| t.quads);
-        let handle = slot_meshes.fitting(kept, tree.indices.len() as u32, quads, &mut meshes);
+        let handle = slot_meshes.fitting(bound, tree.indices.len() as u32, quads, &mut meshes);
         let mut e = commands.entity(entity);
         if mesh.map(|m| m.0.id()) != Some(handle.id()) {
             e.insert((Mesh3d(handle), NoFrustumCulling));
@@ -223,7 +287,8 @@ pub fn refresh_leaf_materials(
 /// store (the forest manager) to place themselves.
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum FoliageSystems {
-    /// Pruning inputs of every tree ([`compute_pruning_params`]); after transform propagation.
+    /// The shadow light ([`track_shadow_light`]) and the pruning inputs of every tree
+    /// ([`compute_pruning_params`]); after transform propagation.
     PruningParams,
     /// Buffer layout: tree types uploaded, instance slots assigned ([`update_foliage_store`]).
     ///
