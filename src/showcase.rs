@@ -1,9 +1,10 @@
 //! The main example scene (`cargo run --example nature`), shared with the tests so that what a
 //! new user sees first is also what CI renders.
 //!
-//! So far: a lit ground plane with a box casting a shadow under a directional light, and an
-//! olive tree (the thesis' *Olea europaea*, 16,107 leaves) whose leaves are pruned every frame by
-//! distance and view direction ([`bevy_foliage::pruning`]), with
+//! So far: a ground textured from a streamed clip stack, a box casting a soft shadow under the
+//! sun, an olive tree (the thesis' *Olea europaea*, 16,107 leaves) whose leaves are pruned every
+//! frame by distance and view direction ([`bevy_foliage::pruning`]), and behind it the edge of a
+//! forest of 40 ash, oak and cedar trees drawn by the forest LoD manager, with
 //! [`NaturePlugins`](crate::NaturePlugins) added. Each feature of the suite adds itself here as
 //! it lands.
 
@@ -48,6 +49,10 @@ pub struct ShowcaseOptions {
     /// A backdrop forest of [`ForestTree`](bevy_foliage::ForestTree)s behind the scene, drawn by
     /// the forest LoD manager from shared LoD-cache extractions.
     pub forest: bool,
+    /// The backdrop's leaf counts as a fraction of the species' full counts (ash 28,645, oak
+    /// 41,155, cedar 131,042), in `(0, 1]`. Fewer leaves are larger, so the crowns keep the
+    /// coverage of the full counts ([`TreeSpecies::with_leaf_count`]).
+    pub forest_leaf_scale: f32,
     /// Screen Space Soft Shadows on the sun: penumbrae harden at contact and widen with the
     /// distance to the blocker on the ground (plain or clipmap-textured), the box and the bark.
     pub soft_shadows: bool,
@@ -60,6 +65,7 @@ impl Default for ShowcaseOptions {
             box_offset: Vec3::ZERO,
             msaa: true,
             forest: true,
+            forest_leaf_scale: 0.15,
             terrain: true,
             soft_shadows: true,
         }
@@ -129,7 +135,7 @@ fn spawn_showcase(
         error!("could not bake the showcase tree: {e}");
     }
     if options.forest {
-        spawn_backdrop_forest(&mut commands, &mut trees);
+        spawn_backdrop_forest(&mut commands, &mut trees, options.forest_leaf_scale);
     }
     let mut sun = commands.spawn((
         Name::new("sun"),
@@ -163,29 +169,50 @@ fn spawn_showcase(
     }
 }
 
-/// Sixteen managed trees (ash and cedar at reduced leaf counts) in a band 18–50 m behind the
-/// scene: the forest LoD manager ranks them and draws them from per-type LoD-cache extractions.
-fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets) {
+/// A backdrop forest behind the scene: 40 managed trees of three species (ash, oak, cedar) in a
+/// band 14–90 m deep, on a jittered grid so crowns stand apart: the forest LoD manager ranks them
+/// and draws them from per-type LoD-cache extractions.
+fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets, leaf_scale: f32) {
     use bevy_foliage::pruning::bake::BakeSettings;
     use bevy_foliage::pruning::material::leaf_material;
     use bevy_foliage::pruning::spawn::{default_bark_material, default_leaf_material};
+    let scale = if leaf_scale.is_finite() {
+        leaf_scale.clamp(0.001, 1.0)
+    } else {
+        0.15
+    };
+    let reduced = |s: TreeSpecies| {
+        let n = ((s.leaf_count as f32 * scale).round() as usize).max(50);
+        s.with_leaf_count(n)
+    };
+    // Species and the colour of their leaves.
     let species = [
-        TreeSpecies::fraxinus().with_leaf_count(2000),
-        TreeSpecies::cedrus().with_leaf_count(3000),
+        (
+            reduced(TreeSpecies::fraxinus()),
+            Color::srgb(0.3, 0.45, 0.18),
+        ),
+        (
+            reduced(TreeSpecies::quercus()),
+            Color::srgb(0.26, 0.38, 0.16),
+        ),
+        (reduced(TreeSpecies::cedrus()), Color::srgb(0.16, 0.3, 0.2)),
     ];
     let mut types = Vec::new();
-    for s in &species {
+    for (s, colour) in &species {
         match trees.bake_species(s, &BakeSettings::default()) {
-            Ok(t) => types.push(t),
+            Ok((baked, bark)) => {
+                let leaves = trees.leaf_materials.add(leaf_material(StandardMaterial {
+                    base_color: *colour,
+                    ..default_leaf_material()
+                }));
+                types.push((baked, bark, leaves));
+            }
             Err(e) => error!("could not bake the backdrop {}: {e}", s.name),
         }
     }
     if types.is_empty() {
         return;
     }
-    let leaves = trees
-        .leaf_materials
-        .add(leaf_material(default_leaf_material()));
     let bark = trees.materials.add(default_bark_material());
     let root = commands
         .spawn((
@@ -195,21 +222,25 @@ fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets) {
         ))
         .id();
     let mut rng = bevy_foliage::rng::SplitMix64::new(42);
-    for i in 0..16 {
-        let (baked, bark_mesh) = &types[i % types.len()];
-        let x = rng.range(-40.0, 40.0);
-        let z = -rng.range(18.0, 50.0);
-        commands.entity(root).with_child((
-            Name::new(format!("forest tree {i}")),
-            bevy_foliage::ForestTree {
-                baked: baked.clone(),
-                material: leaves.clone(),
-            },
-            Transform::from_xyz(x, 0.0, z)
-                .with_rotation(Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)))
-                .with_scale(Vec3::splat(rng.range(0.8, 1.2))),
-            children![(Mesh3d(bark_mesh.clone()), MeshMaterial3d(bark.clone()))],
-        ));
+    let mut i = 0;
+    for row in 0..5 {
+        for column in 0..8 {
+            let (baked, bark_mesh, leaves) = &types[rng.below(types.len() as u32) as usize];
+            let x = -56.0 + column as f32 * 16.0 + rng.range(-5.0, 5.0) + (row % 2) as f32 * 8.0;
+            let z = -14.0 - row as f32 * 16.0 - rng.range(0.0, 8.0);
+            commands.entity(root).with_child((
+                Name::new(format!("forest tree {i}")),
+                bevy_foliage::ForestTree {
+                    baked: baked.clone(),
+                    material: leaves.clone(),
+                },
+                Transform::from_xyz(x, 0.0, z)
+                    .with_rotation(Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)))
+                    .with_scale(Vec3::splat(rng.range(0.8, 1.2))),
+                children![(Mesh3d(bark_mesh.clone()), MeshMaterial3d(bark.clone()))],
+            ));
+            i += 1;
+        }
     }
 }
 

@@ -69,6 +69,8 @@ pub struct SizeRow {
     pub coverage_compensated: f64,
     /// Without compensation.
     pub coverage_plain: f64,
+    /// Pixels in the image.
+    pub pixels: u32,
 }
 
 /// One tree.
@@ -241,6 +243,7 @@ pub fn measure(
             coverage_full: coverage(&full),
             coverage_compensated: coverage(&compensated),
             coverage_plain: coverage(&plain),
+            pixels: full.width * full.height,
         });
     }
     Ok(row)
@@ -249,7 +252,7 @@ pub fn measure(
 /// The table as Markdown.
 pub fn markdown(rows: &[CorpusRow]) -> String {
     let mut out = String::from(
-        "| tree | leaves | cells | bake ms | opaque | screen size | factor | kept % | RMSE comp. | RMSE plain | coverage full | comp. | plain |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| tree | leaves | cells | bake ms | opaque | screen size | factor | kept % | RMSE comp. | RMSE plain | crown px | coverage comp. | coverage plain |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         for (i, s) in r.sizes.iter().enumerate() {
@@ -261,16 +264,18 @@ pub fn markdown(rows: &[CorpusRow]) -> String {
             } else {
                 " | | | | ".to_string()
             };
+            // Coverage with and without compensation, relative to full detail.
+            let relative = |c: f64| 100.0 * (c - s.coverage_full) / s.coverage_full.max(1e-9);
             out += &format!(
-                "| {head} | {:.2} | {:.2} | {:.1} | {:.4} | {:.4} | {:.3} | {:.3} | {:.3} |\n",
+                "| {head} | {:.2} | {:.2} | {:.1} | {:.4} | {:.4} | {:.0} | {:+.1} % | {:+.1} % |\n",
                 s.screen_size,
                 s.distance_factor,
                 s.kept_percent,
                 s.rmse_compensated,
                 s.rmse_plain,
-                s.coverage_full,
-                s.coverage_compensated,
-                s.coverage_plain
+                s.coverage_full * s.pixels as f64,
+                relative(s.coverage_compensated),
+                relative(s.coverage_plain)
             );
         }
     }

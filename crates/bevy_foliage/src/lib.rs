@@ -6,7 +6,10 @@
 //! - **GPU view-dependent stochastic pruning of leaves** (Gumbau, ch. 3): each tree's leaves are
 //!   grouped in cells with baked per-view visibility; every frame a compute pass keeps, per cell, a
 //!   prefix of a stochastically ordered leaf list sized by distance and visibility, and the kept
-//!   leaves are enlarged so the crown keeps its area.
+//!   leaves are enlarged so the crown keeps its area. Distances follow the crown's size on
+//!   screen ([`LodDistances`]), shadows draw the light's own selection, and trees come from
+//!   glTF files as artists export them ([`pruning::gltf`], [`pruning::spawn`]) or from the
+//!   procedural species; [`corpus`] writes real-world-like test trees.
 //! - **an urgency-ranked forest LoD manager** under a frame budget with **LoD caches** (Gumbau,
 //!   §3.6 and ch. 4): tag instances with [`ForestTree`]; per type, a few cached extractions are
 //!   shared by every tree whose desired LoD falls in the same slot ([`forest`]).
@@ -15,6 +18,13 @@
 //!
 //! Add [`FoliagePlugin`]; tune [`FoliagePruningSettings`] (a reflected resource, so inspectors can
 //! edit it live).
+//!
+//! The crate is split by role: the algorithms are plain Rust modules with no render types
+//! (`pruning::{leaves, cells, visibility, mask, bake, extract, selection, appearance, format,
+//! gltf, procedural}`, `forest::{cache, feedback, lod, manager, hlod}`, [`distance`]); the
+//! main-world ECS code lives in `components`, `systems`, `store` and `spawn` modules; the
+//! render-world code sits beside its WGSL (`pruning::render` with `prune.wgsl`,
+//! `pruning::material` with the leaf shaders).
 
 use bevy::prelude::*;
 

@@ -1,7 +1,7 @@
 //! The terrain material: Bevy's `StandardMaterial` (lighting, shadows) whose base colour is
 //! sampled from a clip stack by the mesh's virtual-texture coordinates — the finest layer that
 //! covers the point, falling back to coarser ones and to the resident base level
-//! (`clipmap.wgsl`). Make one with [`ClipStackTexture::material`]; build meshes whose texture
+//! (`clipmap.wgsl`). Make one with [`ClipStackTexture::material`](crate::stack_gpu::ClipStackTexture::material); build meshes whose texture
 //! coordinates are virtual-texture coordinates computed in f64 with [`flat_patch_mesh`].
 
 use bevy::asset::{RenderAssetUsages, embedded_asset};

@@ -46,7 +46,8 @@ pub enum ForestBudget {
     Milliseconds(f32),
 }
 
-/// Settings of the forest manager. Near/far distances are [`FoliagePruningSettings`]'.
+/// Settings of the forest manager. Near/far distances are
+/// [`FoliagePruningSettings::distances`](crate::FoliagePruningSettings::distances).
 #[derive(Resource, Clone, Debug, PartialEq, Reflect)]
 #[reflect(Resource, Default, Debug, PartialEq)]
 pub struct ForestSettings {

@@ -29,7 +29,7 @@ use crate::pruning::material::LeafMaterial;
 use crate::pruning::selection::{Selection, ShadowLight, factor_fixed};
 use crate::pruning::slot_mesh::SlotMeshes;
 use crate::pruning::store::{FoliageSlot, mesh_tag};
-use crate::pruning::systems::{drawn_index_bound, pruning_camera};
+use crate::pruning::systems::{drawn_indices, pruning_camera};
 use crate::settings::FoliagePruningSettings;
 use bevy::camera::visibility::NoFrustumCulling;
 use bevy::diagnostic::{DiagnosticPath, Diagnostics};
@@ -508,8 +508,8 @@ pub fn draw_forest_trees(
             let Some(data) = baked.get(&pruned.baked) else {
                 return (tag, 0, 0, 0);
             };
-            let (kept, bound) = drawn_index_bound(data, params);
-            (tag, kept, bound, data.indices.len() as u32)
+            let (kept, shadow) = drawn_indices(data, params);
+            (tag, kept, kept.max(shadow), data.indices.len() as u32)
         });
         visible += 1;
         triangles += kept as u64 / 3;

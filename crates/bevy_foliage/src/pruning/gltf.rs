@@ -709,7 +709,7 @@ pub fn load_gltf_tree(
                     "{label}: index {bad} out of range ({n} vertices)"
                 )));
             }
-            if indices.len() % 3 != 0 {
+            if !indices.len().is_multiple_of(3) {
                 return Err(GltfTreeError::Invalid(format!(
                     "{label}: {} indices is not a whole number of triangles",
                     indices.len()

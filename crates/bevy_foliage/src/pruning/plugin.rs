@@ -7,8 +7,9 @@ use super::components::FoliageShadowLight;
 use super::slot_mesh::SlotMeshes;
 use super::store::{FoliageStore, update_foliage_store};
 use super::systems::{
-    FoliageSystems, KEPT_PERCENT, TREES_PRUNED, TRIANGLES_DRAWN, TRIANGLES_FULL,
-    assign_slot_meshes, compute_pruning_params, refresh_leaf_materials, track_shadow_light,
+    FoliageSystems, KEPT_PERCENT, SHADOW_TRIANGLES_DRAWN, TREES_PRUNED, TRIANGLES_DRAWN,
+    TRIANGLES_FULL, assign_slot_meshes, compute_pruning_params, refresh_leaf_materials,
+    track_shadow_light,
 };
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::diagnostic::{Diagnostic, RegisterDiagnostic};
@@ -17,7 +18,13 @@ use bevy::transform::TransformSystems;
 
 /// Registers everything pruning needs (called by `FoliagePlugin` when rendering is present).
 pub(crate) fn build(app: &mut App) {
-    for path in [TRIANGLES_DRAWN, TRIANGLES_FULL, KEPT_PERCENT, TREES_PRUNED] {
+    for path in [
+        TRIANGLES_DRAWN,
+        SHADOW_TRIANGLES_DRAWN,
+        TRIANGLES_FULL,
+        KEPT_PERCENT,
+        TREES_PRUNED,
+    ] {
         app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
     }
     app.init_asset::<BakedFoliage>()

@@ -163,19 +163,23 @@ pub fn compute_pruning_params(
     }
 }
 
-/// Indices a pruned tree draws at most this frame, over its camera's and light's selections:
-/// the slot mesh must hold both.
-pub fn drawn_index_bound(tree: &BakedFoliage, params: &PruningParams) -> (u32, u32) {
+/// Indices a pruned tree draws this frame for the camera and for shadow views (the light's
+/// selection, or the camera's when it has none). The slot mesh must hold both.
+pub fn drawn_indices(tree: &BakedFoliage, params: &PruningParams) -> (u32, u32) {
     let input = tree.pruning_input();
     let camera = kept_index_total(&input, &params.camera.weights, params.camera.distance_fixed);
-    let light = params.light.map_or(0, |l| {
+    let light = params.light.map_or(camera, |l| {
         kept_index_total(&input, &l.weights, l.distance_fixed)
     });
-    (camera, camera.max(light))
+    (camera, light)
 }
 
 /// Leaf triangles drawn this frame, over all pruned trees.
 pub const TRIANGLES_DRAWN: DiagnosticPath = DiagnosticPath::const_new("foliage/triangles_drawn");
+/// Leaf triangles shadow views draw this frame (the shadow light's selections), over all pruned
+/// trees.
+pub const SHADOW_TRIANGLES_DRAWN: DiagnosticPath =
+    DiagnosticPath::const_new("foliage/shadow_triangles_drawn");
 /// Leaf triangles of the same trees at full detail.
 pub const TRIANGLES_FULL: DiagnosticPath = DiagnosticPath::const_new("foliage/triangles_full");
 /// `100 · drawn / full`.
@@ -204,13 +208,15 @@ pub fn assign_slot_meshes(
         (With<FoliageSlot>, Without<ManagedPruning>),
     >,
 ) {
-    let (mut drawn, mut full, mut count) = (0u64, 0u64, 0u32);
+    let (mut drawn, mut shadow_drawn, mut full, mut count) = (0u64, 0u64, 0u64, 0u32);
     for (entity, pruned, params, mesh, material) in &trees {
         let Some(tree) = baked.get(&pruned.baked) else {
             continue;
         };
-        let (kept, bound) = drawn_index_bound(tree, params);
+        let (kept, shadow) = drawn_indices(tree, params);
+        let bound = kept.max(shadow);
         drawn += kept as u64 / 3;
+        shadow_drawn += shadow as u64 / 3;
         full += tree.indices.len() as u64 / 3;
         count += 1;
         let quads = store.types.get(&pruned.baked.id()).is_some_and(|t| t.quads);
@@ -225,6 +231,7 @@ pub fn assign_slot_meshes(
     }
     diagnostics.add_measurement(&TRIANGLES_DRAWN, || drawn as f64);
     diagnostics.add_measurement(&TRIANGLES_FULL, || full as f64);
+    diagnostics.add_measurement(&SHADOW_TRIANGLES_DRAWN, || shadow_drawn as f64);
     diagnostics.add_measurement(&TREES_PRUNED, || count as f64);
     diagnostics.add_measurement(&KEPT_PERCENT, || {
         if full == 0 {
