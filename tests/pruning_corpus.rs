@@ -166,6 +166,7 @@ fn the_masked_bake_sees_through_transparent_cards() {
 fn corpus_trees_prune_by_screen_size_and_compensation_keeps_their_coverage() {
     let dir = std::env::temp_dir().join(format!("pruning_corpus_test_{}", std::process::id()));
     let settings = CorpusSettings::default();
+    let mut factors: Vec<(String, Vec<f32>)> = Vec::new();
     for tree in corpus::all() {
         let Some(mut harness) = RenderHarness::for_test("pruning_corpus", 256, 256) else {
             return;
@@ -189,6 +190,10 @@ fn corpus_trees_prune_by_screen_size_and_compensation_keeps_their_coverage() {
                 );
             }
         }
+        factors.push((
+            row.name.clone(),
+            sizes.iter().map(|s| s.distance_factor).collect(),
+        ));
         // Coverage at the largest size, where the crown has pixels enough to count (at smaller
         // sizes full detail itself loses the small card leaves to the texture's mips).
         let s = &sizes[0];
@@ -209,5 +214,22 @@ fn corpus_trees_prune_by_screen_size_and_compensation_keeps_their_coverage() {
             row.name
         );
     }
+    // Scale-free distances: at the same crown screen size every tree — 10 m or 16 m tall, in
+    // metres or in centimetres (1,300 units tall) — gets the same distance factor.
+    for (name, f) in &factors[1..] {
+        for (a, b) in f.iter().zip(&factors[0].1) {
+            assert!(
+                (a - b).abs() < 0.01,
+                "{name}: distance factors {f:?} differ from {}'s {:?}",
+                factors[0].0,
+                factors[0].1
+            );
+        }
+    }
+    assert!(
+        factors[0].1[2] < 0.7,
+        "the smallest size is well into pruning: {:?}",
+        factors[0].1
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
