@@ -97,15 +97,7 @@ impl PrimitiveDesc {
             positions: leaves.positions.clone(),
             normals: leaves.normals.clone(),
             uvs: leaves.uvs.clone(),
-            indices: leaves
-                .leaves
-                .iter()
-                .flat_map(|r| {
-                    leaves.indices[r.start as usize..r.end as usize]
-                        .iter()
-                        .copied()
-                })
-                .collect(),
+            indices: leaves.leaf_indices(),
         }
     }
 

@@ -40,16 +40,12 @@ pub fn bark_mesh(data: &MeshData) -> Mesh {
 
 /// A Bevy mesh of every leaf of a leaf set, as an ordinary (unpruned) mesh.
 pub fn leaf_set_mesh(leaves: &LeafSet) -> Mesh {
-    let indices = leaves
-        .leaves
-        .iter()
-        .flat_map(|r| {
-            leaves.indices[r.start as usize..r.end as usize]
-                .iter()
-                .copied()
-        })
-        .collect();
-    triangle_mesh(&leaves.positions, &leaves.normals, &leaves.uvs, indices)
+    triangle_mesh(
+        &leaves.positions,
+        &leaves.normals,
+        &leaves.uvs,
+        leaves.leaf_indices(),
+    )
 }
 
 #[cfg(test)]

@@ -36,19 +36,8 @@ impl bevy::asset::AssetLoader for BakedFoliageLoader {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pruning::bake::{BakeSettings, CellCount, bake};
+    use crate::pruning::format::tests::sample;
     use crate::pruning::format::{encode, save};
-    use crate::pruning::procedural::{TreeSpecies, generate};
-
-    fn sample() -> BakedFoliage {
-        let tree = generate(&TreeSpecies::fraxinus().with_leaf_count(500));
-        let settings = BakeSettings {
-            cells: CellCount::Depth(4),
-            resolution: 48,
-            ..Default::default()
-        };
-        bake(&tree.leaves, &settings, &|_| {}).unwrap().0
-    }
 
     #[test]
     fn asset_server_loads_good_files_and_fails_corrupt_ones_without_panicking() {

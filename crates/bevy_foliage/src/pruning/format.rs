@@ -345,12 +345,13 @@ pub fn load(path: &Path) -> Result<BakedFoliage, FormatError> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::pruning::bake::{BakeSettings, CellCount, bake};
     use crate::pruning::procedural::{TreeSpecies, generate};
 
-    fn sample() -> BakedFoliage {
+    /// A small bake for file and loader tests.
+    pub(crate) fn sample() -> BakedFoliage {
         let tree = generate(&TreeSpecies::fraxinus().with_leaf_count(500));
         let settings = BakeSettings {
             cells: CellCount::Depth(4),

@@ -73,6 +73,18 @@ impl LeafSet {
             })
     }
 
+    /// Every leaf's triangles, leaf after leaf, as one index list.
+    pub fn leaf_indices(&self) -> Vec<u32> {
+        self.leaves
+            .iter()
+            .flat_map(|r| {
+                self.indices[r.start as usize..r.end as usize]
+                    .iter()
+                    .copied()
+            })
+            .collect()
+    }
+
     /// The distinct vertices of leaf `leaf`, in first-use order.
     pub fn leaf_vertices(&self, leaf: usize) -> Vec<u32> {
         let range = self.leaves[leaf].clone();
