@@ -3,6 +3,8 @@
 //! RMSE are measured; compensation must lose clearly less coverage than the same pruning
 //! uncompensated. The images are written under `target/nature-artifacts/pruning_image/`.
 
+mod common;
+
 use bevy::camera::{PerspectiveProjection, Projection};
 use bevy::prelude::*;
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
@@ -13,6 +15,7 @@ use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 use bevy_foliage::{FoliagePlugin, FoliagePruningSettings, LodDistances};
 use bevy_nature_harness::compare::{Comparison, RgbaImage, coverage_against_background};
 use bevy_nature_harness::{RenderHarness, artifacts_dir};
+use common::render_with_settings;
 
 const SIZE: u32 = 128;
 const SKY: Color = Color::srgb(0.55, 0.7, 0.9);
@@ -22,16 +25,10 @@ fn render_variant(
     enabled: bool,
     area_compensation: bool,
 ) -> RgbaImage {
-    {
-        let mut settings = harness.world_mut().resource_mut::<FoliagePruningSettings>();
-        settings.enabled = enabled;
-        settings.area_compensation = area_compensation;
-    }
-    // Let the settings reach the pruning parameters and the leaf material.
-    for _ in 0..12 {
-        harness.step();
-    }
-    harness.render().unwrap()
+    render_with_settings(harness, |s| {
+        s.enabled = enabled;
+        s.area_compensation = area_compensation;
+    })
 }
 
 #[test]

@@ -4,6 +4,8 @@
 //! the frame so only the shadow on the ground is compared. Inside `near` the shadow is the
 //! unpruned one, pixel for pixel. Images go to `target/nature-artifacts/shadow_selection/`.
 
+mod common;
+
 use bevy::camera::{PerspectiveProjection, Projection};
 use bevy::light::{CascadeShadowConfigBuilder, DirectionalLightShadowMap, GlobalAmbientLight};
 use bevy::prelude::*;
@@ -15,6 +17,7 @@ use bevy_foliage::pruning::render::PruningFrame;
 use bevy_foliage::{FoliagePlugin, FoliagePruningSettings, LodDistances};
 use bevy_nature_harness::compare::{Comparison, RgbaImage};
 use bevy_nature_harness::{RenderHarness, artifacts_dir};
+use common::render_with_settings;
 
 const SIZE: u32 = 128;
 
@@ -28,18 +31,6 @@ fn shadow_mass(image: &RgbaImage) -> f64 {
     lumas.sort_by(f64::total_cmp);
     let lit = lumas[lumas.len() * 95 / 100].max(1e-6);
     lumas.iter().map(|l| ((lit - l) / lit).max(0.0)).sum()
-}
-
-fn render(
-    harness: &mut RenderHarness,
-    settings: impl Fn(&mut FoliagePruningSettings),
-) -> RgbaImage {
-    settings(&mut harness.world_mut().resource_mut::<FoliagePruningSettings>());
-    // Let the settings reach the pruning parameters, the store and the GPU.
-    for _ in 0..8 {
-        harness.step();
-    }
-    harness.render().unwrap()
 }
 
 #[test]
@@ -131,8 +122,8 @@ fn the_lights_selection_keeps_the_shadow_that_the_cameras_thins() {
         .id();
     harness.wait_until_ready().unwrap();
 
-    let full = render(&mut harness, |s| s.enabled = false);
-    let light = render(&mut harness, |s| {
+    let full = render_with_settings(&mut harness, |s| s.enabled = false);
+    let light = render_with_settings(&mut harness, |s| {
         s.enabled = true;
         s.shadow_selection = true;
     });
@@ -155,7 +146,7 @@ fn the_lights_selection_keeps_the_shadow_that_the_cameras_thins() {
                 .any(|i| i.entity == tree_entity && i.light)
         );
     }
-    let camera_only = render(&mut harness, |s| s.shadow_selection = false);
+    let camera_only = render_with_settings(&mut harness, |s| s.shadow_selection = false);
     let factor = params.camera.distance_fixed as f64 / 65536.0;
     let (m_full, m_light, m_camera) = (
         shadow_mass(&full),
@@ -205,7 +196,7 @@ fn the_lights_selection_keeps_the_shadow_that_the_cameras_thins() {
 
     // Inside `near` (moved out past the camera) the camera keeps the leaves it sees and the
     // shadow draws the full set: the same image as without pruning, pixel for pixel.
-    let near_pruned = render(&mut harness, |s| {
+    let near_pruned = render_with_settings(&mut harness, |s| {
         s.enabled = true;
         s.shadow_selection = true;
         s.distances = LodDistances::World {
@@ -222,7 +213,7 @@ fn the_lights_selection_keeps_the_shadow_that_the_cameras_thins() {
         "inside near, outside the crown"
     );
     Comparison::new("shadow_selection/inside_near", &near_pruned, &full).assert_rmse_at_most(0.0);
-    let near_camera = render(&mut harness, |s| s.shadow_selection = false);
+    let near_camera = render_with_settings(&mut harness, |s| s.shadow_selection = false);
     Comparison::new("shadow_selection/inside_near_camera", &near_camera, &full)
         .assert_rmse_at_least(1e-3);
     let _ = (camera, crown);
