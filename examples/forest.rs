@@ -1,19 +1,26 @@
-//! A walk through the thesis' dense forest (6,450 trees of the four test species) or its sparse
-//! one (210), drawn by the forest LoD manager: trees ranked by urgency, served under a per-frame
-//! budget from per-type LoD caches.
+//! A walk through the thesis' dense forest (6,450 trees of the four test species), its sparse
+//! one (210) or a huge one (100,000), drawn by the forest LoD manager: trees ranked by urgency,
+//! served under a per-frame budget from per-type LoD caches, and beyond `far` by their billboard
+//! clouds (baked on the GPU at the first run, then loaded from `assets/impostors/`).
 //!
 //! ```text
 //! cargo run --release --example forest                 # windowed: the panel shows forest/* counters
 //! cargo run --release --example forest -- --forest sparse --leaf-scale 1
 //! cargo run --example forest -- --headless --frames 30 --stats forest.json
+//! cargo run --release --example forest -- --forest huge --headless --frames 20 --stats huge.json
 //! ```
-//! `--leaf-scale F` scales the thesis' leaf counts (default 0.25). In the panel, switch
-//! `ForestSettings::enabled` off for full detail, `feedback` on to let the frame-rate exponent
-//! steer detail, or change the slots and the budget.
+//! `--leaf-scale F` scales the thesis' leaf counts (default 0.25). Press `R` (or tick
+//! `ImpostorSettings::show_representation` in the panel) to tint the trees drawn by their
+//! billboard cloud orange. In the panel, switch `ForestSettings::enabled` off for full detail,
+//! `feedback` on to let the frame-rate exponent steer detail, or change the slots and the budget.
 
 use bevy::prelude::*;
+use bevy_nature::foliage::impostor::bake::ImpostorBakeCamera;
+use bevy_nature::foliage::impostor::systems::ImpostorSettings;
 use bevy_nature::foliage::{FoliagePruningSettings, ForestSettings};
-use bevy_nature::forest_scene::{ForestArgs, ForestScene, camera_transform, spawn_forest};
+use bevy_nature::forest_scene::{
+    ForestArgs, ForestDraw, ForestScene, ForestScenePlugin, camera_transform,
+};
 use bevy_nature_harness::{ExampleArgs, ExampleRunner};
 
 fn main() -> AppExit {
@@ -26,22 +33,24 @@ fn main() -> AppExit {
         std::process::exit(2)
     });
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
-        eprintln!("{e} [--forest dense|sparse] [--leaf-scale F]");
+        eprintln!("{e} [--forest dense|sparse|huge] [--leaf-scale F]");
         std::process::exit(2)
     });
     ExampleRunner::with_args("forest", args)
         .inspect_resource::<ForestSettings>()
         .inspect_resource::<FoliagePruningSettings>()
+        .inspect_resource::<ImpostorSettings>()
         .run(move |app| {
-            app.add_plugins(bevy_nature::NaturePlugins)
+            app.add_plugins((bevy_nature::NaturePlugins, ForestScenePlugin))
                 .insert_resource(ClearColor(Color::srgb(0.55, 0.7, 0.9)))
                 .insert_resource(ForestScene {
                     kind,
                     leaf_scale,
-                    with_hlod: false,
+                    draw: ForestDraw::Managed,
+                    impostors: true,
                 })
-                .add_systems(Startup, (spawn_forest, spawn_camera))
-                .add_systems(Update, walk);
+                .add_systems(Startup, spawn_camera)
+                .add_systems(Update, (walk, toggle_representation));
         })
 }
 
@@ -49,8 +58,21 @@ fn spawn_camera(mut commands: Commands) {
     commands.spawn((Camera3d::default(), camera_transform()));
 }
 
+/// `R` tints the impostor-drawn trees.
+fn toggle_representation(
+    keys: Option<Res<ButtonInput<KeyCode>>>,
+    mut settings: ResMut<ImpostorSettings>,
+) {
+    if keys.is_some_and(|k| k.just_pressed(KeyCode::KeyR)) {
+        settings.show_representation = !settings.show_representation;
+    }
+}
+
 /// Walks a 60 m circle through the forest, looking ahead.
-fn walk(time: Res<Time>, mut cameras: Query<&mut Transform, With<Camera3d>>) {
+fn walk(
+    time: Res<Time>,
+    mut cameras: Query<&mut Transform, (With<Camera3d>, Without<ImpostorBakeCamera>)>,
+) {
     let t = time.elapsed_secs() * 0.08;
     let position = Vec3::new(60.0 * t.cos() - 60.0, 3.0, 60.0 * t.sin());
     let ahead = Vec3::new(-t.sin(), -0.05, t.cos());

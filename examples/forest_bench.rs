@@ -1,185 +1,173 @@
 //! The forest benchmark (Gumbau 2011, table 3.5), headless, one process: the same forest drawn
-//! three ways, each measured over N frames after it settled —
+//! by our manager (pruning near, billboard clouds beyond `far`) and by what a Bevy user builds
+//! without this crate — decimated leaf meshes switched by `VisibilityRange`, bark ranged too —
+//! each swept over its own settings, every image compared with a full-detail reference rendered in
+//! the same run.
 //!
-//! - `full`: every tree in view (frustum, nearer than `far`) with every leaf (the reference);
-//! - `manager`: the urgency-ranked manager with LoD caches;
-//! - `visibility_range`: what a Bevy user would build — three decimated leaf meshes per type
-//!   switched by `VisibilityRange` (full / 40 % / 12 %, leaves enlarged to keep the area).
+//! Rows:
+//! - `reference`: every tree, every leaf, bark, at every distance (rendered once, not timed);
+//! - `no_trees`: ground and sky only — no manager work, no pruning pass;
+//! - `visibility_range`: the baseline, one row per setting (leaf fractions of the three levels ×
+//!   where they end); no manager, no pruning pass, no impostors;
+//! - `ours`: the urgency-ranked manager with LoD caches and billboard clouds, one row per
+//!   `(near, far)`.
 //!
-//! A `no_trees` row (the forest hidden) gives the cost every mode pays regardless (ground, sky,
-//! frame overhead), so `tree_ms` is what the trees themselves cost.
-//!
-//! Reports frame time (median, p95), leaf triangles, the manager's CPU time and counters, and
-//! image error of each against `full` rendered in the same run: per-pixel RMSE and RMSE of 8×8
-//! block means (leaves are a pixel or two far away, so per-pixel error mostly counts which
-//! leaves were dropped; block means compare the forest's density). Prints one JSON object.
+//! Frame time is GPU-synchronised: each frame is `App::update` (the renderer runs inside it,
+//! unpipelined) followed by a blocking wait until the GPU has finished everything submitted
+//! (`timing: "gpu-synchronised"` in the output). RMSE is per pixel against the reference;
+//! `rmse_8x8` compares 8×8 block means (the forest's density more than which leaves were kept).
+//! From the two curves of (RMSE, frame ms), the lower envelopes are taken; at each of our envelope
+//! points inside the baseline's RMSE range, the baseline's frame time is interpolated on its
+//! envelope at our RMSE, and `speedup_at_matched_rmse` is the smallest of those ratios (the
+//! headline: our worst case), with every matched point listed.
 //!
 //! ```text
-//! cargo run --release --example forest_bench -- [--forest dense|sparse] [--leaf-scale F]
-//!     [--no-borrowing] [--exponent N] [--frames N] [--size WxH] [--screenshot DIR]
+//! cargo run --release --example forest_bench -- [--forest dense|sparse|both] [--leaf-scale F]
+//!     [--frames N] [--size WxH] [--screenshot DIR] [--stats FILE]
 //! ```
 //! `--leaf-scale` scales the thesis' leaf counts (default 0.1: the full counts give a software
-//! rasteriser frames of tens of seconds at full detail).
+//! rasteriser reference frames of minutes).
 
 use bevy::camera::visibility::VisibilityRange;
 use bevy::prelude::*;
-use bevy_nature::foliage::ForestSettings;
 use bevy_nature::foliage::forest::systems::{ForestState, LEAF_TRIANGLES, MANAGER_MS};
+use bevy_nature::foliage::impostor::systems::IMPOSTORS_DRAWN;
+use bevy_nature::foliage::{FoliagePruningSettings, ForestSettings, LodDistances};
 use bevy_nature::forest_scene::{
-    ForestArgs, ForestScene, HlodForestRoot, ManagedForestRoot, camera_transform, spawn_forest,
+    BaselineLevels, ForestArgs, ForestDraw, ForestKind, ForestScene, ForestScenePlugin,
+    camera_transform, forest_impostors_ready, set_forest_draw,
 };
 use bevy_nature_harness::compare::{Comparison, RgbaImage};
 use bevy_nature_harness::headless::HarnessConfig;
 use bevy_nature_harness::{ExampleArgs, RenderHarness, require_adapter};
 
-struct Measured {
-    name: &'static str,
-    median_ms: f64,
-    p95_ms: f64,
+struct Row {
+    scene: &'static str,
+    mode: &'static str,
+    params: String,
+    frame_ms: f64,
+    frame_ms_p95: f64,
+    rmse: f64,
+    rmse_8x8: f64,
     leaf_triangles: f64,
+    impostors: f64,
     manager_ms: f64,
-    image: RgbaImage,
 }
 
-fn main() {
-    // Our own flags first; the rest are the runner's.
-    let ForestArgs {
-        kind,
-        leaf_scale,
-        rest,
-    } = ForestArgs::parse(std::env::args().skip(1), 0.1).unwrap_or_else(|e| {
-        eprintln!("{e}");
-        std::process::exit(2)
-    });
-    let mut borrowing = true;
-    let mut exponent = 1.0f32;
-    let mut runner_flags = Vec::new();
-    let mut rest = rest.into_iter();
-    while let Some(arg) = rest.next() {
-        match arg.as_str() {
-            "--no-borrowing" => borrowing = false,
-            "--exponent" => {
-                let v = rest.next().unwrap_or_default();
-                exponent = v
-                    .parse()
-                    .ok()
-                    .filter(|n: &f32| *n > 0.0)
-                    .unwrap_or_else(|| {
-                        eprintln!("--exponent takes a positive number, not '{v}'");
-                        std::process::exit(2)
-                    });
-            }
-            _ => runner_flags.push(arg),
-        }
+impl Row {
+    fn json(&self) -> String {
+        format!(
+            "{{\"scene\": \"{}\", \"mode\": \"{}\", \"params\": {}, \"frame_ms\": {:.2}, \"frame_ms_p95\": {:.2}, \"rmse\": {:.5}, \"rmse_8x8\": {:.5}, \"leaf_triangles\": {}, \"impostors\": {}, \"manager_ms\": {:.3}}}",
+            self.scene,
+            self.mode,
+            self.params,
+            self.frame_ms,
+            self.frame_ms_p95,
+            self.rmse,
+            self.rmse_8x8,
+            self.leaf_triangles,
+            self.impostors,
+            self.manager_ms
+        )
     }
-    let rest = runner_flags;
-    let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
-        eprintln!("{e} [--forest dense|sparse] [--leaf-scale F] [--no-borrowing] [--exponent N]");
-        std::process::exit(2)
-    });
-    let size = args.size.unwrap_or(UVec2::new(480, 270));
-    let frames = args.frames.unwrap_or(8);
-    if require_adapter("forest_bench").is_none() {
-        std::process::exit(1);
-    }
-    let mut harness = RenderHarness::new(HarnessConfig::sized(size.x, size.y)).expect("harness");
-    harness
-        .app_mut()
-        .add_plugins(bevy_nature::NaturePlugins)
-        .insert_resource(ClearColor(Color::srgb(0.55, 0.7, 0.9)))
-        .insert_resource(ForestScene {
-            kind,
-            leaf_scale,
-            with_hlod: true,
-        })
-        .insert_resource(ForestSettings {
-            budget: bevy_nature::foliage::ForestBudget::Extractions(64),
-            borrowing,
-            exponent,
-            ..default()
-        })
-        .add_systems(Startup, spawn_forest);
-    harness
-        .world_mut()
-        .spawn((Camera3d::default(), Msaa::Off, camera_transform()));
-    harness.wait_until_ready().expect("scene ready");
+}
 
-    let show = |harness: &mut RenderHarness, managed: bool, manager_on: bool| {
-        let world = harness.world_mut();
-        world.resource_mut::<ForestSettings>().enabled = manager_on;
-        let mut roots =
-            world.query::<(&mut Visibility, Has<ManagedForestRoot>, Has<HlodForestRoot>)>();
-        for (mut v, is_managed, is_hlod) in roots.iter_mut(world) {
-            if is_managed {
-                *v = if managed {
-                    Visibility::Inherited
-                } else {
-                    Visibility::Hidden
-                };
-            } else if is_hlod {
-                *v = if managed {
-                    Visibility::Hidden
-                } else {
-                    Visibility::Inherited
-                };
-            }
-        }
-        // Settle: the manager serves its backlog, new pipelines compile.
-        for _ in 0..400 {
-            harness.step();
-            if harness
-                .world_mut()
-                .resource::<ForestState>()
-                .last
-                .candidates
-                == 0
-            {
-                break;
-            }
-        }
-        harness.wait_until_ready().expect("ready");
-    };
-    let measure = |harness: &mut RenderHarness, name: &'static str| {
-        harness.reset_timing();
-        harness.run_frames(frames).unwrap();
-        let stats = harness.frame_stats();
-        let leaf_triangles = harness.diagnostic(&LEAF_TRIANGLES).unwrap_or(0.0);
-        let manager_ms = harness.diagnostic(&MANAGER_MS).unwrap_or(0.0);
-        let image = harness.render().unwrap();
-        Measured {
-            name,
-            median_ms: stats.median_ms,
-            p95_ms: stats.p95_ms,
-            leaf_triangles,
-            manager_ms,
-            image,
-        }
-    };
-    // The frame without any tree leaves or bark: what every mode pays regardless.
-    {
-        let world = harness.world_mut();
-        let mut roots = world
-            .query_filtered::<&mut Visibility, Or<(With<ManagedForestRoot>, With<HlodForestRoot>)>>(
-            );
-        for mut v in roots.iter_mut(world) {
-            *v = Visibility::Hidden;
+/// The points of a (rmse, ms) curve that no other point beats on both: sorted by RMSE, each
+/// faster than every point of lower RMSE.
+fn lower_envelope(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let mut sorted: Vec<(f64, f64)> = points.to_vec();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    for p in sorted {
+        if out.last().is_none_or(|last| p.1 < last.1) {
+            out.push(p);
         }
     }
-    for _ in 0..3 {
+    out
+}
+
+/// Frame time on an envelope at `rmse`, linearly interpolated; `None` outside its range.
+fn interpolate(envelope: &[(f64, f64)], rmse: f64) -> Option<f64> {
+    let first = envelope.first()?;
+    let last = envelope.last()?;
+    if rmse < first.0 || rmse > last.0 {
+        return None;
+    }
+    for w in envelope.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        if rmse >= a.0 && rmse <= b.0 {
+            let t = if b.0 > a.0 {
+                (rmse - a.0) / (b.0 - a.0)
+            } else {
+                0.0
+            };
+            return Some(a.1 + t * (b.1 - a.1));
+        }
+    }
+    Some(first.1)
+}
+
+/// Our speed-up at each of our envelope points the baseline's envelope reaches.
+fn matched_speedups(ours: &[(f64, f64)], baseline: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let (ours, baseline) = (lower_envelope(ours), lower_envelope(baseline));
+    ours.iter()
+        .filter_map(|&(rmse, ms)| interpolate(&baseline, rmse).map(|b| (rmse, b / ms.max(1e-9))))
+        .collect()
+}
+
+fn kind_name(kind: ForestKind) -> &'static str {
+    match kind {
+        ForestKind::Dense => "dense",
+        ForestKind::Sparse => "sparse",
+        ForestKind::Huge => "huge",
+    }
+}
+
+fn settle(harness: &mut RenderHarness) {
+    // The manager serves its backlog, new pipelines compile.
+    for _ in 0..300 {
+        harness.step();
+        if harness
+            .world_mut()
+            .resource::<ForestState>()
+            .last
+            .candidates
+            == 0
+        {
+            break;
+        }
+    }
+    harness.wait_until_ready().expect("ready");
+    for _ in 0..2 {
         harness.step();
     }
-    let mut empty = measure(&mut harness, "no_trees");
-    empty.leaf_triangles = 0.0;
-    show(&mut harness, true, false);
-    let full = measure(&mut harness, "full");
-    let visible = harness.world_mut().resource::<ForestState>().last.visible;
-    show(&mut harness, true, true);
-    let managed = measure(&mut harness, "manager");
-    let report = harness.world_mut().resource::<ForestState>().last;
-    show(&mut harness, false, true);
-    let mut hlod = measure(&mut harness, "visibility_range");
-    // The baseline's leaves are ordinary meshes: count the triangles of the levels drawn.
-    hlod.leaf_triangles = {
+}
+
+#[allow(clippy::too_many_arguments)]
+fn measure(
+    harness: &mut RenderHarness,
+    scene: &'static str,
+    mode: &'static str,
+    params: String,
+    frames: u32,
+    reference: &RgbaImage,
+    baseline_triangles: bool,
+    shots: Option<&std::path::Path>,
+) -> Row {
+    harness.reset_timing();
+    harness
+        .run_frames_gpu_synchronised(frames)
+        .expect("measured frames");
+    let stats = harness.frame_stats();
+    let image = harness.render().expect("render");
+    let cmp = Comparison::new(format!("forest_bench/{scene}/{mode}"), &image, reference);
+    let blocks = Comparison::new(
+        format!("forest_bench/{scene}/{mode}_8x8"),
+        &image.box_downsample(8),
+        &reference.box_downsample(8),
+    );
+    let leaf_triangles = if baseline_triangles {
+        // The baseline's leaves are ordinary meshes: the triangles of the levels drawn.
         let world = harness.world_mut();
         let mut levels =
             world.query_filtered::<(&Mesh3d, &ViewVisibility), With<VisibilityRange>>();
@@ -194,51 +182,299 @@ fn main() {
             .filter_map(|h| meshes.get(h))
             .map(|m| m.indices().map_or(0, |i| i.len()) as f64 / 3.0)
             .sum()
+    } else {
+        harness.diagnostic(&LEAF_TRIANGLES).unwrap_or(0.0)
     };
+    if let Some(dir) = shots {
+        let name = format!(
+            "{scene}_{mode}_{}.png",
+            params.replace(|c: char| !c.is_ascii_alphanumeric() && c != '.', "_")
+        );
+        image.save_png(dir.join(name)).ok();
+    }
+    let row = Row {
+        scene,
+        mode,
+        params,
+        frame_ms: stats.median_ms,
+        frame_ms_p95: stats.p95_ms,
+        rmse: cmp.rmse,
+        rmse_8x8: blocks.rmse,
+        // (An empty sum is −0.)
+        leaf_triangles: leaf_triangles + 0.0,
+        impostors: if mode == "ours" {
+            harness.diagnostic(&IMPOSTORS_DRAWN).unwrap_or(0.0)
+        } else {
+            0.0
+        },
+        manager_ms: harness.diagnostic(&MANAGER_MS).unwrap_or(0.0),
+    };
+    eprintln!("{}", row.json());
+    row
+}
 
-    if let Some(dir) = &args.screenshot {
-        std::fs::create_dir_all(dir).ok();
-        for m in [&full, &managed, &hlod] {
-            m.image.save_png(dir.join(format!("{}.png", m.name))).ok();
+fn run_forest(
+    kind: ForestKind,
+    leaf_scale: f32,
+    size: UVec2,
+    frames: u32,
+    shots: Option<&std::path::Path>,
+) -> Vec<Row> {
+    let scene = kind_name(kind);
+    let mut harness = RenderHarness::new(HarnessConfig::sized(size.x, size.y)).expect("harness");
+    harness
+        .app_mut()
+        .add_plugins((bevy_nature::NaturePlugins, ForestScenePlugin))
+        .insert_resource(ClearColor(Color::srgb(0.55, 0.7, 0.9)))
+        .insert_resource(ForestScene {
+            kind,
+            leaf_scale,
+            draw: ForestDraw::Nothing,
+            impostors: true,
+        })
+        .insert_resource(ForestSettings {
+            budget: bevy_nature::foliage::ForestBudget::Extractions(64),
+            ..default()
+        });
+    harness
+        .world_mut()
+        .spawn((Camera3d::default(), Msaa::Off, camera_transform()));
+    // The billboard clouds: baked on the GPU at the first run, loaded from the cache after.
+    let started = std::time::Instant::now();
+    for _ in 0..2000 {
+        harness.step();
+        if forest_impostors_ready(harness.world_mut()) {
+            break;
         }
     }
-    let rows: Vec<String> = [&empty, &full, &managed, &hlod]
+    eprintln!(
+        "{scene}: impostors ready after {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+    let (near, far) = kind.near_far();
+
+    set_forest_draw(harness.world_mut(), &ForestDraw::Reference);
+    settle(&mut harness);
+    let reference = harness.render().expect("reference");
+    if let Some(dir) = shots {
+        reference
+            .save_png(dir.join(format!("{scene}_reference.png")))
+            .ok();
+    }
+    let mut rows = Vec::new();
+
+    set_forest_draw(harness.world_mut(), &ForestDraw::Nothing);
+    settle(&mut harness);
+    rows.push(measure(
+        &mut harness,
+        scene,
+        "no_trees",
+        "{}".into(),
+        frames,
+        &reference,
+        true,
+        shots,
+    ));
+
+    // The baseline at its best settings: three leaf fractions × where the levels end (the last
+    // level at `far`, at twice `far`, or never culled).
+    let fractions: [[f32; 3]; 3] = [[1.0, 0.4, 0.12], [1.0, 0.25, 0.06], [1.0, 0.5, 0.25]];
+    let ends: [f32; 3] = [far, 2.0 * far, f32::MAX];
+    let mut settings: Vec<([f32; 3], f32)> = Vec::new();
+    for f in &fractions[..2] {
+        for &e in &ends {
+            settings.push((*f, e));
+        }
+    }
+    settings.push((fractions[2], f32::MAX));
+    settings.push((fractions[2], 2.0 * far));
+    for (f, last_end) in settings {
+        // Level ends at 20 % and 55 % of [near, D], D = the last end (or 3·far when never culled).
+        let span = if last_end == f32::MAX {
+            3.0 * far
+        } else {
+            last_end
+        };
+        let levels = BaselineLevels(vec![
+            (f[0], near + 0.2 * (span - near)),
+            (f[1], near + 0.55 * (span - near)),
+            (f[2], last_end),
+        ]);
+        let params = format!(
+            "{{\"fractions\": [{}, {}, {}], \"ends_m\": [{:.0}, {:.0}, {}]}}",
+            f[0],
+            f[1],
+            f[2],
+            levels.0[0].1,
+            levels.0[1].1,
+            if last_end == f32::MAX {
+                "null".to_string()
+            } else {
+                format!("{last_end:.0}")
+            }
+        );
+        set_forest_draw(harness.world_mut(), &ForestDraw::Baseline(levels));
+        settle(&mut harness);
+        rows.push(measure(
+            &mut harness,
+            scene,
+            "visibility_range",
+            params,
+            frames,
+            &reference,
+            true,
+            shots,
+        ));
+    }
+
+    // Ours over its settings: where full detail ends (`near`) and where pruning hands over to
+    // the billboard clouds (`far`).
+    let _ = near;
+    set_forest_draw(harness.world_mut(), &ForestDraw::Managed);
+    // Fractions of the scene's `far` (360 m dense, 115 m sparse): from aggressive to generous.
+    let ours: Vec<(f32, f32)> = [
+        (0.04, 0.16),
+        (0.1, 0.3),
+        (0.2, 0.5),
+        (0.3, 0.6),
+        (0.5, 1.0),
+        (0.7, 1.4),
+    ]
+    .iter()
+    .map(|&(n, f)| (n * far, f * far))
+    .collect();
+    for (n, f) in ours {
+        harness
+            .world_mut()
+            .resource_mut::<FoliagePruningSettings>()
+            .distances = LodDistances::World { near: n, far: f };
+        for _ in 0..3 {
+            harness.step();
+        }
+        settle(&mut harness);
+        rows.push(measure(
+            &mut harness,
+            scene,
+            "ours",
+            format!("{{\"near_m\": {n:.1}, \"far_m\": {f:.1}}}"),
+            frames,
+            &reference,
+            false,
+            shots,
+        ));
+    }
+    rows
+}
+
+fn main() {
+    // `--forest both` (the default) runs the dense and the sparse forest; the scene flags take
+    // one.
+    let raw: Vec<String> = std::env::args().skip(1).collect();
+    let (mut both, mut filtered, mut i) = (true, Vec::new(), 0);
+    while i < raw.len() {
+        if raw[i] == "--forest" {
+            if raw.get(i + 1).map(String::as_str) == Some("both") {
+                i += 2;
+                continue;
+            }
+            both = false;
+        }
+        filtered.push(raw[i].clone());
+        i += 1;
+    }
+    let ForestArgs {
+        kind,
+        leaf_scale,
+        rest: runner_flags,
+    } = ForestArgs::parse(filtered, 0.1).unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(2)
+    });
+    let args = ExampleArgs::parse_from(runner_flags).unwrap_or_else(|e| {
+        eprintln!("{e} [--forest dense|sparse|both] [--leaf-scale F]");
+        std::process::exit(2)
+    });
+    let size = args.size.unwrap_or(UVec2::new(480, 270));
+    let frames = args.frames.unwrap_or(5);
+    if require_adapter("forest_bench").is_none() {
+        std::process::exit(1);
+    }
+    if let Some(dir) = &args.screenshot {
+        std::fs::create_dir_all(dir).ok();
+    }
+    let kinds = if both {
+        vec![ForestKind::Dense, ForestKind::Sparse]
+    } else {
+        vec![kind]
+    };
+    let mut rows = Vec::new();
+    let mut speedups = Vec::new();
+    for kind in kinds {
+        let forest_rows = run_forest(kind, leaf_scale, size, frames, args.screenshot.as_deref());
+        let curve = |mode: &str| -> Vec<(f64, f64)> {
+            forest_rows
+                .iter()
+                .filter(|r| r.mode == mode)
+                .map(|r| (r.rmse, r.frame_ms))
+                .collect()
+        };
+        let matched = matched_speedups(&curve("ours"), &curve("visibility_range"));
+        let worst = matched.iter().map(|m| m.1).min_by(|a, b| a.total_cmp(b));
+        speedups.push((kind_name(kind), worst, matched));
+        rows.extend(forest_rows);
+    }
+    let speedup_json = speedups
         .iter()
-        .map(|m| {
-            let cmp = Comparison::new(format!("forest_bench/{}", m.name), &m.image, &full.image);
-            let blocks = Comparison::new(
-                format!("forest_bench/{}_8x8", m.name),
-                &m.image.box_downsample(8),
-                &full.image.box_downsample(8),
-            );
+        .map(|(name, worst, _)| {
             format!(
-                "{{\"mode\": \"{}\", \"frame_ms_median\": {:.1}, \"frame_ms_p95\": {:.1}, \"speedup_vs_full\": {:.2}, \"tree_ms\": {:.1}, \"tree_speedup_vs_full\": {:.2}, \"leaf_triangles\": {}, \"manager_cpu_ms\": {:.3}, \"rmse\": {:.4}, \"rmse_8x8\": {:.4}, \"ssim\": {:.3}}}",
-                m.name,
-                m.median_ms,
-                m.p95_ms,
-                full.median_ms / m.median_ms.max(1e-9),
-                m.median_ms - empty.median_ms,
-                (full.median_ms - empty.median_ms) / (m.median_ms - empty.median_ms).max(1e-9),
-                m.leaf_triangles,
-                m.manager_ms,
-                cmp.rmse,
-                blocks.rmse,
-                cmp.ssim,
+                "\"{name}\": {}",
+                worst.map_or("null".to_string(), |w| format!("{w:.3}"))
             )
         })
-        .collect();
-    println!(
-        "{{\"bench\": \"forest\", \"forest\": \"{kind:?}\", \"trees\": {}, \"in_view\": {visible}, \"leaf_scale\": {leaf_scale}, \"borrowing\": {borrowing}, \"exponent\": {exponent}, \"size\": [{}, {}], \"frames\": {frames}, \"adapter\": {:?}, \"manager_last_frame\": {{\"visible\": {}, \"extractions\": {}, \"borrows\": {}}}, \"rows\": [\n  {}\n]}}",
-        kind.tree_count(),
+        .collect::<Vec<_>>()
+        .join(", ");
+    let matched_json = speedups
+        .iter()
+        .map(|(name, _, matched)| {
+            format!(
+                "\"{name}\": [{}]",
+                matched
+                    .iter()
+                    .map(|(rmse, s)| format!("{{\"rmse\": {rmse:.5}, \"speedup\": {s:.3}}}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    let json = format!(
+        "{{\"bench\": \"forest\", \"headline\": \"speedup_at_matched_rmse (our worst case over the matched RMSE range; > 1: ours faster)\", \"timing\": \"gpu-synchronised\", \"leaf_scale\": {leaf_scale}, \"size\": [{}, {}], \"frames\": {frames}, \"speedup_at_matched_rmse\": {{{speedup_json}}}, \"matched_points\": {{{matched_json}}}, \"rows\": [\n  {}\n]}}",
         size.x,
         size.y,
-        harness
-            .adapter()
-            .map(|a| a.name.clone())
-            .unwrap_or_default(),
-        report.visible,
-        report.extractions,
-        report.borrows,
-        rows.join(",\n  ")
+        rows.iter().map(Row::json).collect::<Vec<_>>().join(",\n  ")
     );
+    println!("{json}");
+    if let Some(path) = &args.stats
+        && let Err(e) = std::fs::write(path, &json)
+    {
+        eprintln!("could not write {}: {e}", path.display());
+        std::process::exit(1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn matched_speedup_interpolates_on_the_baseline_envelope() {
+        // Baseline: 0.02 → 100 ms, 0.04 → 50 ms (and a dominated point).
+        let baseline = [(0.02, 100.0), (0.04, 50.0), (0.05, 80.0)];
+        let ours = [(0.03, 25.0), (0.01, 200.0)];
+        let m = matched_speedups(&ours, &baseline);
+        // 0.03 sits halfway: the baseline would take 75 ms.
+        assert_eq!(m.len(), 1);
+        assert!((m[0].1 - 3.0).abs() < 1e-9);
+        assert_eq!(lower_envelope(&baseline).len(), 2);
+    }
 }

@@ -1,18 +1,27 @@
 //! The forest scenes of Gumbau 2011, table 3.5, shared by the `forest` example and the
-//! `forest_bench` benchmark: a dense forest of 6,450 trees and a sparse one of 210, mixing the
-//! four test trees, on a ground plane, the camera standing inside.
+//! `forest_bench` benchmark: a dense forest of 6,450 trees and a sparse one of 210 (and a huge one
+//! of 100,000 for scale), mixing the four test trees, on a ground plane, the camera standing
+//! inside.
 //!
-//! Each scene sets `far` so that about as many trees are in view (in the frustum and nearer than
-//! `far`) as in the thesis: 508 of 6,450 (8 %) and 24 of 210. Trees are drawn with
-//! [`ForestTree`] (the manager and its LoD caches); the same trees are also spawned, hidden, as
-//! the `VisibilityRange` baseline (three decimated leaf meshes per type) under
-//! [`HlodForestRoot`].
+//! Each scene sets `far` so that about as many trees are nearer than `far` in view as in the
+//! thesis: 508 of 6,450 (8 %) and 24 of 210. The same placements can be drawn four ways
+//! ([`ForestDraw`]): by the manager ([`ForestTree`], pruning, billboard clouds beyond `far`), as
+//! the `VisibilityRange` baseline a Bevy user would build, at full detail everywhere (the
+//! reference), or not at all; [`set_forest_draw`] swaps them, so a benchmark row runs only its own
+//! trees.
 
+use bevy::asset::io::file::FileAssetReader;
 use bevy::camera::visibility::VisibilityRange;
+use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy_foliage::forest::hlod::decimated_leaves;
+use bevy_foliage::impostor::assets::BillboardCloudAsset;
+use bevy_foliage::impostor::bake::{ImpostorBakeRequest, ImpostorBakeResult, ImpostorBakeSettings};
+use bevy_foliage::impostor::systems::{TreeBark, TreeImpostor};
+use bevy_foliage::impostor::texture::{BakeSurface, ImpostorSource};
 use bevy_foliage::meshes::{bark_mesh, leaf_set_mesh};
-use bevy_foliage::pruning::bake::{BakeSettings, bake};
+use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
+use bevy_foliage::pruning::leaves::LeafSet;
 use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 use bevy_foliage::pruning::spawn::{default_bark_material, default_leaf_material};
@@ -26,6 +35,8 @@ pub enum ForestKind {
     Dense,
     /// 210 trees, about 24 in view.
     Sparse,
+    /// 100,000 trees at the dense forest's density, laid out procedurally (scale test).
+    Huge,
 }
 
 impl ForestKind {
@@ -34,6 +45,7 @@ impl ForestKind {
         match text {
             "dense" => Some(Self::Dense),
             "sparse" => Some(Self::Sparse),
+            "huge" => Some(Self::Huge),
             _ => None,
         }
     }
@@ -43,6 +55,7 @@ impl ForestKind {
         match self {
             Self::Dense => 6450,
             Self::Sparse => 210,
+            Self::Huge => 100_000,
         }
     }
 
@@ -51,6 +64,8 @@ impl ForestKind {
         match self {
             Self::Dense => 1100.0,
             Self::Sparse => 300.0,
+            // The dense forest's density: 6,450 trees on 1,100 m × 1,100 m.
+            Self::Huge => 1100.0 * (100_000.0f32 / 6450.0).sqrt(),
         }
     }
 
@@ -59,7 +74,7 @@ impl ForestKind {
     /// trees with far = 250 m, so 360 m for ~500; sparse: 18 at 100 m, so 115 m for ~24).
     pub fn near_far(self) -> (f32, f32) {
         match self {
-            Self::Dense => (15.0, 360.0),
+            Self::Dense | Self::Huge => (15.0, 360.0),
             Self::Sparse => (15.0, 115.0),
         }
     }
@@ -90,8 +105,9 @@ impl ForestArgs {
             match arg.as_str() {
                 "--forest" => {
                     let v = args.next().unwrap_or_default();
-                    out.kind = ForestKind::parse(&v)
-                        .ok_or_else(|| format!("--forest takes dense or sparse, not '{v}'"))?;
+                    out.kind = ForestKind::parse(&v).ok_or_else(|| {
+                        format!("--forest takes dense, sparse or huge, not '{v}'")
+                    })?;
                 }
                 "--leaf-scale" => {
                     let v = args.next().unwrap_or_default();
@@ -110,6 +126,17 @@ impl ForestArgs {
     }
 }
 
+/// The forest scene's systems: [`spawn_forest`] at startup (needs [`ForestScene`]) and
+/// [`adopt_forest_impostors`].
+pub struct ForestScenePlugin;
+
+impl Plugin for ForestScenePlugin {
+    fn build(&self, app: &mut App) {
+        app.add_systems(Startup, spawn_forest)
+            .add_systems(Update, adopt_forest_impostors);
+    }
+}
+
 /// The forest to build.
 #[derive(Resource, Clone, Debug)]
 pub struct ForestScene {
@@ -117,30 +144,105 @@ pub struct ForestScene {
     pub kind: ForestKind,
     /// Fraction of the thesis' leaf counts (16,107 / 28,645 / 41,155 / 131,042) per tree type.
     pub leaf_scale: f32,
-    /// Also spawn the hidden `VisibilityRange` baseline.
-    pub with_hlod: bool,
+    /// What to draw once the types are built.
+    pub draw: ForestDraw,
+    /// Bake (or load from `assets/impostors/`) a billboard cloud per type for the distant trees.
+    pub impostors: bool,
 }
 
-/// Parent of the manager's trees (hide it to show only the baseline).
+/// How the forest is drawn.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ForestDraw {
+    /// Nothing (the ground and sky alone).
+    Nothing,
+    /// [`ForestTree`]s: the manager, pruning, and billboard clouds beyond `far` if baked.
+    Managed,
+    /// What a Bevy user builds without this crate: per type, leaf meshes decimated offline and
+    /// switched by `VisibilityRange`; the bark drawn up to the last level's end. No manager, no
+    /// pruning pass.
+    Baseline(BaselineLevels),
+    /// Every tree with every leaf and its bark at every distance: the reference image.
+    Reference,
+}
+
+/// The levels of the `VisibilityRange` baseline: `(fraction of the leaves, end distance in m)`
+/// from near to far; the first starts at 0. The bark ends with the last level.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BaselineLevels(pub Vec<(f32, f32)>);
+
+impl BaselineLevels {
+    /// The thesis-like default: full detail to 20 % of `[near, far]`, 40 % of the leaves to
+    /// 55 %, 12 % to `far`.
+    pub fn standard(kind: ForestKind) -> Self {
+        let (near, far) = kind.near_far();
+        Self(
+            [(1.0, 0.2), (0.4, 0.55), (0.12, 1.0)]
+                .iter()
+                .map(|&(f, e)| (f, near + e * (far - near)))
+                .collect(),
+        )
+    }
+}
+
+/// Parent of the trees of the current [`ForestDraw`].
 #[derive(Component)]
-pub struct ManagedForestRoot;
+pub struct ForestRoot;
 
-/// Parent of the `VisibilityRange` baseline trees (hidden at first).
-#[derive(Component)]
-pub struct HlodForestRoot;
+/// A tree's type (index into [`ForestTypes`]).
+#[derive(Component, Clone, Copy, Debug)]
+pub struct ForestTreeType(pub usize);
 
-/// The leaf fractions and distance bands of the baseline's three levels, as fractions of
-/// `[near, far]`: full detail to 20 %, 40 % of the leaves to 55 %, 12 % to `far`.
-pub const HLOD_LEVELS: [(f32, f32); 3] = [(1.0, 0.2), (0.4, 0.55), (0.12, 1.0)];
+/// One tree type, built once.
+pub struct ForestType {
+    /// Species name.
+    pub name: &'static str,
+    /// Pruning bake.
+    pub baked: Handle<BakedFoliage>,
+    /// The leaves (decimated for the baseline).
+    pub leaves: LeafSet,
+    /// Bark mesh.
+    pub bark: Handle<Mesh>,
+    /// The billboard cloud, once baked or loaded.
+    pub impostor: Option<Handle<BillboardCloudAsset>>,
+}
 
-/// Builds the forest (a startup system; needs [`ForestScene`] inserted).
+/// The forest's tree types, materials and placements.
+#[derive(Resource)]
+pub struct ForestTypes {
+    /// The types.
+    pub types: Vec<ForestType>,
+    /// Leaves of managed trees.
+    pub leaf_material: Handle<LeafMaterial>,
+    /// Leaves of the baseline and reference (the same look as a `StandardMaterial`).
+    pub mesh_leaf_material: Handle<StandardMaterial>,
+    /// Bark.
+    pub bark_material: Handle<StandardMaterial>,
+    /// Every tree: type and transform.
+    pub placements: Vec<(usize, Transform)>,
+    /// Decimated leaf meshes by (type, fraction in ‰).
+    pub decimated: HashMap<(usize, u32), Handle<Mesh>>,
+    /// What is drawn now.
+    pub drawn: Option<ForestDraw>,
+}
+
+/// Where a species' billboard cloud is cached, relative to the asset root.
+fn impostor_asset_path(name: &str, leaf_scale: f32) -> String {
+    format!(
+        "impostors/{name}-{:04}.bbcloud",
+        (leaf_scale * 1000.0).round() as u32
+    )
+}
+
+/// Builds the forest's types (a startup system; needs [`ForestScene`] inserted), spawns the
+/// ground and the light, the impostor bakes, and the trees of `ForestScene::draw`.
+#[allow(clippy::too_many_arguments)]
 pub fn spawn_forest(
     mut commands: Commands,
     scene: Res<ForestScene>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
     mut leaf_materials: ResMut<Assets<LeafMaterial>>,
-    mut baked_assets: ResMut<Assets<bevy_foliage::pruning::bake::BakedFoliage>>,
+    mut baked_assets: ResMut<Assets<BakedFoliage>>,
     mut pruning: ResMut<FoliagePruningSettings>,
 ) {
     let (near, far) = scene.kind.near_far();
@@ -149,7 +251,7 @@ pub fn spawn_forest(
     let side = scene.kind.side();
     commands.spawn((
         Name::new("ground"),
-        Mesh3d(meshes.add(Plane3d::default().mesh().size(side + 400.0, side + 400.0))),
+        Mesh3d(meshes.add(Plane3d::default().mesh().size(side + 2000.0, side + 2000.0))),
         MeshMaterial3d(materials.add(StandardMaterial {
             base_color: Color::srgb(0.42, 0.47, 0.32),
             perceptual_roughness: 1.0,
@@ -158,17 +260,13 @@ pub fn spawn_forest(
     ));
     let leaf_look = default_leaf_material();
     let leaf_material = leaf_materials.add(leaf_material(leaf_look.clone()));
-    let hlod_leaf_material = materials.add(StandardMaterial {
+    let mesh_leaf_material = materials.add(StandardMaterial {
         double_sided: true,
         cull_mode: None,
-        ..leaf_look
+        ..leaf_look.clone()
     });
-    let bark_material = materials.add(default_bark_material());
-    struct Type {
-        baked: Handle<bevy_foliage::pruning::bake::BakedFoliage>,
-        bark: Handle<Mesh>,
-        levels: Vec<Handle<Mesh>>,
-    }
+    let bark_look = default_bark_material();
+    let bark_material = materials.add(bark_look.clone());
     let mut types = Vec::new();
     for species in TreeSpecies::thesis_trees() {
         let count = ((species.leaf_count as f32 * scene.leaf_scale.clamp(0.001, 1.0)).round()
@@ -188,101 +286,66 @@ pub fn spawn_forest(
             species.name,
             started.elapsed().as_secs_f64() * 1e3
         );
-        let levels = if scene.with_hlod {
-            HLOD_LEVELS
-                .iter()
-                .enumerate()
-                .map(|(i, (fraction, _))| {
-                    meshes.add(leaf_set_mesh(&decimated_leaves(
-                        &tree.leaves,
-                        *fraction,
-                        17 + i as u64,
-                    )))
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
-        types.push(Type {
+        if scene.impostors {
+            let mut source = ImpostorSource::default();
+            source.push_leaves(&tree.leaves, bake_surface(&leaf_look, 0.5));
+            source.push_bark(&tree.bark, bake_surface(&bark_look, 0.0));
+            let asset_path = impostor_asset_path(species.name, scene.leaf_scale);
+            commands.spawn((
+                ImpostorBakeRequest {
+                    label: species.name.to_string(),
+                    source: std::sync::Arc::new(source),
+                    settings: ImpostorBakeSettings::default(),
+                    save_to: Some(
+                        FileAssetReader::get_base_path()
+                            .join("assets")
+                            .join(&asset_path),
+                    ),
+                },
+                ForestImpostorBake {
+                    ty: types.len(),
+                    asset_path,
+                },
+            ));
+        }
+        types.push(ForestType {
+            name: species.name,
             baked: baked_assets.add(baked),
+            leaves: tree.leaves,
             bark: meshes.add(bark_mesh(&tree.bark)),
-            levels,
+            impostor: None,
         });
     }
-    if types.is_empty() {
-        return;
-    }
-    let managed_root = commands
-        .spawn((
-            Name::new("forest (manager)"),
-            ManagedForestRoot,
-            Transform::IDENTITY,
-            Visibility::Inherited,
-        ))
-        .id();
-    let hlod_root = scene.with_hlod.then(|| {
-        commands
-            .spawn((
-                Name::new("forest (VisibilityRange baseline)"),
-                HlodForestRoot,
-                Transform::IDENTITY,
-                Visibility::Hidden,
-            ))
-            .id()
-    });
-    let mut rng = SplitMix64::new(2011);
-    for i in 0..scene.kind.tree_count() {
-        let ty = &types[i % types.len()];
-        let position = Vec3::new(
-            rng.range(-side / 2.0, side / 2.0),
-            0.0,
-            rng.range(-side / 2.0, side / 2.0),
-        );
-        // Keep a clearing around the camera's spot.
-        if position.length() < 6.0 {
-            continue;
-        }
-        let transform = Transform::from_translation(position)
-            .with_rotation(Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)))
-            .with_scale(Vec3::splat(rng.range(0.85, 1.15)));
-        commands.entity(managed_root).with_child((
-            ForestTree {
-                baked: ty.baked.clone(),
-                material: leaf_material.clone(),
-            },
-            transform,
-            children![(
-                Mesh3d(ty.bark.clone()),
-                MeshMaterial3d(bark_material.clone())
-            )],
-        ));
-        if let Some(root) = hlod_root {
-            let mut start = 0.0;
-            let mut levels = Vec::new();
-            for (level, (_, end_fraction)) in ty.levels.iter().zip(HLOD_LEVELS) {
-                let end = near + end_fraction * (far - near);
-                levels.push((
-                    Mesh3d(level.clone()),
-                    MeshMaterial3d(hlod_leaf_material.clone()),
-                    VisibilityRange::abrupt(start, end),
-                ));
-                start = end;
+    let mut placements = Vec::new();
+    if !types.is_empty() {
+        let mut rng = SplitMix64::new(2011);
+        for i in 0..scene.kind.tree_count() {
+            let ty = i % types.len();
+            let position = Vec3::new(
+                rng.range(-side / 2.0, side / 2.0),
+                0.0,
+                rng.range(-side / 2.0, side / 2.0),
+            );
+            let transform = Transform::from_translation(position)
+                .with_rotation(Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)))
+                .with_scale(Vec3::splat(rng.range(0.85, 1.15)));
+            // Keep a clearing around the camera's spot.
+            if position.length() >= 6.0 {
+                placements.push((ty, transform));
             }
-            commands.entity(root).with_children(|parent| {
-                parent
-                    .spawn((transform, Visibility::Inherited))
-                    .with_children(|tree| {
-                        tree.spawn((
-                            Mesh3d(ty.bark.clone()),
-                            MeshMaterial3d(bark_material.clone()),
-                        ));
-                        for level in levels {
-                            tree.spawn(level);
-                        }
-                    });
-            });
         }
     }
+    commands.insert_resource(ForestTypes {
+        types,
+        leaf_material,
+        mesh_leaf_material,
+        bark_material,
+        placements,
+        decimated: HashMap::new(),
+        drawn: None,
+    });
+    let draw = scene.draw.clone();
+    commands.queue(move |world: &mut World| set_forest_draw(world, &draw));
     commands.spawn((
         DirectionalLight {
             illuminance: 10_000.0,
@@ -295,6 +358,180 @@ pub fn spawn_forest(
         brightness: 500.0,
         ..default()
     });
+}
+
+/// A `StandardMaterial`'s look as a bake surface (colour factor, no texture).
+fn bake_surface(look: &StandardMaterial, alpha_cutoff: f32) -> BakeSurface {
+    let c = look.base_color.to_linear();
+    BakeSurface {
+        base_color: Vec4::new(c.red, c.green, c.blue, c.alpha),
+        texture: None,
+        alpha_cutoff,
+    }
+}
+
+/// A species' billboard cloud bake in flight.
+#[derive(Component)]
+pub struct ForestImpostorBake {
+    ty: usize,
+    asset_path: String,
+}
+
+/// Loads each species' billboard cloud once its bake (or the cache) is done and gives it to the
+/// managed trees of that species; a failed bake leaves them on pruned geometry (the bake warned).
+#[allow(clippy::type_complexity)]
+pub fn adopt_forest_impostors(
+    mut commands: Commands,
+    server: Res<AssetServer>,
+    types: Option<ResMut<ForestTypes>>,
+    bakes: Query<(Entity, &ForestImpostorBake, &ImpostorBakeResult)>,
+    trees: Query<(Entity, &ForestTreeType), (With<ForestTree>, Without<TreeImpostor>)>,
+) {
+    let Some(mut types) = types else {
+        return;
+    };
+    for (entity, bake, result) in &bakes {
+        if result.0.is_ok()
+            && let Some(ty) = types.types.get_mut(bake.ty)
+        {
+            ty.impostor = Some(server.load(bake.asset_path.clone()));
+        }
+        commands.entity(entity).despawn();
+    }
+    for (tree, ty) in &trees {
+        if let Some(handle) = types.types.get(ty.0).and_then(|t| t.impostor.clone()) {
+            commands.entity(tree).insert(TreeImpostor(handle));
+        }
+    }
+}
+
+/// Whether every species' impostor bake is done and its asset loaded (true without impostors).
+pub fn forest_impostors_ready(world: &mut World) -> bool {
+    let pending = world.query::<&ForestImpostorBake>().iter(world).count();
+    let Some(types) = world.get_resource::<ForestTypes>() else {
+        return false;
+    };
+    let server = world.resource::<AssetServer>();
+    pending == 0
+        && types.types.iter().all(|t| {
+            t.impostor.as_ref().is_none_or(|h| {
+                server.is_loaded_with_dependencies(h.id()) || server.load_state(h.id()).is_failed()
+            })
+        })
+}
+
+/// Replaces the drawn trees with those of `draw`.
+pub fn set_forest_draw(world: &mut World, draw: &ForestDraw) {
+    let roots: Vec<Entity> = world
+        .query_filtered::<Entity, With<ForestRoot>>()
+        .iter(world)
+        .collect();
+    for root in roots {
+        world.entity_mut(root).despawn();
+    }
+    let Some(mut types) = world.remove_resource::<ForestTypes>() else {
+        return;
+    };
+    // Decimated meshes the baseline needs.
+    if let ForestDraw::Baseline(levels) = draw {
+        let mut meshes = world.resource_mut::<Assets<Mesh>>();
+        for ty in 0..types.types.len() {
+            for &(fraction, _) in &levels.0 {
+                let key = (ty, (fraction * 1000.0).round() as u32);
+                if !types.decimated.contains_key(&key) {
+                    let mesh = leaf_set_mesh(&decimated_leaves(
+                        &types.types[ty].leaves,
+                        fraction,
+                        17 + key.1 as u64,
+                    ));
+                    types.decimated.insert(key, meshes.add(mesh));
+                }
+            }
+        }
+    }
+    if matches!(draw, ForestDraw::Reference) {
+        let mut meshes = world.resource_mut::<Assets<Mesh>>();
+        for ty in 0..types.types.len() {
+            types
+                .decimated
+                .entry((ty, 1000))
+                .or_insert_with(|| meshes.add(leaf_set_mesh(&types.types[ty].leaves)));
+        }
+    }
+    let root = world
+        .spawn((
+            Name::new(format!("forest ({draw:?})")),
+            ForestRoot,
+            Transform::IDENTITY,
+            Visibility::Inherited,
+        ))
+        .id();
+    for &(ty, transform) in &types.placements {
+        let t = &types.types[ty];
+        match draw {
+            ForestDraw::Nothing => {}
+            ForestDraw::Managed => {
+                let mut tree = world.spawn((
+                    ForestTree {
+                        baked: t.baked.clone(),
+                        material: types.leaf_material.clone(),
+                    },
+                    ForestTreeType(ty),
+                    transform,
+                    ChildOf(root),
+                ));
+                if let Some(impostor) = &t.impostor {
+                    tree.insert(TreeImpostor(impostor.clone()));
+                }
+                tree.with_child((
+                    Mesh3d(t.bark.clone()),
+                    MeshMaterial3d(types.bark_material.clone()),
+                    TreeBark,
+                ));
+            }
+            ForestDraw::Baseline(levels) => {
+                let mut start = 0.0;
+                let mut children = Vec::new();
+                for &(fraction, end) in &levels.0 {
+                    let key = (ty, (fraction * 1000.0).round() as u32);
+                    children.push((
+                        Mesh3d(types.decimated[&key].clone()),
+                        MeshMaterial3d(types.mesh_leaf_material.clone()),
+                        VisibilityRange::abrupt(start, end),
+                    ));
+                    start = end;
+                }
+                world
+                    .spawn((transform, Visibility::Inherited, ChildOf(root)))
+                    .with_children(|tree| {
+                        tree.spawn((
+                            Mesh3d(t.bark.clone()),
+                            MeshMaterial3d(types.bark_material.clone()),
+                            VisibilityRange::abrupt(0.0, start),
+                        ));
+                        for level in children {
+                            tree.spawn(level);
+                        }
+                    });
+            }
+            ForestDraw::Reference => {
+                world
+                    .spawn((transform, Visibility::Inherited, ChildOf(root)))
+                    .with_children(|tree| {
+                        tree.spawn((
+                            Mesh3d(t.bark.clone()),
+                            MeshMaterial3d(types.bark_material.clone()),
+                        ));
+                        tree.spawn((
+                            Mesh3d(types.decimated[&(ty, 1000)].clone()),
+                            MeshMaterial3d(types.mesh_leaf_material.clone()),
+                        ));
+                    });
+            }
+        }
+    }
+    types.drawn = Some(draw.clone());
+    world.insert_resource(types);
 }
 
 /// The camera's standing point: the forest's centre, looking along +x, slightly down.

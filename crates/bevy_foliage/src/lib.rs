@@ -31,6 +31,7 @@ use bevy::prelude::*;
 pub mod corpus;
 pub mod distance;
 pub mod forest;
+pub mod impostor;
 pub mod meshes;
 pub mod pruning;
 pub mod rng;
@@ -57,6 +58,7 @@ impl Plugin for FoliagePlugin {
         if app.world().contains_resource::<AssetServer>() {
             pruning::plugin::build(app);
             forest::plugin::build(app);
+            impostor::build(app);
         }
     }
 }

@@ -22,6 +22,10 @@ const PURE: &[&str] = &[
     "src/forest/hlod.rs",
     "src/forest/lod.rs",
     "src/forest/manager.rs",
+    "src/impostor/atlas.rs",
+    "src/impostor/cloud.rs",
+    "src/impostor/format.rs",
+    "src/impostor/texture.rs",
 ];
 
 const RENDER: &[&str] = &[

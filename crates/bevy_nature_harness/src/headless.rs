@@ -384,6 +384,36 @@ impl RenderHarness {
         Ok(())
     }
 
+    /// Runs one frame and waits until the GPU has finished all the work it submitted, returning
+    /// the wall time of both together: a frame time that includes the GPU, not just the CPU's
+    /// submission (the renderer runs inside `App::update` here, unpipelined).
+    pub fn step_gpu_synchronised(&mut self) -> Result<Duration, HarnessError> {
+        self.finish_setup();
+        let start = Instant::now();
+        self.app.update();
+        let device = self
+            .app
+            .get_sub_app(RenderApp)
+            .and_then(|r| r.world().get_resource::<RenderDevice>())
+            .ok_or_else(|| HarnessError::Readback("no render device".into()))?
+            .clone();
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| HarnessError::Readback(e.to_string()))?;
+        Ok(start.elapsed())
+    }
+
+    /// Runs `frames` measured frames like [`Self::run_frames`], each timed with
+    /// [`Self::step_gpu_synchronised`].
+    pub fn run_frames_gpu_synchronised(&mut self, frames: u32) -> Result<(), HarnessError> {
+        self.ensure_ready()?;
+        for _ in 0..frames {
+            let dt = self.step_gpu_synchronised()?;
+            self.frame_times.push(dt);
+        }
+        Ok(())
+    }
+
     /// Runs `frames` measured frames (after the scene is ready), recording each frame's time.
     pub fn run_frames(&mut self, frames: u32) -> Result<(), HarnessError> {
         self.ensure_ready()?;

@@ -20,6 +20,7 @@ use super::cache::{LodSlots, SLOT_LOD_ONE, SLOT_LOD_ZERO};
 use super::components::{ForestBudget, ForestSettings, ForestTree, TreeLod};
 use super::feedback::ExponentController;
 use super::manager::{Budget, ForestManager, Frustum, ManagerSettings, TreeInput, TreeLodState};
+use crate::impostor::systems::TreeImpostor;
 use crate::pruning::bake::BakedFoliage;
 use crate::pruning::components::{
     FoliageCamera, FoliageShadowLight, ManagedPruning, PrunedFoliage, PruningParams,
@@ -97,7 +98,7 @@ pub const GPU_BYTES_PER_VISIBLE: DiagnosticPath =
 
 /// Runs the forest manager: ranks the visible trees by urgency, serves them within the budget
 /// (borrowing or re-extracting cache slots) and sets the extraction entities' pruning inputs.
-#[allow(clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub fn run_forest_manager(
     mut commands: Commands,
     mut state: ResMut<ForestState>,
@@ -115,6 +116,7 @@ pub fn run_forest_manager(
         &GlobalTransform,
         &mut TreeLod,
         &mut Visibility,
+        Has<TreeImpostor>,
     )>,
     mut params: Query<&mut PruningParams, With<ManagedPruning>>,
     mut asset_events: MessageReader<AssetEvent<BakedFoliage>>,
@@ -159,7 +161,7 @@ pub fn run_forest_manager(
         for (_, entity) in state.extractions.drain() {
             commands.entity(entity).despawn();
         }
-        for (.., mut lod, _) in &mut trees {
+        for (_, _, _, mut lod, ..) in &mut trees {
             *lod = TreeLod::default();
         }
         state.states.clear();
@@ -221,6 +223,16 @@ pub fn run_forest_manager(
         state
             .states
             .push(previous.get(&entity).copied().unwrap_or_default());
+    }
+
+    // A forest with no trees left holds no extractions: nothing is pruned for it.
+    if state.entities.is_empty() && !state.extractions.is_empty() {
+        for (_, entity) in state.extractions.drain() {
+            commands.entity(entity).despawn();
+        }
+        for cache in &mut state.manager.caches {
+            cache.clear();
+        }
     }
 
     // The feedback exponent.
@@ -411,7 +423,7 @@ pub fn run_forest_manager(
 
     // Write back the per-tree state.
     for (i, &entity) in state.entities.iter().enumerate() {
-        let Ok((_, _, _, mut lod, mut visibility)) = trees.get_mut(entity) else {
+        let Ok((_, _, _, mut lod, mut visibility, has_impostor)) = trees.get_mut(entity) else {
             continue;
         };
         let s = state.states[i];
@@ -426,7 +438,9 @@ pub fn run_forest_manager(
         if *lod != new {
             *lod = new;
         }
-        let shown = s.visible && !ForestManager::draws_nothing(&s);
+        // A tree with a billboard cloud stays shown where its leaves are gone: the impostor
+        // child draws it (and fades in by its own visibility range).
+        let shown = s.visible && (has_impostor || !ForestManager::draws_nothing(&s));
         let v = if shown {
             Visibility::Inherited
         } else {
@@ -484,6 +498,10 @@ pub fn draw_forest_trees(
             continue;
         };
         if slot == SLOT_LOD_ZERO {
+            // Shown for its impostor only: the leaves draw nothing.
+            if mesh.is_some() {
+                commands.entity(entity).remove::<(Mesh3d, MeshTag)>();
+            }
             continue;
         }
         let Some(&i) = index.get(&entity) else {

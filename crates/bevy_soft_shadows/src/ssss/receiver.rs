@@ -34,8 +34,9 @@ impl MaterialExtension for SoftShadowReceiver {
     }
 }
 
-/// Marks a camera whose view runs the SSSS passes (added automatically to every 3D camera
-/// while a light has [`ScreenSpaceSoftShadows`], with the depth and normal prepasses it needs).
+/// Marks a camera whose view runs the SSSS passes (added automatically to the scene's camera —
+/// the active 3D camera of the lowest order — while a light has [`ScreenSpaceSoftShadows`], with
+/// the depth and normal prepasses it needs).
 #[derive(Component, Clone, Copy, Default, Debug, ExtractComponent)]
 pub struct SoftShadowCamera;
 
@@ -45,8 +46,7 @@ pub struct SoftShadowCamera;
 #[reflect(Component, Default)]
 pub struct NoSoftShadowReceiver;
 
-/// The screen-sized textures of the SSSS passes, sized to the first [`SoftShadowCamera`]'s
-/// target. Readable for tests and debugging views.
+/// The screen-sized textures of the SSSS passes, sized to the scene camera's target. Readable for tests and debugging views.
 #[derive(Resource, Clone, Debug, Default)]
 pub struct SsssTextures {
     /// Per pixel (hard shadow, σx, σy, eye depth) — the distance map of §6.2.2 (Rgba32Float).
@@ -103,21 +103,25 @@ fn prepare_cameras_and_textures(
     if !any {
         return;
     }
-    let mut size = None;
-    for (entity, camera, marked) in &cameras {
-        if !marked {
-            info!(
-                "Screen Space Soft Shadows: adding depth and normal prepasses to camera {entity}"
-            );
-            commands
-                .entity(entity)
-                .insert((SoftShadowCamera, DepthPrepass, NormalPrepass));
-        }
-        if size.is_none() && camera.is_active {
-            size = camera.physical_target_size();
-        }
+    // The scene's camera is the active 3D camera of the lowest order (as for the foliage and the
+    // terrain); cameras drawing after it into other targets (offscreen bakes, overlays) are left
+    // alone: the passes' screen textures are sized to one camera.
+    let Some((entity, camera, marked)) = cameras
+        .iter()
+        .filter(|(_, c, _)| c.is_active)
+        .min_by_key(|(_, c, _)| c.order)
+    else {
+        return;
+    };
+    if !marked {
+        info!("Screen Space Soft Shadows: adding depth and normal prepasses to camera {entity}");
+        commands
+            .entity(entity)
+            .insert((SoftShadowCamera, DepthPrepass, NormalPrepass));
     }
-    let Some(size) = size else { return };
+    let Some(size) = camera.physical_target_size() else {
+        return;
+    };
     if textures.size == size && images.contains(&textures.visibility) {
         return;
     }

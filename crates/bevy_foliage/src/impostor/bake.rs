@@ -1,0 +1,605 @@
+//! The GPU bake of a billboard cloud's textures (seed 001 §4.2): every plane's member triangles
+//! rendered by an orthographic camera looking down the plane's normal into the plane's rectangle
+//! of one atlas image — albedo and coverage in the top half, tangent-space normals in the bottom
+//! half — read back, and written to a `*.bbcloud` file.
+//!
+//! Spawn an [`ImpostorBakeRequest`]; a few frames later the entity gets an
+//! [`ImpostorBakeResult`]. The bake cameras and meshes live on render layers of their own
+//! ([`BAKE_LAYER_BASE`] and up), so no game camera sees them. A bake is accepted once no render
+//! pipeline is still compiling and two consecutive readbacks agree, so an image read while the
+//! bake shader was still compiling is never taken. [`super::texture::bake_reference`] is the CPU
+//! reference of what this renders.
+
+use super::atlas::{AtlasLayout, pack};
+use super::cloud::{BillboardCloud, CloudSettings, build_cloud};
+use super::format::{ImpostorData, load, save};
+use super::texture::{
+    ImpostorSource, dilate, impostor_planes, min_extent, plane_extent, srgb_to_linear,
+};
+use bevy::asset::{RenderAssetUsages, embedded_asset};
+use bevy::camera::visibility::{NoFrustumCulling, RenderLayers};
+use bevy::camera::{CameraOutputMode, ClearColorConfig, RenderTarget, ScalingMode, Viewport};
+use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
+use bevy::light::NotShadowCaster;
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::pbr::{MaterialPipeline, MaterialPipelineKey, MaterialPlugin};
+use bevy::prelude::*;
+use bevy::render::gpu_readback::{Readback, ReadbackComplete};
+use bevy::render::render_resource::{
+    AsBindGroup, Extent3d, PipelineCache, RenderPipelineDescriptor, ShaderType,
+    SpecializedMeshPipelineError, TextureDimension, TextureFormat, TextureUsages,
+};
+use bevy::render::{Render, RenderApp, RenderSystems};
+use bevy::shader::ShaderRef;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// The first render layer the bake uses (one layer per plane and pass above it).
+pub const BAKE_LAYER_BASE: usize = 1 << 12;
+
+/// Settings of a billboard-cloud bake.
+#[derive(Clone, Debug, PartialEq, Reflect)]
+#[reflect(Debug, PartialEq)]
+pub struct ImpostorBakeSettings {
+    /// Plane selection.
+    #[reflect(ignore)]
+    pub cloud: CloudSettings,
+    /// Side of each atlas in texels (a multiple of 64, 64..=4096).
+    pub atlas_size: u32,
+    /// Gutter between rectangles, in texels.
+    pub padding: u32,
+}
+
+impl Default for ImpostorBakeSettings {
+    fn default() -> Self {
+        Self {
+            cloud: CloudSettings::default(),
+            atlas_size: 512,
+            padding: 2,
+        }
+    }
+}
+
+impl ImpostorBakeSettings {
+    /// These settings with unusable values replaced, and what was replaced.
+    pub fn sanitized(&self) -> (Self, Vec<String>) {
+        let (cloud, mut fixes) = self.cloud.sanitized();
+        let mut s = Self {
+            cloud,
+            ..self.clone()
+        };
+        if !(64..=4096).contains(&s.atlas_size) || !s.atlas_size.is_multiple_of(64) {
+            let fixed = (s.atlas_size.clamp(64, 4096) / 64) * 64;
+            fixes.push(format!(
+                "atlas_size = {} must be a multiple of 64 in 64..=4096: using {fixed}",
+                s.atlas_size
+            ));
+            s.atlas_size = fixed;
+        }
+        if s.padding > 16 {
+            fixes.push(format!(
+                "padding = {} is over 16 texels: using 16",
+                s.padding
+            ));
+            s.padding = 16;
+        }
+        (s, fixes)
+    }
+
+    /// A tag of these settings for the source hash.
+    pub fn tag(&self) -> String {
+        format!("{:?}", self)
+    }
+}
+
+/// Asks for a billboard cloud to be baked on the GPU. The entity gets an
+/// [`ImpostorBakeResult`] when it is done (or has failed). With `save_to`, a file there baked
+/// from the same source and settings (same hash) is loaded instead of baking again, and a new
+/// bake is written there.
+#[derive(Component, Clone, Debug)]
+pub struct ImpostorBakeRequest {
+    /// Names the tree in messages (a file path or a species name).
+    pub label: String,
+    /// The tree.
+    pub source: Arc<ImpostorSource>,
+    /// How to bake it.
+    pub settings: ImpostorBakeSettings,
+    /// Where to write the `*.bbcloud` file (none: keep it in memory only).
+    pub save_to: Option<PathBuf>,
+}
+
+/// The outcome of an [`ImpostorBakeRequest`].
+#[derive(Component, Clone, Debug)]
+pub struct ImpostorBakeResult(pub Result<Arc<ImpostorData>, String>);
+
+/// The raw atlases as rendered, before dilation (for tests against the CPU reference).
+#[derive(Component, Clone, Debug)]
+pub struct ImpostorBakeRaw {
+    /// The plane selection.
+    pub cloud: BillboardCloud,
+    /// The atlas layout.
+    pub layout: AtlasLayout,
+    /// Albedo atlas, RGBA8 sRGB.
+    pub albedo: Vec<u8>,
+    /// Normal atlas, RGBA8 linear.
+    pub normal: Vec<u8>,
+}
+
+/// Marks the bake's cameras (so a game's camera controllers can leave them alone).
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct ImpostorBakeCamera;
+
+/// A bake in flight.
+#[derive(Component)]
+struct BakeJob {
+    cloud: BillboardCloud,
+    layout: AtlasLayout,
+    target: Handle<Image>,
+    started: Instant,
+    frames: u32,
+    hash: u64,
+    latest: Arc<Mutex<Option<Vec<u8>>>>,
+    previous: Option<Vec<u8>>,
+    parts: Vec<Entity>,
+}
+
+/// Whether the render world had no pipeline compiling in its last frame.
+#[derive(Resource, Clone, Default)]
+pub struct BakePipelinesIdle(pub Arc<AtomicBool>);
+
+/// The bake's unlit material: a surface's colour (albedo pass) or its tangent-space normal
+/// (normal pass), alpha-tested.
+#[derive(Asset, TypePath, AsBindGroup, Clone, Debug)]
+pub struct ImpostorBakeMaterial {
+    /// Colour, plane frame and pass.
+    #[uniform(0)]
+    pub params: BakeParams,
+    /// Optional colour texture.
+    #[texture(1)]
+    #[sampler(2)]
+    pub texture: Option<Handle<Image>>,
+}
+
+/// Uniforms of [`ImpostorBakeMaterial`] (see `impostor_bake.wgsl`).
+#[derive(Clone, Copy, Debug, ShaderType)]
+pub struct BakeParams {
+    /// Linear RGBA base colour.
+    pub base_color: Vec4,
+    /// The plane's tangent; w: 0 albedo pass, 1 normal pass.
+    pub tangent: Vec4,
+    /// The plane's bitangent; w: alpha cutoff.
+    pub bitangent: Vec4,
+    /// The plane's normal; w: 1 if the texture is used.
+    pub normal: Vec4,
+}
+
+const BAKE_SHADER: &str = "embedded://bevy_foliage/impostor/impostor_bake.wgsl";
+
+impl Material for ImpostorBakeMaterial {
+    fn fragment_shader() -> ShaderRef {
+        ShaderRef::Path(BAKE_SHADER.into())
+    }
+    fn enable_prepass() -> bool {
+        false
+    }
+    fn enable_shadows() -> bool {
+        false
+    }
+    fn specialize(
+        _pipeline: &MaterialPipeline,
+        descriptor: &mut RenderPipelineDescriptor,
+        _layout: &bevy::mesh::MeshVertexBufferLayoutRef,
+        _key: MaterialPipelineKey<Self>,
+    ) -> Result<(), SpecializedMeshPipelineError> {
+        // Leaves are two-sided.
+        descriptor.primitive.cull_mode = None;
+        Ok(())
+    }
+}
+
+/// Registers the bake.
+pub(crate) fn build(app: &mut App) {
+    embedded_asset!(app, "impostor_bake.wgsl");
+    let idle = BakePipelinesIdle::default();
+    app.add_plugins(MaterialPlugin::<ImpostorBakeMaterial>::default())
+        .insert_resource(idle.clone())
+        .add_systems(
+            Update,
+            (start_impostor_bakes, finish_impostor_bakes).chain(),
+        );
+    if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
+        render_app
+            .insert_resource(idle)
+            .add_systems(Render, note_pipelines_idle.in_set(RenderSystems::Cleanup));
+    }
+}
+
+fn note_pipelines_idle(cache: Res<PipelineCache>, idle: Res<BakePipelinesIdle>) {
+    idle.0.store(
+        cache.waiting_pipelines().next().is_none(),
+        Ordering::Relaxed,
+    );
+}
+
+/// The plane selection and atlas layout of a source, or why there is none.
+pub fn plan(
+    source: &ImpostorSource,
+    settings: &ImpostorBakeSettings,
+) -> Result<(BillboardCloud, AtlasLayout), String> {
+    if source.triangles.is_empty() {
+        return Err("the tree has no triangles to bake".into());
+    }
+    let cloud =
+        build_cloud(&source.cloud_triangles(), &settings.cloud).map_err(|e| e.to_string())?;
+    let min = min_extent(&cloud);
+    let sizes: Vec<Vec2> = cloud
+        .planes
+        .iter()
+        .map(|p| {
+            let (lo, hi) = plane_extent(p, min);
+            hi - lo
+        })
+        .collect();
+    let layout =
+        pack(&sizes, settings.atlas_size, settings.padding).map_err(|e| format!("{e:?}"))?;
+    if layout
+        .rects
+        .iter()
+        .any(|r| r.size[0] == 0 || r.size[1] == 0)
+    {
+        return Err("a plane got a zero-area atlas rectangle".into());
+    }
+    Ok((cloud, layout))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn start_impostor_bakes(
+    mut commands: Commands,
+    requests: Query<(Entity, &ImpostorBakeRequest), Added<ImpostorBakeRequest>>,
+    mut images: ResMut<Assets<Image>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<ImpostorBakeMaterial>>,
+) {
+    for (entity, request) in &requests {
+        let (settings, fixes) = request.settings.sanitized();
+        for fix in fixes {
+            warn!("impostor bake of {}: {fix}", request.label);
+        }
+        let started = Instant::now();
+        // A cached bake of the same source and settings is taken as it is.
+        let hash = request.source.hash(&settings.tag());
+        if let Some(path) = &request.save_to
+            && path.exists()
+        {
+            match load(path) {
+                Ok(data) if data.source_hash == hash => {
+                    commands
+                        .entity(entity)
+                        .insert(ImpostorBakeResult(Ok(Arc::new(data))));
+                    continue;
+                }
+                Ok(_) => info!("{}: stale billboard cloud cache, re-baking", path.display()),
+                Err(e) => warn!("{}: {e}; re-baking", path.display()),
+            }
+        }
+        let (cloud, layout) = match plan(&request.source, &settings) {
+            Ok(p) => p,
+            Err(e) => {
+                warn!(
+                    "impostor bake of {} failed: {e}; the tree keeps its pruned geometry",
+                    request.label
+                );
+                commands.entity(entity).insert(ImpostorBakeResult(Err(e)));
+                continue;
+            }
+        };
+        let size = layout.size;
+        let mut image = Image::new_fill(
+            Extent3d {
+                width: size,
+                height: size * 2,
+                depth_or_array_layers: 1,
+            },
+            TextureDimension::D2,
+            &[0, 0, 0, 0],
+            TextureFormat::Rgba8UnormSrgb,
+            RenderAssetUsages::RENDER_WORLD,
+        );
+        image.texture_descriptor.usage = TextureUsages::RENDER_ATTACHMENT
+            | TextureUsages::COPY_SRC
+            | TextureUsages::TEXTURE_BINDING;
+        let target = images.add(image);
+        // Surface textures, once per surface.
+        let textures: Vec<Option<Handle<Image>>> = request
+            .source
+            .surfaces
+            .iter()
+            .map(|s| {
+                s.texture.as_ref().map(|t| {
+                    images.add(Image::new(
+                        Extent3d {
+                            width: t.width,
+                            height: t.height,
+                            depth_or_array_layers: 1,
+                        },
+                        TextureDimension::D2,
+                        t.rgba.clone(),
+                        TextureFormat::Rgba8UnormSrgb,
+                        RenderAssetUsages::RENDER_WORLD,
+                    ))
+                })
+            })
+            .collect();
+        let min = min_extent(&cloud);
+        let mut parts = Vec::new();
+        for (k, (plane, rect)) in cloud.planes.iter().zip(&layout.rects).enumerate() {
+            let (lo, hi) = plane_extent(plane, min);
+            let epsilon = cloud.epsilon.max(cloud.branch_epsilon) + cloud.radius * 0.01;
+            let mid = plane.point((lo + hi) * 0.5);
+            let eye = mid + plane.normal * epsilon;
+            // Per surface, the plane's member triangles as one mesh.
+            let mut by_surface: Vec<Vec<u32>> = vec![Vec::new(); request.source.surfaces.len()];
+            for &t in &plane.triangles {
+                if let Some(tri) = request.source.triangles.get(t as usize)
+                    && let Some(list) = by_surface.get_mut(tri.surface as usize)
+                {
+                    list.push(t);
+                }
+            }
+            for pass in 0..2u32 {
+                let layer = BAKE_LAYER_BASE + 2 * k + pass as usize;
+                for (surface_index, members) in by_surface.iter().enumerate() {
+                    if members.is_empty() {
+                        continue;
+                    }
+                    let surface = &request.source.surfaces[surface_index];
+                    let (mut positions, mut normals, mut uvs) =
+                        (Vec::new(), Vec::new(), Vec::new());
+                    for &t in members {
+                        let tri = &request.source.triangles[t as usize];
+                        for c in 0..3 {
+                            positions.push(tri.positions[c].to_array());
+                            normals.push(tri.normals[c].normalize_or(plane.normal).to_array());
+                            uvs.push(tri.uvs[c].to_array());
+                        }
+                    }
+                    let count = positions.len() as u32;
+                    let mesh = Mesh::new(
+                        PrimitiveTopology::TriangleList,
+                        RenderAssetUsages::RENDER_WORLD,
+                    )
+                    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+                    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+                    .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uvs)
+                    .with_inserted_indices(Indices::U32((0..count).collect()));
+                    let texture = textures[surface_index].clone();
+                    let material = materials.add(ImpostorBakeMaterial {
+                        params: BakeParams {
+                            base_color: surface.base_color,
+                            tangent: plane.tangent.extend(pass as f32),
+                            bitangent: plane.bitangent.extend(surface.alpha_cutoff),
+                            normal: plane
+                                .normal
+                                .extend(if texture.is_some() { 1.0 } else { 0.0 }),
+                        },
+                        texture,
+                    });
+                    parts.push(
+                        commands
+                            .spawn((
+                                Name::new(format!("impostor bake {} plane {k}", request.label)),
+                                Mesh3d(meshes.add(mesh)),
+                                MeshMaterial3d(material),
+                                Transform::IDENTITY,
+                                RenderLayers::none().with(layer),
+                                NotShadowCaster,
+                                NoFrustumCulling,
+                            ))
+                            .id(),
+                    );
+                }
+                let first = k == 0 && pass == 0;
+                parts.push(
+                    commands
+                        .spawn((
+                            Name::new(format!("impostor bake camera {} plane {k}", request.label)),
+                            Camera3d::default(),
+                            Camera {
+                                // After every game camera, and never the one pruning picks (the lowest order).
+                                order: (1 << 20) + (2 * k as isize) + pass as isize,
+                                viewport: Some(Viewport {
+                                    physical_position: UVec2::new(
+                                        rect.min[0],
+                                        rect.min[1] + pass * size,
+                                    ),
+                                    physical_size: UVec2::new(rect.size[0], rect.size[1]),
+                                    depth: 0.0..1.0,
+                                }),
+                                // The first camera clears the whole atlas; the others draw on.
+                                clear_color: if first {
+                                    ClearColorConfig::Custom(Color::NONE)
+                                } else {
+                                    ClearColorConfig::None
+                                },
+                                // The final write clears the target (gutters included) to
+                                // transparent too, not to the world's clear colour.
+                                output_mode: CameraOutputMode::Write {
+                                    blend_state: None,
+                                    clear_color: if first {
+                                        ClearColorConfig::Custom(Color::NONE)
+                                    } else {
+                                        ClearColorConfig::None
+                                    },
+                                },
+                                ..default()
+                            },
+                            RenderTarget::Image(target.clone().into()),
+                            Projection::Orthographic(OrthographicProjection {
+                                near: 0.0,
+                                far: 2.0 * epsilon,
+                                scaling_mode: ScalingMode::Fixed {
+                                    width: hi.x - lo.x,
+                                    height: hi.y - lo.y,
+                                },
+                                ..OrthographicProjection::default_3d()
+                            }),
+                            Transform::from_translation(eye)
+                                .looking_to(-plane.normal, plane.bitangent),
+                            ImpostorBakeCamera,
+                            Tonemapping::None,
+                            DebandDither::Disabled,
+                            Msaa::Off,
+                            RenderLayers::none().with(layer),
+                        ))
+                        .id(),
+                );
+            }
+        }
+        let latest: Arc<Mutex<Option<Vec<u8>>>> = Arc::default();
+        let sink = latest.clone();
+        commands
+            .entity(entity)
+            .insert((
+                BakeJob {
+                    cloud,
+                    layout,
+                    target: target.clone(),
+                    started,
+                    frames: 0,
+                    hash,
+                    latest,
+                    previous: None,
+                    parts,
+                },
+                Readback::texture(target),
+            ))
+            .observe(move |done: On<ReadbackComplete>| {
+                *sink.lock().unwrap() = Some(done.data.clone());
+            });
+    }
+}
+
+/// Removes the 256-byte row padding of a texture readback.
+fn unpad(padded: &[u8], width: u32, height: u32) -> Option<Vec<u8>> {
+    let row = width as usize * 4;
+    let stride = row.div_ceil(256) * 256;
+    if padded.len() < stride * (height as usize - 1) + row {
+        return None;
+    }
+    Some(
+        (0..height as usize)
+            .flat_map(|y| padded[y * stride..y * stride + row].iter().copied())
+            .collect(),
+    )
+}
+
+/// Frames after which a bake that never settles is given up.
+const MAX_BAKE_FRAMES: u32 = 600;
+
+fn finish_impostor_bakes(
+    mut commands: Commands,
+    mut jobs: Query<(Entity, &ImpostorBakeRequest, &mut BakeJob)>,
+    idle: Res<BakePipelinesIdle>,
+    mut images: ResMut<Assets<Image>>,
+) {
+    for (entity, request, mut job) in &mut jobs {
+        job.frames += 1;
+        let size = job.layout.size;
+        let latest = job.latest.lock().unwrap().take();
+        let give_up = job.frames > MAX_BAKE_FRAMES;
+        let Some(padded) = latest else {
+            if give_up {
+                finish(
+                    &mut commands,
+                    entity,
+                    &job,
+                    &mut images,
+                    Err("no readback arrived".into()),
+                );
+            }
+            continue;
+        };
+        let Some(pixels) = unpad(&padded, size, size * 2) else {
+            continue;
+        };
+        let settled = idle.0.load(Ordering::Relaxed)
+            && job.frames >= 3
+            && job.previous.as_ref() == Some(&pixels)
+            && pixels.chunks_exact(4).any(|p| p[3] > 0);
+        if !settled {
+            job.previous = Some(pixels);
+            if give_up {
+                finish(
+                    &mut commands,
+                    entity,
+                    &job,
+                    &mut images,
+                    Err("the bake never settled".into()),
+                );
+            }
+            continue;
+        }
+        let half = (size * size * 4) as usize;
+        let albedo_raw = pixels[..half].to_vec();
+        // The normal pass wrote `0.5 + 0.5·n` as a colour into an sRGB target: undo the encoding.
+        let normal_raw: Vec<u8> = pixels[half..]
+            .chunks_exact(4)
+            .flat_map(|p| {
+                let lin = |c: u8| (srgb_to_linear(c) * 255.0 + 0.5) as u8;
+                [lin(p[0]), lin(p[1]), lin(p[2]), p[3]]
+            })
+            .collect();
+        let (mut albedo, mut normal) = (albedo_raw.clone(), normal_raw.clone());
+        dilate(&mut albedo, size, 4);
+        dilate(&mut normal, size, 4);
+        let data = ImpostorData {
+            center: job.cloud.center,
+            radius: job.cloud.radius,
+            planes: impostor_planes(&job.cloud, &job.layout, min_extent(&job.cloud)),
+            atlas_size: size,
+            albedo,
+            normal,
+            source_hash: job.hash,
+            bake_ms: job.started.elapsed().as_secs_f32() * 1e3,
+        };
+        if let Some(path) = &request.save_to
+            && let Err(e) = save(&data, path)
+        {
+            warn!("impostor bake of {}: could not save: {e}", request.label);
+        }
+        info!(
+            "baked the billboard cloud of {}: {} planes, {}² atlas, {:.0} ms, {:.1} MiB of textures",
+            request.label,
+            data.planes.len(),
+            size,
+            data.bake_ms,
+            data.texture_bytes() as f64 / (1 << 20) as f64
+        );
+        commands.entity(entity).insert(ImpostorBakeRaw {
+            cloud: job.cloud.clone(),
+            layout: job.layout.clone(),
+            albedo: albedo_raw,
+            normal: normal_raw,
+        });
+        finish(&mut commands, entity, &job, &mut images, Ok(Arc::new(data)));
+    }
+}
+
+fn finish(
+    commands: &mut Commands,
+    entity: Entity,
+    job: &BakeJob,
+    images: &mut Assets<Image>,
+    result: Result<Arc<ImpostorData>, String>,
+) {
+    for &part in &job.parts {
+        commands.entity(part).despawn();
+    }
+    images.remove(&job.target);
+    commands
+        .entity(entity)
+        .remove::<(BakeJob, Readback)>()
+        .insert(ImpostorBakeResult(result));
+}

@@ -1,0 +1,307 @@
+//! Forest trees drawn by their billboard cloud where pruning has thinned their crown to nothing.
+//!
+//! A [`ForestTree`] with a [`TreeImpostor`] gets an impostor child (the cloud's quads and
+//! `StandardMaterial`). The handover is a cross-fade over a distance band ending at the pruning's
+//! `far` (where the desired LoD reaches 0): inside the band the impostor dithers in through Bevy's
+//! own `VisibilityRange` dithering while pruning removes the last leaves stochastically (another
+//! dither, leaf by leaf, with area compensation), and the tree's bark, marked [`TreeBark`],
+//! dithers out. Beyond `far` the tree is its impostor alone — never nothing.
+//!
+//! With `LodDistances::ScreenSize` the band is converted per tree into world distances from its
+//! crown radius and the camera's projection, so large and small trees hand over at the same size
+//! on screen.
+
+use super::assets::BillboardCloudAsset;
+use crate::distance::{LodDistances, LodView};
+use crate::forest::components::ForestTree;
+use crate::pruning::components::FoliageCamera;
+use crate::pruning::systems::pruning_camera;
+use crate::settings::FoliagePruningSettings;
+use bevy::camera::visibility::VisibilityRange;
+use bevy::diagnostic::{Diagnostic, DiagnosticPath, Diagnostics, RegisterDiagnostic};
+use bevy::prelude::*;
+
+/// A forest tree's billboard cloud: drawn beyond the pruning's `far`, cross-faded over
+/// [`ImpostorSettings::fade_band`].
+#[derive(Component, Clone, Debug)]
+pub struct TreeImpostor(pub Handle<BillboardCloudAsset>);
+
+/// Marks a forest tree's bark mesh (a child entity): it fades out where the impostor fades in.
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct TreeBark;
+
+/// The impostor child the plugin spawned for a tree (on the tree).
+#[derive(Component, Clone, Copy, Debug)]
+pub struct ImpostorChild(pub Entity);
+
+/// Marks an impostor child entity.
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct ImpostorOf;
+
+/// Settings of the impostors.
+#[derive(Resource, Clone, Debug, PartialEq, Reflect)]
+#[reflect(Resource, Default, Debug, PartialEq)]
+pub struct ImpostorSettings {
+    /// Draw impostors (off: trees beyond `far` draw nothing, as without this module).
+    pub enabled: bool,
+    /// Width of the cross-fade band before `far`, as a fraction of `far` (world distance).
+    pub fade_band: f32,
+    /// Tint impostors orange, to see which trees they draw.
+    pub show_representation: bool,
+}
+
+impl Default for ImpostorSettings {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            fade_band: 0.15,
+            show_representation: false,
+        }
+    }
+}
+
+impl ImpostorSettings {
+    /// These settings with unusable values replaced, and what was replaced.
+    pub fn sanitized(&self) -> (Self, Vec<String>) {
+        let mut s = self.clone();
+        let mut fixes = Vec::new();
+        if !(s.fade_band.is_finite() && (0.0..=0.9).contains(&s.fade_band)) {
+            fixes.push(format!(
+                "fade_band = {} must be in [0, 0.9]: using 0.15",
+                s.fade_band
+            ));
+            s.fade_band = 0.15;
+        }
+        (s, fixes)
+    }
+}
+
+/// Trees drawn by their impostor (fully or fading in) this frame.
+pub const IMPOSTORS_DRAWN: DiagnosticPath = DiagnosticPath::const_new("forest/impostors");
+
+/// The world distance at which a crown of `radius` is at LoD distance `rho` (inverse of
+/// [`LodDistances::lod_distance`]); orthographic screen sizes do not depend on distance.
+pub fn world_distance(distances: &LodDistances, rho: f32, radius: f32, view: &LodView) -> f32 {
+    match distances {
+        LodDistances::World { .. } => rho,
+        LodDistances::ScreenSize { .. } => {
+            if view.orthographic {
+                f32::INFINITY
+            } else {
+                rho * radius * view.yy
+            }
+        }
+    }
+}
+
+/// The visibility ranges of a tree's impostor (fading in) and bark (fading out) for a tree whose
+/// LoD reaches 0 at world distance `far`.
+pub fn handover_ranges(far: f32, fade_band: f32) -> (VisibilityRange, VisibilityRange) {
+    let far = if far.is_finite() {
+        far.max(0.0)
+    } else {
+        f32::MAX
+    };
+    let start = far * (1.0 - fade_band.clamp(0.0, 0.9));
+    (
+        VisibilityRange {
+            start_margin: start..far,
+            end_margin: f32::MAX..f32::MAX,
+            use_aabb: true,
+        },
+        VisibilityRange {
+            start_margin: 0.0..0.0,
+            end_margin: start..far,
+            use_aabb: true,
+        },
+    )
+}
+
+/// Spawns the impostor child of every forest tree whose billboard cloud has loaded, and keeps
+/// the impostors' and barks' visibility ranges on the pruning's `far`.
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+pub fn place_impostors(
+    mut commands: Commands,
+    settings: Res<ImpostorSettings>,
+    pruning: Res<FoliagePruningSettings>,
+    clouds: Res<Assets<BillboardCloudAsset>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut tinted: Local<Vec<(AssetId<StandardMaterial>, Handle<StandardMaterial>)>>,
+    marked: Query<(&Camera, &GlobalTransform), With<FoliageCamera>>,
+    cameras: Query<(&Camera, &GlobalTransform), With<Camera3d>>,
+    trees: Query<
+        (
+            Entity,
+            &TreeImpostor,
+            &GlobalTransform,
+            Option<&ImpostorChild>,
+            Option<&Children>,
+        ),
+        With<ForestTree>,
+    >,
+    mut impostors: Query<
+        (
+            &mut Visibility,
+            &mut MeshMaterial3d<StandardMaterial>,
+            Option<&mut VisibilityRange>,
+        ),
+        With<ImpostorOf>,
+    >,
+    mut barks: Query<Option<&mut VisibilityRange>, (With<TreeBark>, Without<ImpostorOf>)>,
+) {
+    let view = pruning_camera(&marked, &cameras)
+        .map(|(_, _, view)| view)
+        .unwrap_or_default();
+    let (_, far_rho) = pruning.distances.range();
+    for (tree, impostor, transform, child, children) in &trees {
+        let Some(cloud) = clouds.get(&impostor.0) else {
+            continue;
+        };
+        let scale = transform.scale().abs().max_element();
+        let far = world_distance(&pruning.distances, far_rho, cloud.radius * scale, &view);
+        let (impostor_range, bark_range) = if settings.enabled {
+            handover_ranges(far, settings.fade_band)
+        } else {
+            // Impostors off: hidden; bark drawn at every distance, as without this module.
+            (
+                VisibilityRange::abrupt(f32::MAX, f32::MAX),
+                VisibilityRange::abrupt(0.0, f32::MAX),
+            )
+        };
+        let material = if settings.show_representation {
+            let id = cloud.material.id();
+            match tinted.iter().find(|(source, _)| *source == id) {
+                Some((_, handle)) => handle.clone(),
+                None => {
+                    let mut m = materials.get(id).cloned().unwrap_or_default();
+                    m.base_color = Color::srgb(1.0, 0.45, 0.1);
+                    let handle = materials.add(m);
+                    tinted.push((id, handle.clone()));
+                    handle
+                }
+            }
+        } else {
+            cloud.material.clone()
+        };
+        match child.and_then(|c| impostors.get_mut(c.0).ok()) {
+            Some((mut visibility, mut mesh_material, range)) => {
+                let v = if settings.enabled {
+                    Visibility::Inherited
+                } else {
+                    Visibility::Hidden
+                };
+                if *visibility != v {
+                    *visibility = v;
+                }
+                if mesh_material.0 != material {
+                    mesh_material.0 = material;
+                }
+                if let Some(mut range) = range
+                    && *range != impostor_range
+                {
+                    *range = impostor_range;
+                }
+            }
+            None => {
+                let entity = commands
+                    .spawn((
+                        Name::new("billboard cloud"),
+                        ImpostorOf,
+                        Mesh3d(cloud.mesh.clone()),
+                        MeshMaterial3d(material),
+                        impostor_range,
+                        Transform::IDENTITY,
+                        ChildOf(tree),
+                    ))
+                    .id();
+                commands.entity(tree).insert(ImpostorChild(entity));
+            }
+        }
+        for &child in children.into_iter().flatten() {
+            if let Ok(range) = barks.get_mut(child) {
+                match range {
+                    Some(mut r) => {
+                        if *r != bark_range {
+                            *r = bark_range.clone();
+                        }
+                    }
+                    None => {
+                        commands.entity(child).insert(bark_range.clone());
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Counts the impostors Bevy decided to draw this frame.
+pub fn count_impostors(
+    mut diagnostics: Diagnostics,
+    impostors: Query<&ViewVisibility, With<ImpostorOf>>,
+) {
+    let n = impostors.iter().filter(|v| v.get()).count();
+    diagnostics.add_measurement(&IMPOSTORS_DRAWN, || n as f64);
+}
+
+/// Replaces unusable [`ImpostorSettings`] values, with a warning for each.
+pub fn sanitize_impostor_settings(mut settings: ResMut<ImpostorSettings>) {
+    let (fixed, fixes) = settings.sanitized();
+    if !fixes.is_empty() {
+        for fix in &fixes {
+            warn!("ImpostorSettings: {fix}");
+        }
+        *settings = fixed;
+    }
+}
+
+/// Registers the systems.
+pub(crate) fn build(app: &mut App) {
+    app.register_type::<ImpostorSettings>()
+        .init_resource::<ImpostorSettings>()
+        .register_diagnostic(Diagnostic::new(IMPOSTORS_DRAWN).with_max_history_length(1))
+        .add_systems(
+            PreUpdate,
+            sanitize_impostor_settings.run_if(resource_changed::<ImpostorSettings>),
+        )
+        .add_systems(
+            PostUpdate,
+            place_impostors.before(bevy::camera::visibility::VisibilitySystems::CheckVisibility),
+        )
+        .add_systems(Last, count_impostors);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_impostor_fades_in_where_the_bark_fades_out_and_stays() {
+        let (imp, bark) = handover_ranges(100.0, 0.2);
+        assert_eq!(imp.start_margin, 80.0..100.0);
+        assert_eq!(bark.end_margin, 80.0..100.0);
+        // Beyond far: the impostor alone, at any distance.
+        assert!(imp.is_visible_at_all(100.0) && imp.is_visible_at_all(1e6));
+        assert!(!bark.is_visible_at_all(100.5));
+        // Near: no impostor.
+        assert!(!imp.is_visible_at_all(79.0));
+        assert!(bark.is_visible_at_all(79.0));
+    }
+
+    #[test]
+    fn screen_size_distances_hand_over_at_the_same_size_on_screen() {
+        let distances = LodDistances::ScreenSize {
+            near: 0.6,
+            far: 0.015,
+        };
+        let view = LodView {
+            yy: 2.0,
+            orthographic: false,
+        };
+        let (_, far_rho) = distances.range();
+        for radius in [1.0, 4.0, 40.0] {
+            let d = world_distance(&distances, far_rho, radius, &view);
+            let rho = distances.lod_distance(d, radius, &view);
+            assert!((rho - far_rho).abs() / far_rho < 1e-4, "{radius}: {rho}");
+        }
+    }
+}

@@ -1,0 +1,327 @@
+//! Billboard-cloud impostors on the GPU: the atlas the GPU bake renders equals the CPU reference
+//! texel by texel (coverage, albedo, normals), a bake that cannot work fails with a message and no
+//! panic, and a forest tree beyond the pruning's `far` is drawn by its impostor — close to the full
+//! tree rendered in the same run — instead of by nothing.
+
+use bevy::prelude::*;
+use bevy_foliage::FoliagePlugin;
+use bevy_foliage::impostor::bake::{
+    ImpostorBakeRaw, ImpostorBakeRequest, ImpostorBakeResult, ImpostorBakeSettings,
+};
+use bevy_foliage::impostor::format::ImpostorData;
+use bevy_foliage::impostor::texture::{BakeSurface, ImpostorSource, bake_reference};
+use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
+use bevy_nature_harness::RenderHarness;
+use std::sync::Arc;
+
+fn solid(r: f32, g: f32, b: f32) -> BakeSurface {
+    BakeSurface {
+        base_color: Vec4::new(r, g, b, 1.0),
+        texture: None,
+        alpha_cutoff: 0.5,
+    }
+}
+
+/// A small olive tree: leaves green, bark brown.
+pub fn olive_source(leaves: usize) -> ImpostorSource {
+    let tree = generate(&TreeSpecies::olea().with_leaf_count(leaves));
+    let mut source = ImpostorSource::default();
+    source.push_leaves(&tree.leaves, solid(0.12, 0.35, 0.08));
+    source.push_bark(&tree.bark, solid(0.3, 0.2, 0.12));
+    source
+}
+
+/// Steps until the request's result arrives.
+fn bake(
+    harness: &mut RenderHarness,
+    source: ImpostorSource,
+    atlas_size: u32,
+) -> (Entity, Result<Arc<ImpostorData>, String>) {
+    let entity = harness
+        .world_mut()
+        .spawn(ImpostorBakeRequest {
+            label: "test olive".into(),
+            source: Arc::new(source),
+            settings: ImpostorBakeSettings {
+                atlas_size,
+                ..default()
+            },
+            save_to: None,
+        })
+        .id();
+    for _ in 0..200 {
+        harness.step();
+        if let Some(result) = harness.world_mut().get::<ImpostorBakeResult>(entity) {
+            return (entity, result.0.clone());
+        }
+    }
+    panic!("the bake never finished");
+}
+
+#[test]
+fn gpu_bake_matches_the_cpu_reference() {
+    let Some(mut harness) = RenderHarness::for_test("impostor_bake", 64, 64) else {
+        return;
+    };
+    harness.app_mut().add_plugins(FoliagePlugin);
+    harness
+        .world_mut()
+        .spawn((Camera3d::default(), Transform::from_xyz(0.0, 2.0, 10.0)));
+    let source = olive_source(400);
+    let (entity, result) = bake(&mut harness, source.clone(), 256);
+    let data = result.expect("bake");
+    let raw = harness
+        .world_mut()
+        .get::<ImpostorBakeRaw>(entity)
+        .expect("raw atlases")
+        .clone();
+    assert!(data.planes.len() >= 3, "{} planes", data.planes.len());
+    let (albedo, normal) = bake_reference(&source, &raw.cloud, &raw.layout);
+    let texels = (raw.layout.size * raw.layout.size) as usize;
+    let (mut covered_cpu, mut covered_gpu, mut disagree, mut colour_off, mut normal_off, mut both) =
+        (0usize, 0usize, 0usize, 0usize, 0usize, 0usize);
+    for i in 0..texels {
+        let (c, g) = (albedo[i * 4 + 3] == 255, raw.albedo[i * 4 + 3] == 255);
+        covered_cpu += c as usize;
+        covered_gpu += g as usize;
+        if c != g {
+            disagree += 1;
+            continue;
+        }
+        if !c {
+            continue;
+        }
+        both += 1;
+        let diff = |a: &[u8], b: &[u8]| {
+            (0..3)
+                .map(|k| (a[i * 4 + k] as i32 - b[i * 4 + k] as i32).abs())
+                .max()
+                .unwrap()
+        };
+        if diff(&albedo, &raw.albedo) > 2 {
+            colour_off += 1;
+        }
+        if diff(&normal, &raw.normal) > 4 {
+            normal_off += 1;
+        }
+    }
+    eprintln!(
+        "{} planes, covered CPU {covered_cpu} GPU {covered_gpu}, disagree {disagree}, colour off {colour_off}, normal off {normal_off} of {both}",
+        data.planes.len()
+    );
+    // The atlas is not empty, and the GPU covers the same texels: edge texels whose centre lies
+    // on a triangle edge may go either way, nothing more (a shifted or flipped plane rectangle
+    // disagrees on most covered texels).
+    assert!(covered_cpu > texels / 20, "{covered_cpu} of {texels}");
+    assert!(
+        (disagree as f64) < 0.01 * covered_cpu as f64,
+        "{disagree} texels differ in coverage of {covered_cpu}"
+    );
+    // Where both cover a texel, the same triangle won: same colour, same normal. Leaves and
+    // bark differ in colour, so a wrong depth order shows.
+    assert!(
+        (colour_off as f64) < 0.005 * both as f64,
+        "{colour_off} of {both}"
+    );
+    assert!(
+        (normal_off as f64) < 0.01 * both as f64,
+        "{normal_off} of {both}"
+    );
+}
+
+#[test]
+fn a_bake_that_cannot_work_fails_with_a_message() {
+    let Some(mut harness) = RenderHarness::for_test("impostor_bake_bad", 32, 32) else {
+        return;
+    };
+    harness.app_mut().add_plugins(FoliagePlugin);
+    harness.world_mut().spawn(Camera3d::default());
+    // No triangles at all.
+    let (_, empty) = bake(&mut harness, ImpostorSource::default(), 256);
+    assert!(empty.unwrap_err().contains("no triangles"));
+    // Only degenerate triangles (a tree collapsed to a point).
+    let mut degenerate = olive_source(50);
+    for t in &mut degenerate.triangles {
+        t.positions = [Vec3::ONE; 3];
+    }
+    let (_, collapsed) = bake(&mut harness, degenerate, 256);
+    assert!(collapsed.is_err());
+}
+
+/// A camera on the ground looking at one olive `distance` m away, with `far` at half that: the
+/// tree is beyond `far`, where pruning leaves it no leaves.
+#[test]
+fn a_tree_beyond_far_is_drawn_by_its_impostor_close_to_the_full_tree() {
+    use bevy_foliage::impostor::assets::BillboardCloudAsset;
+    use bevy_foliage::impostor::systems::{ImpostorSettings, TreeBark, TreeImpostor};
+    use bevy_foliage::meshes::{bark_mesh, leaf_set_mesh};
+    use bevy_foliage::pruning::bake::{BakeSettings, bake as bake_pruning};
+    use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
+    use bevy_foliage::{FoliagePruningSettings, ForestTree, LodDistances};
+    use bevy_nature_harness::compare::{Comparison, coverage_against_background};
+
+    let Some(mut harness) = RenderHarness::for_test("impostor_forest", 96, 96) else {
+        return;
+    };
+    let sky = Color::srgb(0.55, 0.7, 0.9);
+    harness
+        .app_mut()
+        .add_plugins(FoliagePlugin)
+        .insert_resource(ClearColor(sky))
+        .insert_resource(FoliagePruningSettings {
+            distances: LodDistances::World {
+                near: 5.0,
+                far: 20.0,
+            },
+            ..default()
+        });
+    let distance = 40.0;
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Projection::Perspective(PerspectiveProjection {
+            fov: 0.25,
+            ..default()
+        }),
+        Transform::from_xyz(0.0, 3.5, distance).looking_at(Vec3::new(0.0, 3.5, 0.0), Vec3::Y),
+    ));
+    harness.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 8000.0,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::default().looking_to(Vec3::new(-0.3, -1.0, -0.5), Vec3::Y),
+    ));
+    let tree = generate(&TreeSpecies::olea().with_leaf_count(600));
+    let leaf_colour = Vec4::new(0.12, 0.35, 0.08, 1.0);
+    let bark_colour = Vec4::new(0.3, 0.2, 0.12, 1.0);
+    let mut source = ImpostorSource::default();
+    source.push_leaves(
+        &tree.leaves,
+        solid(leaf_colour.x, leaf_colour.y, leaf_colour.z),
+    );
+    source.push_bark(
+        &tree.bark,
+        solid(bark_colour.x, bark_colour.y, bark_colour.z),
+    );
+    let (_, result) = bake(&mut harness, source, 512);
+    let data = result.expect("bake");
+
+    let world = harness.world_mut();
+    let leaf_look = StandardMaterial {
+        base_color: Color::linear_rgb(leaf_colour.x, leaf_colour.y, leaf_colour.z),
+        double_sided: true,
+        cull_mode: None,
+        ..default()
+    };
+    let bark_look = StandardMaterial {
+        base_color: Color::linear_rgb(bark_colour.x, bark_colour.y, bark_colour.z),
+        ..default()
+    };
+    let cloud = {
+        let asset = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
+            world.resource_scope(|world, mut images: Mut<Assets<Image>>| {
+                let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+                BillboardCloudAsset::from_data(&data, &mut meshes, &mut images, &mut materials)
+            })
+        });
+        world
+            .resource_mut::<Assets<BillboardCloudAsset>>()
+            .add(asset)
+    };
+    let baked = bake_pruning(&tree.leaves, &BakeSettings::default(), &|_| {})
+        .unwrap()
+        .0;
+    let baked = world.resource_mut::<Assets<_>>().add(baked);
+    let leaf_mat = world
+        .resource_mut::<Assets<LeafMaterial>>()
+        .add(leaf_material(leaf_look.clone()));
+    let bark_mat = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(bark_look);
+    let bark = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(bark_mesh(&tree.bark));
+    let managed = world
+        .spawn((
+            ForestTree {
+                baked,
+                material: leaf_mat,
+            },
+            TreeImpostor(cloud),
+            Transform::IDENTITY,
+        ))
+        .with_child((
+            Mesh3d(bark.clone()),
+            MeshMaterial3d(bark_mat.clone()),
+            TreeBark,
+        ))
+        .id();
+    for _ in 0..20 {
+        harness.step();
+    }
+    harness.wait_until_ready().unwrap();
+    let with_impostor = harness.render().unwrap();
+    harness
+        .world_mut()
+        .resource_mut::<ImpostorSettings>()
+        .enabled = false;
+    for _ in 0..6 {
+        harness.step();
+    }
+    let without = harness.render().unwrap();
+
+    // The reference: the same tree, every leaf, as plain meshes.
+    let world = harness.world_mut();
+    world.entity_mut(managed).despawn();
+    let leaves = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(leaf_set_mesh(&tree.leaves));
+    let leaf_std = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(leaf_look);
+    world
+        .spawn((Transform::IDENTITY, Visibility::Inherited))
+        .with_children(|t| {
+            t.spawn((Mesh3d(bark), MeshMaterial3d(bark_mat)));
+            t.spawn((Mesh3d(leaves), MeshMaterial3d(leaf_std)));
+        });
+    for _ in 0..6 {
+        harness.step();
+    }
+    harness.wait_until_ready().unwrap();
+    let reference = harness.render().unwrap();
+
+    let bg = sky.to_srgba();
+    let bg = [
+        (bg.red * 255.0).round() as u8,
+        (bg.green * 255.0).round() as u8,
+        (bg.blue * 255.0).round() as u8,
+        255,
+    ];
+    let cov = |img| coverage_against_background(img, bg, 12);
+    let (c_ref, c_imp, c_none) = (cov(&reference), cov(&with_impostor), cov(&without));
+    let blocks = |img: &bevy_nature_harness::compare::RgbaImage| {
+        Comparison::new(
+            "impostor_8x8",
+            &img.box_downsample(8),
+            &reference.box_downsample(8),
+        )
+        .rmse
+    };
+    eprintln!(
+        "coverage: reference {c_ref:.4}, impostor {c_imp:.4}, impostors off {c_none:.4}; 8x8 RMSE impostor {:.4}, off {:.4}",
+        blocks(&with_impostor),
+        blocks(&without)
+    );
+    assert!(c_ref > 0.05, "the tree fills part of the view: {c_ref}");
+    // Without its impostor the tree beyond `far` is its bare trunk; with it, a crown of about the
+    // full tree's coverage.
+    assert!(c_none < 0.35 * c_ref, "{c_none} vs {c_ref}");
+    assert!(
+        (c_imp - c_ref).abs() < 0.2 * c_ref,
+        "impostor coverage {c_imp} vs the full tree's {c_ref}"
+    );
+    assert!(blocks(&with_impostor) < 0.5 * blocks(&without));
+}
