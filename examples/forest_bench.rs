@@ -23,8 +23,11 @@
 //!
 //! ```text
 //! cargo run --release --example forest_bench -- [--forest dense|sparse|both] [--leaf-scale F]
-//!     [--frames N] [--size WxH] [--screenshot DIR] [--stats FILE]
+//!     [--frames N] [--dolly N] [--size WxH] [--screenshot DIR] [--stats FILE]
 //! ```
+//! `--dolly N` (default 60): frames of the slow dolly that measures popping — the frame-to-frame
+//! RMSE at frames where a tree enters or leaves the impostor handover band, against the median
+//! frame-to-frame RMSE of the dolly (`dolly` in the output).
 //! `--leaf-scale` scales the thesis' leaf counts (default 0.1: the full counts give a software
 //! rasteriser reference frames of minutes).
 
@@ -218,8 +221,9 @@ fn run_forest(
     leaf_scale: f32,
     size: UVec2,
     frames: u32,
+    dolly_frames: usize,
     shots: Option<&std::path::Path>,
-) -> Vec<Row> {
+) -> (Vec<Row>, Dolly) {
     let scene = kind_name(kind);
     let mut harness = RenderHarness::new(HarnessConfig::sized(size.x, size.y)).expect("harness");
     harness
@@ -363,7 +367,122 @@ fn run_forest(
             shots,
         ));
     }
-    rows
+    let dolly = dolly(&mut harness, kind, dolly_frames, shots);
+    (rows, dolly)
+}
+
+/// Cosine of the half horizontal field of view of the benchmark camera (45° vertical at 16:9 is
+/// 36° either side), with a few degrees of margin.
+const HALF_VIEW_COS: f32 = 0.77;
+
+/// Metres the dolly moves per frame.
+const DOLLY_STEP: f32 = 0.1;
+
+/// What the slow dolly measured.
+struct Dolly {
+    /// Per frame: frame-to-frame RMSE, and whether a tree crossed a handover band edge.
+    per_frame: Vec<(f64, bool)>,
+    frames: usize,
+    median_rmse: f64,
+    switch_frames: usize,
+    max_switch_rmse: f64,
+}
+
+/// A slow dolly ([`DOLLY_STEP`] per frame, straight ahead) with our default settings: the frame-to-frame
+/// RMSE of every frame, and of the frames in which a tree enters or leaves the handover band
+/// (its impostor starts to fade in, or its last leaves go).
+fn dolly(
+    harness: &mut RenderHarness,
+    kind: ForestKind,
+    frames: usize,
+    shots: Option<&std::path::Path>,
+) -> Dolly {
+    use bevy_nature::foliage::impostor::systems::ImpostorSettings;
+    use bevy_nature::forest_scene::ForestTypes;
+    let (near, far) = kind.near_far();
+    harness
+        .world_mut()
+        .resource_mut::<FoliagePruningSettings>()
+        .distances = LodDistances::World { near, far };
+    let band = harness.world_mut().resource::<ImpostorSettings>().fade_band;
+    let start = camera_transform();
+    let ahead = start.forward().as_vec3() * Vec3::new(1.0, 0.0, 1.0);
+    let trees: Vec<Vec3> = harness
+        .world_mut()
+        .resource::<ForestTypes>()
+        .placements
+        .iter()
+        .map(|(_, t)| t.translation)
+        .collect();
+    let place = |harness: &mut RenderHarness, i: usize| {
+        let world = harness.world_mut();
+        let mut cameras = world.query_filtered::<&mut Transform, (
+            With<Camera3d>,
+            Without<bevy_nature::foliage::impostor::bake::ImpostorBakeCamera>,
+        )>();
+        let position = start.translation + ahead * DOLLY_STEP * i as f32;
+        for mut t in cameras.iter_mut(world) {
+            *t = Transform::from_translation(position).with_rotation(start.rotation);
+        }
+        position
+    };
+    place(harness, 0);
+    settle(harness);
+    let mut previous = harness.render().expect("dolly");
+    let mut last_position = start.translation;
+    let (mut all, mut at_switch, mut per_frame) = (Vec::new(), Vec::new(), Vec::new());
+    let mut worst = 0.0;
+    for i in 1..=frames {
+        let position = place(harness, i);
+        let image = harness.render().expect("dolly");
+        let rmse = Comparison::new("forest_bench/dolly", &image, &previous).rmse;
+        // Trees in view (within the horizontal field of view, with a margin) whose distance to
+        // the camera — to the tree's origin, as `VisibilityRange` measures it — crosses an edge
+        // of the handover band.
+        let crossed = trees.iter().any(|&t| {
+            let to = (t - position) * Vec3::new(1.0, 0.0, 1.0);
+            if to.normalize_or_zero().dot(ahead.normalize_or_zero()) < HALF_VIEW_COS {
+                return false;
+            }
+            let (a, b) = (t.distance(last_position), t.distance(position));
+            [far * (1.0 - band), far]
+                .iter()
+                .any(|&edge| (a - edge) * (b - edge) <= 0.0)
+        });
+        if crossed {
+            at_switch.push(rmse);
+        }
+        per_frame.push((rmse, crossed));
+        if rmse > worst {
+            worst = rmse;
+            if let Some(dir) = shots {
+                let scene = kind_name(kind);
+                previous
+                    .save_png(dir.join(format!("{scene}_dolly_worst_before.png")))
+                    .ok();
+                image
+                    .save_png(dir.join(format!("{scene}_dolly_worst_after.png")))
+                    .ok();
+            }
+        }
+        all.push(rmse);
+        previous = image;
+        last_position = position;
+    }
+    let mut sorted = all.clone();
+    sorted.sort_by(f64::total_cmp);
+    let d = Dolly {
+        per_frame,
+        frames,
+        median_rmse: sorted.get(sorted.len() / 2).copied().unwrap_or(0.0),
+        switch_frames: at_switch.len(),
+        max_switch_rmse: at_switch.iter().copied().fold(0.0, f64::max),
+    };
+    eprintln!(
+        "dolly: {} frames, median frame-to-frame RMSE {:.5}, {} frames with trees switching, max {:.5}",
+        d.frames, d.median_rmse, d.switch_frames, d.max_switch_rmse
+    );
+    d
 }
 
 fn main() {
@@ -371,7 +490,19 @@ fn main() {
     // one.
     let raw: Vec<String> = std::env::args().skip(1).collect();
     let (mut both, mut filtered, mut i) = (true, Vec::new(), 0);
+    let mut dolly_frames = 60usize;
     while i < raw.len() {
+        if raw[i] == "--dolly" {
+            dolly_frames = raw
+                .get(i + 1)
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| {
+                    eprintln!("--dolly takes a number of frames");
+                    std::process::exit(2)
+                });
+            i += 2;
+            continue;
+        }
         if raw[i] == "--forest" {
             if raw.get(i + 1).map(String::as_str) == Some("both") {
                 i += 2;
@@ -391,11 +522,12 @@ fn main() {
         std::process::exit(2)
     });
     let args = ExampleArgs::parse_from(runner_flags).unwrap_or_else(|e| {
-        eprintln!("{e} [--forest dense|sparse|both] [--leaf-scale F]");
+        eprintln!("{e} [--forest dense|sparse|both] [--leaf-scale F] [--dolly N]");
         std::process::exit(2)
     });
     let size = args.size.unwrap_or(UVec2::new(480, 270));
     let frames = args.frames.unwrap_or(5);
+
     if require_adapter("forest_bench").is_none() {
         std::process::exit(1);
     }
@@ -409,8 +541,17 @@ fn main() {
     };
     let mut rows = Vec::new();
     let mut speedups = Vec::new();
+    let mut dollies = Vec::new();
     for kind in kinds {
-        let forest_rows = run_forest(kind, leaf_scale, size, frames, args.screenshot.as_deref());
+        let (forest_rows, dolly) = run_forest(
+            kind,
+            leaf_scale,
+            size,
+            frames,
+            dolly_frames,
+            args.screenshot.as_deref(),
+        );
+        dollies.push((kind_name(kind), dolly));
         let curve = |mode: &str| -> Vec<(f64, f64)> {
             forest_rows
                 .iter()
@@ -447,8 +588,27 @@ fn main() {
         })
         .collect::<Vec<_>>()
         .join(", ");
+    let dolly_json = dollies
+        .iter()
+        .map(|(name, d)| {
+            format!(
+                "\"{name}\": {{\"frames\": {}, \"median_rmse\": {:.5}, \"switch_frames\": {}, \"max_switch_rmse\": {:.5}, \"ratio\": {:.2}, \"per_frame\": [{}]}}",
+                d.frames,
+                d.median_rmse,
+                d.switch_frames,
+                d.max_switch_rmse,
+                d.max_switch_rmse / d.median_rmse.max(1e-9),
+                d.per_frame
+                    .iter()
+                    .map(|(r, c)| format!("[{r:.5}, {c}]"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
     let json = format!(
-        "{{\"bench\": \"forest\", \"headline\": \"speedup_at_matched_rmse (our worst case over the matched RMSE range; > 1: ours faster)\", \"timing\": \"gpu-synchronised\", \"leaf_scale\": {leaf_scale}, \"size\": [{}, {}], \"frames\": {frames}, \"speedup_at_matched_rmse\": {{{speedup_json}}}, \"matched_points\": {{{matched_json}}}, \"rows\": [\n  {}\n]}}",
+        "{{\"bench\": \"forest\", \"headline\": \"speedup_at_matched_rmse (our worst case over the matched RMSE range; > 1: ours faster)\", \"timing\": \"gpu-synchronised\", \"leaf_scale\": {leaf_scale}, \"size\": [{}, {}], \"frames\": {frames}, \"speedup_at_matched_rmse\": {{{speedup_json}}}, \"matched_points\": {{{matched_json}}}, \"dolly\": {{{dolly_json}}}, \"rows\": [\n  {}\n]}}",
         size.x,
         size.y,
         rows.iter().map(Row::json).collect::<Vec<_>>().join(",\n  ")

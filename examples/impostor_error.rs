@@ -25,7 +25,7 @@ use bevy_nature::foliage::pruning::spawn::{
     TreeAssets, default_bark_material, default_leaf_material,
 };
 use bevy_nature::foliage::{FoliagePlugin, FoliagePruningSettings};
-use bevy_nature_harness::compare::{Comparison, coverage_against_background};
+use bevy_nature_harness::compare::{Comparison, RgbaImage, coverage_against_background};
 use bevy_nature_harness::headless::HarnessConfig;
 use bevy_nature_harness::{RenderHarness, require_adapter};
 use std::path::PathBuf;
@@ -202,6 +202,22 @@ fn main() {
             data.bake_ms,
             data.texture_bytes() as f64 / (1 << 20) as f64
         );
+        if let Some(out) = &out {
+            // The atlas itself: albedo over coverage (empty texels grey), and the normals.
+            let mut albedo = data.albedo.clone();
+            for p in albedo.chunks_exact_mut(4) {
+                if p[3] < 128 {
+                    p.copy_from_slice(&[64, 64, 64, 255]);
+                }
+            }
+            let tag = name.replace(' ', "_");
+            RgbaImage::new(data.atlas_size, data.atlas_size, albedo)
+                .save_png(out.join(format!("{tag}_atlas_albedo.png")))
+                .ok();
+            RgbaImage::new(data.atlas_size, data.atlas_size, data.normal.clone())
+                .save_png(out.join(format!("{tag}_atlas_normal.png")))
+                .ok();
+        }
         let yy = 1.0 / (FOV / 2.0).tan();
         for s in SCREEN_SIZES {
             // Crown diameter 2R spans s of the view height: d = R·cot(fov/2)/s.

@@ -15,9 +15,8 @@ use bevy::camera::visibility::VisibilityRange;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy_foliage::forest::hlod::decimated_leaves;
-use bevy_foliage::impostor::assets::BillboardCloudAsset;
 use bevy_foliage::impostor::bake::{ImpostorBakeRequest, ImpostorBakeResult, ImpostorBakeSettings};
-use bevy_foliage::impostor::systems::{TreeBark, TreeImpostor};
+use bevy_foliage::impostor::systems::{BakedImpostor, ImpostorFromBake, TreeBark};
 use bevy_foliage::impostor::texture::{BakeSurface, ImpostorSource};
 use bevy_foliage::meshes::{bark_mesh, leaf_set_mesh};
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, bake};
@@ -126,14 +125,12 @@ impl ForestArgs {
     }
 }
 
-/// The forest scene's systems: [`spawn_forest`] at startup (needs [`ForestScene`]) and
-/// [`adopt_forest_impostors`].
+/// The forest scene: [`spawn_forest`] at startup (needs [`ForestScene`]).
 pub struct ForestScenePlugin;
 
 impl Plugin for ForestScenePlugin {
     fn build(&self, app: &mut App) {
-        app.add_systems(Startup, spawn_forest)
-            .add_systems(Update, adopt_forest_impostors);
+        app.add_systems(Startup, spawn_forest);
     }
 }
 
@@ -202,8 +199,8 @@ pub struct ForestType {
     pub leaves: LeafSet,
     /// Bark mesh.
     pub bark: Handle<Mesh>,
-    /// The billboard cloud, once baked or loaded.
-    pub impostor: Option<Handle<BillboardCloudAsset>>,
+    /// The entity baking (or loading) its billboard cloud.
+    pub impostor_bake: Option<Entity>,
 }
 
 /// The forest's tree types, materials and placements.
@@ -286,34 +283,33 @@ pub fn spawn_forest(
             species.name,
             started.elapsed().as_secs_f64() * 1e3
         );
+        let mut impostor_bake = None;
         if scene.impostors {
             let mut source = ImpostorSource::default();
             source.push_leaves(&tree.leaves, bake_surface(&leaf_look, 0.5));
             source.push_bark(&tree.bark, bake_surface(&bark_look, 0.0));
             let asset_path = impostor_asset_path(species.name, scene.leaf_scale);
-            commands.spawn((
-                ImpostorBakeRequest {
-                    label: species.name.to_string(),
-                    source: std::sync::Arc::new(source),
-                    settings: ImpostorBakeSettings::default(),
-                    save_to: Some(
-                        FileAssetReader::get_base_path()
-                            .join("assets")
-                            .join(&asset_path),
-                    ),
-                },
-                ForestImpostorBake {
-                    ty: types.len(),
-                    asset_path,
-                },
-            ));
+            impostor_bake = Some(
+                commands
+                    .spawn(ImpostorBakeRequest {
+                        label: species.name.to_string(),
+                        source: std::sync::Arc::new(source),
+                        settings: ImpostorBakeSettings::default(),
+                        save_to: Some(
+                            FileAssetReader::get_base_path()
+                                .join("assets")
+                                .join(&asset_path),
+                        ),
+                    })
+                    .id(),
+            );
         }
         types.push(ForestType {
             name: species.name,
             baked: baked_assets.add(baked),
             leaves: tree.leaves,
             bark: meshes.add(bark_mesh(&tree.bark)),
-            impostor: None,
+            impostor_bake,
         });
     }
     let mut placements = Vec::new();
@@ -370,54 +366,28 @@ fn bake_surface(look: &StandardMaterial, alpha_cutoff: f32) -> BakeSurface {
     }
 }
 
-/// A species' billboard cloud bake in flight.
-#[derive(Component)]
-pub struct ForestImpostorBake {
-    ty: usize,
-    asset_path: String,
-}
-
-/// Loads each species' billboard cloud once its bake (or the cache) is done and gives it to the
-/// managed trees of that species; a failed bake leaves them on pruned geometry (the bake warned).
-#[allow(clippy::type_complexity)]
-pub fn adopt_forest_impostors(
-    mut commands: Commands,
-    server: Res<AssetServer>,
-    types: Option<ResMut<ForestTypes>>,
-    bakes: Query<(Entity, &ForestImpostorBake, &ImpostorBakeResult)>,
-    trees: Query<(Entity, &ForestTreeType), (With<ForestTree>, Without<TreeImpostor>)>,
-) {
-    let Some(mut types) = types else {
-        return;
-    };
-    for (entity, bake, result) in &bakes {
-        if result.0.is_ok()
-            && let Some(ty) = types.types.get_mut(bake.ty)
-        {
-            ty.impostor = Some(server.load(bake.asset_path.clone()));
-        }
-        commands.entity(entity).despawn();
-    }
-    for (tree, ty) in &trees {
-        if let Some(handle) = types.types.get(ty.0).and_then(|t| t.impostor.clone()) {
-            commands.entity(tree).insert(TreeImpostor(handle));
-        }
-    }
-}
-
-/// Whether every species' impostor bake is done and its asset loaded (true without impostors).
+/// Whether every species' billboard cloud is baked (or its bake failed) and loaded; true
+/// without impostors.
 pub fn forest_impostors_ready(world: &mut World) -> bool {
-    let pending = world.query::<&ForestImpostorBake>().iter(world).count();
     let Some(types) = world.get_resource::<ForestTypes>() else {
         return false;
     };
+    let bakes: Vec<Entity> = types.types.iter().filter_map(|t| t.impostor_bake).collect();
     let server = world.resource::<AssetServer>();
-    pending == 0
-        && types.types.iter().all(|t| {
-            t.impostor.as_ref().is_none_or(|h| {
-                server.is_loaded_with_dependencies(h.id()) || server.load_state(h.id()).is_failed()
-            })
+    bakes.iter().all(|&bake| {
+        let Ok(entity) = world.get_entity(bake) else {
+            return true;
+        };
+        if entity
+            .get::<ImpostorBakeResult>()
+            .is_some_and(|r| r.0.is_err())
+        {
+            return true;
+        }
+        entity.get::<BakedImpostor>().is_some_and(|b| {
+            server.is_loaded_with_dependencies(b.0.id()) || server.load_state(b.0.id()).is_failed()
         })
+    })
 }
 
 /// Replaces the drawn trees with those of `draw`.
@@ -480,8 +450,8 @@ pub fn set_forest_draw(world: &mut World, draw: &ForestDraw) {
                     transform,
                     ChildOf(root),
                 ));
-                if let Some(impostor) = &t.impostor {
-                    tree.insert(TreeImpostor(impostor.clone()));
+                if let Some(bake) = t.impostor_bake {
+                    tree.insert(ImpostorFromBake(bake));
                 }
                 tree.with_child((
                     Mesh3d(t.bark.clone()),

@@ -53,6 +53,11 @@ pub struct ShowcaseOptions {
     /// 41,155, cedar 131,042), in `(0, 1]`. Fewer leaves are larger, so the crowns keep the
     /// coverage of the full counts ([`TreeSpecies::with_leaf_count`]).
     pub forest_leaf_scale: f32,
+    /// A second band of 168 backdrop trees 100–425 m away, drawn beyond the pruning's `far` by
+    /// their billboard clouds (baked on the GPU at the first run and cached in
+    /// `assets/impostors/`), which every backdrop tree gets. Tests turn it off: when a bake
+    /// finishes depends on the machine, so two renders of the scene could differ.
+    pub impostors: bool,
     /// Screen Space Soft Shadows on the sun: penumbrae harden at contact and widen with the
     /// distance to the blocker on the ground (plain or clipmap-textured), the box and the bark.
     pub soft_shadows: bool,
@@ -66,6 +71,7 @@ impl Default for ShowcaseOptions {
             msaa: true,
             forest: true,
             forest_leaf_scale: 0.15,
+            impostors: true,
             terrain: true,
             soft_shadows: true,
         }
@@ -135,7 +141,24 @@ fn spawn_showcase(
         error!("could not bake the showcase tree: {e}");
     }
     if options.forest {
-        spawn_backdrop_forest(&mut commands, &mut trees, options.forest_leaf_scale);
+        spawn_backdrop_forest(
+            &mut commands,
+            &mut trees,
+            options.forest_leaf_scale,
+            options.impostors,
+        );
+        if options.impostors {
+            // Pruning thins a crown to nothing once it is 4 % of the view tall (about 300 m for
+            // these trees): the billboard clouds take over there.
+            commands.queue(|world: &mut World| {
+                world
+                    .resource_mut::<bevy_foliage::FoliagePruningSettings>()
+                    .distances = bevy_foliage::LodDistances::ScreenSize {
+                    near: 0.6,
+                    far: 0.04,
+                };
+            });
+        }
     }
     let mut sun = commands.spawn((
         Name::new("sun"),
@@ -172,7 +195,12 @@ fn spawn_showcase(
 /// A backdrop forest behind the scene: 40 managed trees of three species (ash, oak, cedar) in a
 /// band 14–90 m deep, on a jittered grid so crowns stand apart: the forest LoD manager ranks them
 /// and draws them from per-type LoD-cache extractions.
-fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets, leaf_scale: f32) {
+fn spawn_backdrop_forest(
+    commands: &mut Commands,
+    trees: &mut TreeAssets,
+    leaf_scale: f32,
+    impostors: bool,
+) {
     use bevy_foliage::pruning::bake::BakeSettings;
     use bevy_foliage::pruning::material::leaf_material;
     use bevy_foliage::pruning::spawn::{default_bark_material, default_leaf_material};
@@ -201,11 +229,45 @@ fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets, leaf_s
     for (s, colour) in &species {
         match trees.bake_species(s, &BakeSettings::default()) {
             Ok((baked, bark)) => {
-                let leaves = trees.leaf_materials.add(leaf_material(StandardMaterial {
+                let look = StandardMaterial {
                     base_color: *colour,
                     ..default_leaf_material()
-                }));
-                types.push((baked, bark, leaves));
+                };
+                let leaves = trees.leaf_materials.add(leaf_material(look.clone()));
+                let bake = impostors.then(|| {
+                    use bevy_foliage::impostor::bake::{ImpostorBakeRequest, ImpostorBakeSettings};
+                    use bevy_foliage::impostor::texture::{BakeSurface, ImpostorSource};
+                    let surface = |m: &StandardMaterial, cutoff| {
+                        let c = m.base_color.to_linear();
+                        BakeSurface {
+                            base_color: Vec4::new(c.red, c.green, c.blue, 1.0),
+                            texture: None,
+                            alpha_cutoff: cutoff,
+                        }
+                    };
+                    let tree = bevy_foliage::pruning::procedural::generate(s);
+                    let mut source = ImpostorSource::default();
+                    source.push_leaves(&tree.leaves, surface(&look, 0.5));
+                    source.push_bark(&tree.bark, surface(&default_bark_material(), 0.0));
+                    let path = format!(
+                        "impostors/showcase-{}-{:04}.bbcloud",
+                        s.name,
+                        (scale * 1000.0).round() as u32
+                    );
+                    commands
+                        .spawn(ImpostorBakeRequest {
+                            label: s.name.to_string(),
+                            source: std::sync::Arc::new(source),
+                            settings: ImpostorBakeSettings::default(),
+                            save_to: Some(
+                                bevy::asset::io::file::FileAssetReader::get_base_path()
+                                    .join("assets")
+                                    .join(path),
+                            ),
+                        })
+                        .id()
+                });
+                types.push((baked, bark, leaves, bake));
             }
             Err(e) => error!("could not bake the backdrop {}: {e}", s.name),
         }
@@ -222,24 +284,46 @@ fn spawn_backdrop_forest(commands: &mut Commands, trees: &mut TreeAssets, leaf_s
         ))
         .id();
     let mut rng = bevy_foliage::rng::SplitMix64::new(42);
+    let mut place = |i: usize, x: f32, z: f32, rng: &mut bevy_foliage::rng::SplitMix64| {
+        let (baked, bark_mesh, leaves, bake) = &types[rng.below(types.len() as u32) as usize];
+        let mut tree = commands.spawn((
+            Name::new(format!("forest tree {i}")),
+            bevy_foliage::ForestTree {
+                baked: baked.clone(),
+                material: leaves.clone(),
+            },
+            Transform::from_xyz(x, 0.0, z)
+                .with_rotation(Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)))
+                .with_scale(Vec3::splat(rng.range(0.8, 1.2))),
+            ChildOf(root),
+            children![(
+                Mesh3d(bark_mesh.clone()),
+                MeshMaterial3d(bark.clone()),
+                bevy_foliage::impostor::systems::TreeBark
+            )],
+        ));
+        if let Some(bake) = bake {
+            tree.insert(bevy_foliage::impostor::systems::ImpostorFromBake(*bake));
+        }
+    };
     let mut i = 0;
     for row in 0..5 {
         for column in 0..8 {
-            let (baked, bark_mesh, leaves) = &types[rng.below(types.len() as u32) as usize];
             let x = -56.0 + column as f32 * 16.0 + rng.range(-5.0, 5.0) + (row % 2) as f32 * 8.0;
             let z = -14.0 - row as f32 * 16.0 - rng.range(0.0, 8.0);
-            commands.entity(root).with_child((
-                Name::new(format!("forest tree {i}")),
-                bevy_foliage::ForestTree {
-                    baked: baked.clone(),
-                    material: leaves.clone(),
-                },
-                Transform::from_xyz(x, 0.0, z)
-                    .with_rotation(Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)))
-                    .with_scale(Vec3::splat(rng.range(0.8, 1.2))),
-                children![(Mesh3d(bark_mesh.clone()), MeshMaterial3d(bark.clone()))],
-            ));
+            place(i, x, z, &mut rng);
             i += 1;
+        }
+    }
+    if impostors {
+        // The distant band: drawn by billboard clouds beyond about 300 m.
+        for row in 0..14 {
+            for column in 0..12 {
+                let x = -200.0 + column as f32 * 34.0 + rng.range(-10.0, 10.0);
+                let z = -100.0 - row as f32 * 25.0 - rng.range(0.0, 12.0);
+                place(i, x, z, &mut rng);
+                i += 1;
+            }
         }
     }
 }

@@ -15,6 +15,8 @@ fn test_options() -> ShowcaseOptions {
         msaa: false,
         // Streamed terrain makes a frame depend on how far streaming got: plain ground here.
         terrain: false,
+        // So does when the billboard-cloud bakes finish.
+        impostors: false,
         ..default()
     }
 }
@@ -273,4 +275,53 @@ fn showcase_terrain_receives_soft_shadows() {
             Some(&visibility)
         );
     }
+}
+
+/// The main scene's distant backdrop trees are drawn by their billboard clouds: once the bakes
+/// are done every backdrop tree has exactly one impostor, and some are on screen.
+#[test]
+fn showcase_distant_trees_are_billboard_clouds() {
+    use bevy_nature::foliage::ForestTree;
+    use bevy_nature::foliage::impostor::systems::{IMPOSTORS_DRAWN, ImpostorOf, TreeImpostor};
+    let Some(mut harness) = RenderHarness::for_test("showcase_impostors", 160, 90) else {
+        return;
+    };
+    build_showcase(
+        harness.app_mut(),
+        ShowcaseOptions {
+            impostors: true,
+            ..test_options()
+        },
+    );
+    let mut done = false;
+    for _ in 0..200 {
+        harness.step();
+        let world = harness.world_mut();
+        let trees = world
+            .query_filtered::<(), With<ForestTree>>()
+            .iter(world)
+            .count();
+        let with = world
+            .query_filtered::<(), (With<ForestTree>, With<TreeImpostor>)>()
+            .iter(world)
+            .count();
+        let impostors = world
+            .query_filtered::<(), With<ImpostorOf>>()
+            .iter(world)
+            .count();
+        assert!(
+            impostors <= trees,
+            "{impostors} impostors for {trees} trees"
+        );
+        if trees > 40 && with == trees && impostors == trees {
+            done = true;
+            break;
+        }
+    }
+    assert!(done, "the backdrop never got its billboard clouds");
+    for _ in 0..4 {
+        harness.step();
+    }
+    let drawn = harness.diagnostic(&IMPOSTORS_DRAWN).unwrap_or(0.0);
+    assert!(drawn > 20.0, "{drawn} impostors drawn");
 }

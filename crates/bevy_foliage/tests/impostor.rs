@@ -58,16 +58,35 @@ fn bake(
     panic!("the bake never finished");
 }
 
+/// A glTF tree of the corpus: alpha-textured leaf cards (their own texture and cutoff).
+fn alpha_card_source() -> ImpostorSource {
+    use bevy_foliage::corpus::alpha_card_tree;
+    use bevy_foliage::pruning::gltf::{GltfLeafSettings, load_gltf_tree};
+    let tree = alpha_card_tree();
+    let gltf = load_gltf_tree(tree.gltf.as_bytes(), None, &GltfLeafSettings::default()).unwrap();
+    let source = ImpostorSource::from_gltf(&gltf);
+    assert!(source.surfaces.iter().any(|s| s.texture.is_some()));
+    source
+}
+
 #[test]
 fn gpu_bake_matches_the_cpu_reference() {
-    let Some(mut harness) = RenderHarness::for_test("impostor_bake", 64, 64) else {
+    check_gpu_bake_against_reference("impostor_bake", olive_source(400));
+}
+
+#[test]
+fn gpu_bake_of_a_gltf_tree_matches_the_cpu_reference() {
+    check_gpu_bake_against_reference("impostor_bake_gltf", alpha_card_source());
+}
+
+fn check_gpu_bake_against_reference(test: &str, source: ImpostorSource) {
+    let Some(mut harness) = RenderHarness::for_test(test, 64, 64) else {
         return;
     };
     harness.app_mut().add_plugins(FoliagePlugin);
     harness
         .world_mut()
         .spawn((Camera3d::default(), Transform::from_xyz(0.0, 2.0, 10.0)));
-    let source = olive_source(400);
     let (entity, result) = bake(&mut harness, source.clone(), 256);
     let data = result.expect("bake");
     let raw = harness
@@ -263,6 +282,15 @@ fn a_tree_beyond_far_is_drawn_by_its_impostor_close_to_the_full_tree() {
     }
     harness.wait_until_ready().unwrap();
     let with_impostor = harness.render().unwrap();
+    {
+        use bevy_foliage::impostor::systems::ImpostorOf;
+        let world = harness.world_mut();
+        let n = world
+            .query_filtered::<(), With<ImpostorOf>>()
+            .iter(world)
+            .count();
+        assert_eq!(n, 1, "one impostor child per tree");
+    }
     harness
         .world_mut()
         .resource_mut::<ImpostorSettings>()

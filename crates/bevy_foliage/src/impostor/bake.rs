@@ -20,6 +20,7 @@ use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::camera::visibility::{NoFrustumCulling, RenderLayers};
 use bevy::camera::{CameraOutputMode, ClearColorConfig, RenderTarget, ScalingMode, Viewport};
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
+use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
 use bevy::light::NotShadowCaster;
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::pbr::{MaterialPipeline, MaterialPipelineKey, MaterialPlugin};
@@ -199,6 +200,10 @@ impl Material for ImpostorBakeMaterial {
     }
 }
 
+/// The bake's systems (in `Update`).
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct BakeSystems;
+
 /// Registers the bake.
 pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "impostor_bake.wgsl");
@@ -318,7 +323,7 @@ fn start_impostor_bakes(
             .iter()
             .map(|s| {
                 s.texture.as_ref().map(|t| {
-                    images.add(Image::new(
+                    let mut image = Image::new(
                         Extent3d {
                             width: t.width,
                             height: t.height,
@@ -328,7 +333,14 @@ fn start_impostor_bakes(
                         t.rgba.clone(),
                         TextureFormat::Rgba8UnormSrgb,
                         RenderAssetUsages::RENDER_WORLD,
-                    ))
+                    );
+                    // Nearest texel, repeating: what the CPU reference samples.
+                    image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
+                        address_mode_u: ImageAddressMode::Repeat,
+                        address_mode_v: ImageAddressMode::Repeat,
+                        ..ImageSamplerDescriptor::nearest()
+                    });
+                    images.add(image)
                 })
             })
             .collect();

@@ -12,6 +12,7 @@
 //! on screen.
 
 use super::assets::BillboardCloudAsset;
+use super::bake::{ImpostorBakeRequest, ImpostorBakeResult};
 use crate::distance::{LodDistances, LodView};
 use crate::forest::components::ForestTree;
 use crate::pruning::components::FoliageCamera;
@@ -25,6 +26,18 @@ use bevy::prelude::*;
 /// [`ImpostorSettings::fade_band`].
 #[derive(Component, Clone, Debug)]
 pub struct TreeImpostor(pub Handle<BillboardCloudAsset>);
+
+/// Put on a forest tree: it gets the billboard cloud baked by the named entity (an
+/// [`ImpostorBakeRequest`](super::bake::ImpostorBakeRequest), usually one per species) as its
+/// [`TreeImpostor`] once that bake is done. A failed bake leaves the tree on its pruned geometry
+/// (the bake logged why).
+#[derive(Component, Clone, Copy, Debug)]
+pub struct ImpostorFromBake(pub Entity);
+
+/// On a finished bake entity: the billboard cloud asset it made (loaded through the
+/// `AssetServer` when the bake was saved under the asset folder).
+#[derive(Component, Clone, Debug)]
+pub struct BakedImpostor(pub Handle<BillboardCloudAsset>);
 
 /// Marks a forest tree's bark mesh (a child entity): it fades out where the impostor fades in.
 #[derive(Component, Clone, Copy, Debug, Default)]
@@ -139,10 +152,11 @@ pub fn place_impostors(
         ),
         With<ForestTree>,
     >,
+    // The material is optional: another plugin may have swapped it (soft-shadow receivers).
     mut impostors: Query<
         (
             &mut Visibility,
-            &mut MeshMaterial3d<StandardMaterial>,
+            Option<&mut MeshMaterial3d<StandardMaterial>>,
             Option<&mut VisibilityRange>,
         ),
         With<ImpostorOf>,
@@ -184,7 +198,7 @@ pub fn place_impostors(
             cloud.material.clone()
         };
         match child.and_then(|c| impostors.get_mut(c.0).ok()) {
-            Some((mut visibility, mut mesh_material, range)) => {
+            Some((mut visibility, mesh_material, range)) => {
                 let v = if settings.enabled {
                     Visibility::Inherited
                 } else {
@@ -193,7 +207,9 @@ pub fn place_impostors(
                 if *visibility != v {
                     *visibility = v;
                 }
-                if mesh_material.0 != material {
+                if let Some(mut mesh_material) = mesh_material
+                    && mesh_material.0 != material
+                {
                     mesh_material.0 = material;
                 }
                 if let Some(mut range) = range
@@ -234,6 +250,49 @@ pub fn place_impostors(
     }
 }
 
+/// Turns finished bakes into billboard cloud assets ([`BakedImpostor`]) and hands them to the
+/// trees waiting for them ([`ImpostorFromBake`]).
+#[allow(clippy::too_many_arguments)]
+pub fn adopt_baked_impostors(
+    mut commands: Commands,
+    server: Res<AssetServer>,
+    mut clouds: ResMut<Assets<BillboardCloudAsset>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut images: ResMut<Assets<Image>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    finished: Query<(Entity, &ImpostorBakeRequest, &ImpostorBakeResult), Without<BakedImpostor>>,
+    baked: Query<&BakedImpostor>,
+    waiting: Query<(Entity, &ImpostorFromBake), Without<TreeImpostor>>,
+) {
+    for (entity, request, result) in &finished {
+        let Ok(data) = &result.0 else {
+            continue;
+        };
+        // Saved under the asset folder: load it as an asset, like any other file.
+        let assets_root = bevy::asset::io::file::FileAssetReader::get_base_path().join("assets");
+        let handle = match request
+            .save_to
+            .as_ref()
+            .filter(|p| p.exists())
+            .and_then(|p| p.strip_prefix(&assets_root).ok())
+        {
+            Some(relative) => server.load(relative.to_string_lossy().replace('\\', "/")),
+            None => clouds.add(BillboardCloudAsset::from_data(
+                data,
+                &mut meshes,
+                &mut images,
+                &mut materials,
+            )),
+        };
+        commands.entity(entity).insert(BakedImpostor(handle));
+    }
+    for (tree, from) in &waiting {
+        if let Ok(BakedImpostor(handle)) = baked.get(from.0) {
+            commands.entity(tree).insert(TreeImpostor(handle.clone()));
+        }
+    }
+}
+
 /// Counts the impostors Bevy decided to draw this frame.
 pub fn count_impostors(
     mut diagnostics: Diagnostics,
@@ -266,6 +325,10 @@ pub(crate) fn build(app: &mut App) {
         .add_systems(
             PostUpdate,
             place_impostors.before(bevy::camera::visibility::VisibilitySystems::CheckVisibility),
+        )
+        .add_systems(
+            Update,
+            adopt_baked_impostors.after(super::bake::BakeSystems),
         )
         .add_systems(Last, count_impostors);
 }
