@@ -55,12 +55,15 @@ struct Row {
     leaf_triangles: f64,
     impostors: f64,
     manager_ms: f64,
+    /// Whether the pruning pass ran during the measured frames (it must not for `no_trees` and
+    /// the baseline).
+    pruning_pass: bool,
 }
 
 impl Row {
     fn json(&self) -> String {
         format!(
-            "{{\"scene\": \"{}\", \"mode\": \"{}\", \"params\": {}, \"frame_ms\": {:.2}, \"frame_ms_p95\": {:.2}, \"rmse\": {:.5}, \"rmse_8x8\": {:.5}, \"leaf_triangles\": {}, \"impostors\": {}, \"manager_ms\": {:.3}}}",
+            "{{\"scene\": \"{}\", \"mode\": \"{}\", \"params\": {}, \"frame_ms\": {:.2}, \"frame_ms_p95\": {:.2}, \"rmse\": {:.5}, \"rmse_8x8\": {:.5}, \"leaf_triangles\": {}, \"impostors\": {}, \"manager_ms\": {:.3}, \"pruning_pass\": {}}}",
             self.scene,
             self.mode,
             self.params,
@@ -70,7 +73,8 @@ impl Row {
             self.rmse_8x8,
             self.leaf_triangles,
             self.impostors,
-            self.manager_ms
+            self.manager_ms,
+            self.pruning_pass
         )
     }
 }
@@ -211,6 +215,7 @@ fn measure(
             0.0
         },
         manager_ms: harness.diagnostic(&MANAGER_MS).unwrap_or(0.0),
+        pruning_pass: harness.pass_time_ms("foliage_pruning").is_some(),
     };
     eprintln!("{}", row.json());
     row
