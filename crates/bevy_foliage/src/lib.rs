@@ -13,18 +13,21 @@
 //! - **an urgency-ranked forest LoD manager** under a frame budget with **LoD caches** (Gumbau,
 //!   §3.6 and ch. 4): tag instances with [`ForestTree`]; per type, a few cached extractions are
 //!   shared by every tree whose desired LoD falls in the same slot ([`forest`]).
-//! - grass with geometry/slice LoD, tree lighting and impostors (each in its own module as it
-//!   lands).
+//! - **billboard-cloud impostors** for distant trees (seed 001, ch. 4): each species simplified
+//!   to a few tens of planes textured from one GPU-baked atlas, drawn beyond the pruning's `far`
+//!   with a dithered handover ([`impostor`]).
+//! - grass with geometry/slice LoD and tree lighting (each in its own module as it lands).
 //!
 //! Add [`FoliagePlugin`]; tune [`FoliagePruningSettings`] (a reflected resource, so inspectors can
 //! edit it live).
 //!
 //! The crate is split by role: the algorithms are plain Rust modules with no render types
 //! (`pruning::{leaves, cells, visibility, mask, bake, extract, selection, appearance, format,
-//! gltf, procedural}`, `forest::{cache, feedback, lod, manager, hlod}`, [`distance`]); the
-//! main-world ECS code lives in `components`, `systems`, `store` and `spawn` modules; the
-//! render-world code sits beside its WGSL (`pruning::render` with `prune.wgsl`,
-//! `pruning::material` with the leaf shaders).
+//! gltf, procedural}`, `forest::{cache, feedback, lod, manager, hlod}`,
+//! `impostor::{cloud, atlas, texture, format}`, [`distance`]); the main-world ECS code lives in
+//! `components`, `systems`, `store`, `spawn`, `bake` and `assets` modules; the render-world code
+//! sits beside its WGSL (`pruning::render` with `prune.wgsl`, `pruning::material` with the leaf
+//! shaders, `impostor::bake` with `impostor_bake.wgsl`).
 
 use bevy::prelude::*;
 

@@ -141,40 +141,38 @@ impl ImpostorSource {
 impl ImpostorSource {
     /// Adds a leaf set's triangles (part [`TreePart::Leaves`]) drawn with `surface`.
     pub fn push_leaves(&mut self, leaves: &LeafSet, surface: BakeSurface) {
-        let index = self.surfaces.len() as u32;
-        self.surfaces.push(surface);
-        let n = leaves.positions.len();
-        for tri in leaves.indices.chunks_exact(3) {
-            if tri.iter().any(|&i| i as usize >= n) {
-                continue;
-            }
-            let at = |k: usize| tri[k] as usize;
-            self.triangles.push(BakeTriangle {
-                positions: [0, 1, 2].map(|k| leaves.positions[at(k)]),
-                normals: [0, 1, 2].map(|k| leaves.normals.get(at(k)).copied().unwrap_or(Vec3::Y)),
-                uvs: [0, 1, 2].map(|k| leaves.uvs.get(at(k)).copied().unwrap_or(Vec2::ZERO)),
-                surface: index,
-                part: TreePart::Leaves,
-            });
-        }
+        let arrays = (&leaves.positions, &leaves.normals, &leaves.uvs);
+        self.push_triangles(arrays, &leaves.indices, surface, TreePart::Leaves);
     }
 
     /// Adds bark triangles (part [`TreePart::Branches`]) drawn with `surface`.
     pub fn push_bark(&mut self, bark: &MeshData, surface: BakeSurface) {
+        let arrays = (&bark.positions, &bark.normals, &bark.uvs);
+        self.push_triangles(arrays, &bark.indices, surface, TreePart::Branches);
+    }
+
+    /// Adds an indexed triangle list; triangles with an index out of range are skipped, missing
+    /// normals and uvs get defaults.
+    fn push_triangles(
+        &mut self,
+        (positions, normals, uvs): (&Vec<Vec3>, &Vec<Vec3>, &Vec<Vec2>),
+        indices: &[u32],
+        surface: BakeSurface,
+        part: TreePart,
+    ) {
         let index = self.surfaces.len() as u32;
         self.surfaces.push(surface);
-        let n = bark.positions.len();
-        for tri in bark.indices.chunks_exact(3) {
-            if tri.iter().any(|&i| i as usize >= n) {
+        for tri in indices.chunks_exact(3) {
+            if tri.iter().any(|&i| i as usize >= positions.len()) {
                 continue;
             }
             let at = |k: usize| tri[k] as usize;
             self.triangles.push(BakeTriangle {
-                positions: [0, 1, 2].map(|k| bark.positions[at(k)]),
-                normals: [0, 1, 2].map(|k| bark.normals.get(at(k)).copied().unwrap_or(Vec3::Y)),
-                uvs: [0, 1, 2].map(|k| bark.uvs.get(at(k)).copied().unwrap_or(Vec2::ZERO)),
+                positions: [0, 1, 2].map(|k| positions[at(k)]),
+                normals: [0, 1, 2].map(|k| normals.get(at(k)).copied().unwrap_or(Vec3::Y)),
+                uvs: [0, 1, 2].map(|k| uvs.get(at(k)).copied().unwrap_or(Vec2::ZERO)),
                 surface: index,
-                part: TreePart::Branches,
+                part,
             });
         }
     }
