@@ -10,7 +10,8 @@
 //! - `visibility_range`: the baseline, one row per setting (leaf fractions of the three levels ×
 //!   where they end); no manager, no pruning pass, no impostors;
 //! - `ours`: the urgency-ranked manager with LoD caches and billboard clouds, one row per
-//!   `(near, far)`.
+//!   `(near, far)` (impostors beyond `far`) and one per budget of the time-critical mixed LoD
+//!   (every visible tree given pruned geometry or its impostor by benefit per cost).
 //!
 //! Frame time is GPU-synchronised: each frame is `App::update` (the renderer runs inside it,
 //! unpipelined) followed by a blocking wait until the GPU has finished everything submitted
@@ -28,8 +29,10 @@
 //!     [--frames N] [--dolly N] [--size WxH] [--screenshot DIR] [--stats FILE]
 //! ```
 //! `--dolly N` (default 60): frames of the slow dolly that measures popping — the frame-to-frame
-//! RMSE at frames where a tree enters or leaves the impostor handover band, against the median
-//! frame-to-frame RMSE of the dolly (`dolly` in the output).
+//! RMSE at frames where trees switch representation (a tree in view enters or leaves the
+//! distance handover band; with the mixed LoD, a tree is fading between its two), against the
+//! median frame-to-frame RMSE of the dolly (`dolly` in the output, `<forest>_mixed` for the
+//! mixed LoD at a budget of 200k).
 //! `--leaf-scale` scales the thesis' leaf counts (default 0.1: the full counts give a software
 //! rasteriser reference frames of minutes).
 
@@ -249,7 +252,7 @@ fn run_forest(
     frames: u32,
     dolly_frames: usize,
     shots: Option<&std::path::Path>,
-) -> (Vec<Row>, Dolly) {
+) -> (Vec<Row>, [Dolly; 2]) {
     let scene = kind_name(kind);
     let mut harness = RenderHarness::new(HarnessConfig::sized(size.x, size.y)).expect("harness");
     harness
@@ -393,8 +396,43 @@ fn run_forest(
             shots,
         ));
     }
-    let dolly = dolly(&mut harness, kind, dolly_frames, shots);
-    (rows, dolly)
+    // Ours with the time-critical mixed LoD, over its budget (leaf-triangle units per frame).
+    for budget in MIXED_BUDGETS {
+        set_mixed(&mut harness, Some(budget));
+        settle(&mut harness);
+        rows.push(measure(
+            &mut harness,
+            scene,
+            "ours",
+            format!("{{\"mixed_budget\": {budget}}}"),
+            frames,
+            &reference,
+            false,
+            shots,
+        ));
+    }
+    set_mixed(&mut harness, None);
+    let by_distance = dolly(&mut harness, kind, dolly_frames, shots, None);
+    let mixed = dolly(
+        &mut harness,
+        kind,
+        dolly_frames,
+        shots,
+        Some(MIXED_BUDGETS[0]),
+    );
+    (rows, [by_distance, mixed])
+}
+
+/// The budgets the mixed LoD is measured at.
+const MIXED_BUDGETS: [f32; 6] = [2e5, 4e5, 8e5, 1.6e6, 3.2e6, 6.4e6];
+
+/// Turns the mixed LoD on with `budget`, or off.
+fn set_mixed(harness: &mut RenderHarness, budget: Option<f32>) {
+    let mut settings = harness.world_mut().resource_mut::<ForestSettings>();
+    settings.mixed.enabled = budget.is_some();
+    if let Some(b) = budget {
+        settings.mixed.budget_triangles = b;
+    }
 }
 
 /// Cosine of the half horizontal field of view of the benchmark camera (45° vertical at 16:9 is
@@ -422,7 +460,9 @@ fn dolly(
     kind: ForestKind,
     frames: usize,
     shots: Option<&std::path::Path>,
+    mixed_budget: Option<f32>,
 ) -> Dolly {
+    use bevy_nature::foliage::TreeLod;
     use bevy_nature::foliage::impostor::systems::ImpostorSettings;
     use bevy_nature::forest_scene::ForestTypes;
     let (near, far) = kind.near_far();
@@ -452,6 +492,7 @@ fn dolly(
         }
         position
     };
+    set_mixed(harness, mixed_budget);
     place(harness, 0);
     settle(harness);
     let mut previous = harness.render().expect("dolly");
@@ -475,6 +516,17 @@ fn dolly(
                 .iter()
                 .any(|&edge| (a - edge) * (b - edge) <= 0.0)
         });
+        // With the mixed LoD a tree switches when the selection changes its representation:
+        // frames in which some tree is fading between the two.
+        let crossed = if mixed_budget.is_some() {
+            let world = harness.world_mut();
+            world
+                .query::<&TreeLod>()
+                .iter(world)
+                .any(|l| l.visible && l.impostor_weight > 0.0 && l.impostor_weight < 1.0)
+        } else {
+            crossed
+        };
         if crossed {
             at_switch.push(rmse);
         }
@@ -483,11 +535,12 @@ fn dolly(
             worst = rmse;
             if let Some(dir) = shots {
                 let scene = kind_name(kind);
+                let tag = if mixed_budget.is_some() { "_mixed" } else { "" };
                 previous
-                    .save_png(dir.join(format!("{scene}_dolly_worst_before.png")))
+                    .save_png(dir.join(format!("{scene}_dolly{tag}_worst_before.png")))
                     .ok();
                 image
-                    .save_png(dir.join(format!("{scene}_dolly_worst_after.png")))
+                    .save_png(dir.join(format!("{scene}_dolly{tag}_worst_after.png")))
                     .ok();
             }
         }
@@ -504,9 +557,18 @@ fn dolly(
         switch_frames: at_switch.len(),
         max_switch_rmse: at_switch.iter().copied().fold(0.0, f64::max),
     };
+    set_mixed(harness, None);
     eprintln!(
-        "dolly: {} frames, median frame-to-frame RMSE {:.5}, {} frames with trees switching, max {:.5}",
-        d.frames, d.median_rmse, d.switch_frames, d.max_switch_rmse
+        "dolly{}: {} frames, median frame-to-frame RMSE {:.5}, {} frames with trees switching, max {:.5}",
+        if mixed_budget.is_some() {
+            " (mixed LoD)"
+        } else {
+            ""
+        },
+        d.frames,
+        d.median_rmse,
+        d.switch_frames,
+        d.max_switch_rmse
     );
     d
 }
@@ -638,6 +700,9 @@ fn main() {
         .join(", ");
     let dolly_json = dollies
         .iter()
+        .flat_map(|(name, [by_distance, mixed])| {
+            [(name.to_string(), by_distance), (format!("{name}_mixed"), mixed)]
+        })
         .map(|(name, d)| {
             format!(
                 "\"{name}\": {{\"frames\": {}, \"median_rmse\": {:.5}, \"switch_frames\": {}, \"max_switch_rmse\": {:.5}, \"ratio\": {:.2}, \"per_frame\": [{}]}}",

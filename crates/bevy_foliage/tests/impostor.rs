@@ -353,3 +353,210 @@ fn a_tree_beyond_far_is_drawn_by_its_impostor_close_to_the_full_tree() {
     );
     assert!(blocks(&with_impostor) < 0.5 * blocks(&without));
 }
+
+/// The time-critical mixed LoD: under a small budget the nearest trees get pruned geometry and
+/// the rest their billboard clouds, within the budget; when the budget grows, trees fade back to
+/// geometry over the configured frames instead of popping; with no budget at all the forest is
+/// impostors and still covers about what it covers at full detail.
+#[test]
+fn the_mixed_lod_chooses_under_the_budget_and_fades_over_frames() {
+    use bevy_foliage::forest::components::MixedLodSettings;
+    use bevy_foliage::forest::systems::ForestState;
+    use bevy_foliage::impostor::assets::BillboardCloudAsset;
+    use bevy_foliage::impostor::systems::{TreeBark, TreeImpostor};
+    use bevy_foliage::meshes::bark_mesh;
+    use bevy_foliage::pruning::bake::{BakeSettings, bake as bake_pruning};
+    use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
+    use bevy_foliage::{
+        FoliagePruningSettings, ForestBudget, ForestSettings, ForestTree, LodDistances, TreeLod,
+    };
+    use bevy_nature_harness::compare::coverage_against_background;
+
+    let Some(mut harness) = RenderHarness::for_test("impostor_mixed_lod", 128, 64) else {
+        return;
+    };
+    let sky = Color::srgb(0.55, 0.7, 0.9);
+    const FADE: u32 = 4;
+    harness
+        .app_mut()
+        .add_plugins(FoliagePlugin)
+        .insert_resource(ClearColor(sky))
+        .insert_resource(FoliagePruningSettings {
+            distances: LodDistances::World {
+                near: 5.0,
+                far: 1000.0,
+            },
+            ..default()
+        })
+        .insert_resource(ForestSettings {
+            budget: ForestBudget::Extractions(64),
+            // Geometry only at full detail, impostors cheap: the choice is tree by tree.
+            mixed: MixedLodSettings {
+                enabled: true,
+                budget_triangles: 0.0,
+                fade_frames: FADE,
+                min_lod: 1.0,
+                impostor_fill_weight: 1.0,
+                ..default()
+            },
+            ..default()
+        });
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Transform::from_xyz(0.0, 4.0, 12.0).looking_at(Vec3::new(0.0, 4.0, 0.0), Vec3::Y),
+    ));
+    harness.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 8000.0,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::default().looking_to(Vec3::new(-0.3, -1.0, -0.5), Vec3::Y),
+    ));
+    let tree = generate(&TreeSpecies::olea().with_leaf_count(500));
+    let mut source = ImpostorSource::default();
+    source.push_leaves(&tree.leaves, solid(0.12, 0.35, 0.08));
+    source.push_bark(&tree.bark, solid(0.3, 0.2, 0.12));
+    let (_, result) = bake(&mut harness, source, 256);
+    let data = result.expect("bake");
+    let world = harness.world_mut();
+    let cloud = {
+        let asset = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
+            world.resource_scope(|world, mut images: Mut<Assets<Image>>| {
+                let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+                BillboardCloudAsset::from_data(&data, &mut meshes, &mut images, &mut materials)
+            })
+        });
+        world
+            .resource_mut::<Assets<BillboardCloudAsset>>()
+            .add(asset)
+    };
+    let baked = bake_pruning(&tree.leaves, &BakeSettings::default(), &|_| {})
+        .unwrap()
+        .0;
+    let leaf_triangles = (baked.indices.len() / 3) as f32;
+    let baked = world.resource_mut::<Assets<_>>().add(baked);
+    let leaf_mat = world
+        .resource_mut::<Assets<LeafMaterial>>()
+        .add(leaf_material(StandardMaterial {
+            base_color: Color::linear_rgb(0.12, 0.35, 0.08),
+            ..default()
+        }));
+    let bark_mat = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial::default());
+    let bark = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(bark_mesh(&tree.bark));
+    // Six trees in a row going away from the camera, a little to the side of each other.
+    let mut trees = Vec::new();
+    for i in 0..6 {
+        let z = -(i as f32) * 12.0;
+        let x = if i % 2 == 0 { -3.0 } else { 3.0 };
+        trees.push(
+            world
+                .spawn((
+                    ForestTree {
+                        baked: baked.clone(),
+                        material: leaf_mat.clone(),
+                    },
+                    TreeImpostor(cloud.clone()),
+                    Transform::from_xyz(x, 0.0, z),
+                ))
+                .with_child((
+                    Mesh3d(bark.clone()),
+                    MeshMaterial3d(bark_mat.clone()),
+                    TreeBark,
+                ))
+                .id(),
+        );
+    }
+    let weights = |harness: &mut RenderHarness| -> Vec<f32> {
+        trees
+            .iter()
+            .map(|&t| {
+                harness
+                    .world_mut()
+                    .get::<TreeLod>(t)
+                    .unwrap()
+                    .impostor_weight
+            })
+            .collect()
+    };
+    let cov = |img: &bevy_nature_harness::compare::RgbaImage| {
+        let bg = sky.to_srgba();
+        let bg = [
+            (bg.red * 255.0).round() as u8,
+            (bg.green * 255.0).round() as u8,
+            (bg.blue * 255.0).round() as u8,
+            255,
+        ];
+        coverage_against_background(img, bg, 12)
+    };
+
+    // No budget: every tree fades to its impostor, one step per frame.
+    harness.step();
+    let mut last = weights(&mut harness);
+    for _ in 0..FADE + 2 {
+        harness.step();
+        let now = weights(&mut harness);
+        for (a, b) in last.iter().zip(&now) {
+            assert!(b - a <= 1.0 / FADE as f32 + 1e-4, "a jump: {a} → {b}");
+        }
+        last = now;
+    }
+    assert!(last.iter().all(|&w| w == 1.0), "{last:?}");
+    harness.wait_until_ready().unwrap();
+    let impostors = harness.render().unwrap();
+
+    // A budget of every impostor plus two and a half trees' switch to geometry: the nearest two
+    // get it (64 per tree; impostor triangles at weight 1).
+    let impostor_cost = 64.0 + 2.0 * data.planes.len() as f32;
+    let budget = 6.0 * impostor_cost + 2.5 * (leaf_triangles - 2.0 * data.planes.len() as f32);
+    harness
+        .world_mut()
+        .resource_mut::<ForestSettings>()
+        .mixed
+        .budget_triangles = budget;
+    for _ in 0..FADE + 4 {
+        harness.step();
+    }
+    let now = weights(&mut harness);
+    let report = harness.world_mut().resource::<ForestState>().mixed_last;
+    assert!(report.cost <= budget, "{} > {budget}", report.cost);
+    assert_eq!((report.geometry, report.impostors), (2, 4), "{report:?}");
+    // Geometry goes to the nearest trees: the weights never decrease towards the camera.
+    for pair in now.windows(2) {
+        assert!(pair[0] <= pair[1], "{now:?}");
+    }
+    assert_eq!(now[0], 0.0);
+    assert_eq!(*now.last().unwrap(), 1.0);
+
+    // Budget for everything: all geometry at full detail, faded in over the frames.
+    harness
+        .world_mut()
+        .resource_mut::<ForestSettings>()
+        .mixed
+        .budget_triangles = 1e9;
+    harness.step();
+    let after_one = weights(&mut harness);
+    assert!(
+        after_one.iter().any(|&w| w > 0.0 && w < 1.0),
+        "fading, not popping: {after_one:?}"
+    );
+    for _ in 0..FADE + 20 {
+        harness.step();
+    }
+    assert!(weights(&mut harness).iter().all(|&w| w == 0.0));
+
+    harness.wait_until_ready().unwrap();
+    let geometry = harness.render().unwrap();
+    let (ci, cg) = (cov(&impostors), cov(&geometry));
+    eprintln!("coverage: impostors {ci:.4}, full geometry {cg:.4}, mixed report {report:?}");
+    assert!(cg > 0.1, "{cg}");
+    assert!(
+        (ci - cg).abs() < 0.25 * cg,
+        "impostors {ci} vs geometry {cg}"
+    );
+}

@@ -22,6 +22,7 @@ const PURE: &[&str] = &[
     "src/forest/hlod.rs",
     "src/forest/lod.rs",
     "src/forest/manager.rs",
+    "src/forest/mixed.rs",
     "src/impostor/atlas.rs",
     "src/impostor/cloud.rs",
     "src/impostor/format.rs",

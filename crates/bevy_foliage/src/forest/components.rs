@@ -34,6 +34,65 @@ pub struct TreeLod {
     pub urgency: f32,
     /// In the view frustum this frame.
     pub visible: bool,
+    /// With [`MixedLodSettings`]: how far it has faded over to its billboard cloud (0 pruned
+    /// geometry, 1 impostor).
+    pub impostor_weight: f32,
+}
+
+/// The time-critical mixed level of detail (seed 001, ch. 8; [`crate::forest::mixed`]): every
+/// frame, under a budget of triangles, every visible tree is drawn either by pruned geometry at
+/// the resolution the benefit-per-cost selection gives it, or by its billboard cloud
+/// ([`TreeImpostor`](crate::impostor::systems::TreeImpostor)). A tree that changes
+/// representation cross-fades over `fade_frames` frames: its impostor dithers in (Bevy's
+/// visibility-range dithering, driven by time) while its leaves thin out by pruning.
+///
+/// Off (the default): the distance LoD of eq. 4.2–4.3, impostors beyond `far`.
+#[derive(Clone, Debug, PartialEq, Reflect)]
+#[reflect(Default, Debug, PartialEq)]
+pub struct MixedLodSettings {
+    /// Use it.
+    pub enabled: bool,
+    /// Cost allowed per frame, in leaf-triangle units.
+    pub budget_triangles: f32,
+    /// The geometry resolution a billboard cloud is worth.
+    pub impostor_equivalent_lod: f32,
+    /// The smallest geometry resolution.
+    pub min_lod: f32,
+    /// Draw overhead of one tree, in triangles.
+    pub tree_cost: f32,
+    /// Cost of an impostor triangle in leaf triangles (large alpha-tested quads).
+    pub impostor_fill_weight: f32,
+    /// Frames a change of representation fades over.
+    pub fade_frames: u32,
+}
+
+impl Default for MixedLodSettings {
+    fn default() -> Self {
+        let m = super::mixed::MixedSettings::default();
+        Self {
+            enabled: false,
+            budget_triangles: m.budget,
+            impostor_equivalent_lod: m.impostor_equivalent_lod,
+            min_lod: m.min_lod,
+            tree_cost: m.tree_cost,
+            impostor_fill_weight: m.impostor_fill_weight,
+            fade_frames: 8,
+        }
+    }
+}
+
+impl MixedLodSettings {
+    /// The selection's settings.
+    pub fn selection(&self) -> super::mixed::MixedSettings {
+        super::mixed::MixedSettings {
+            budget: self.budget_triangles,
+            k: 50.0,
+            impostor_equivalent_lod: self.impostor_equivalent_lod,
+            min_lod: self.min_lod,
+            tree_cost: self.tree_cost,
+            impostor_fill_weight: self.impostor_fill_weight,
+        }
+    }
 }
 
 /// Work allowed per frame.
@@ -74,6 +133,8 @@ pub struct ForestSettings {
     pub exponent: f32,
     /// The feedback controller's settings.
     pub feedback_settings: FeedbackSettings,
+    /// The time-critical mixed LoD (off by default).
+    pub mixed: MixedLodSettings,
 }
 
 impl Default for ForestSettings {
@@ -89,6 +150,7 @@ impl Default for ForestSettings {
             feedback: false,
             exponent: 1.0,
             feedback_settings: FeedbackSettings::default(),
+            mixed: MixedLodSettings::default(),
         }
     }
 }
@@ -132,6 +194,26 @@ impl ForestSettings {
                 s.exponent
             ));
             s.exponent = 1.0;
+        }
+        let (selection, mixed_fixes) = s.mixed.selection().sanitized();
+        if !mixed_fixes.is_empty() {
+            fixes.extend(mixed_fixes.into_iter().map(|f| format!("mixed: {f}")));
+            s.mixed = MixedLodSettings {
+                enabled: s.mixed.enabled,
+                budget_triangles: selection.budget,
+                impostor_equivalent_lod: selection.impostor_equivalent_lod,
+                min_lod: selection.min_lod,
+                tree_cost: selection.tree_cost,
+                impostor_fill_weight: selection.impostor_fill_weight,
+                fade_frames: s.mixed.fade_frames,
+            };
+        }
+        if !(1..=120).contains(&s.mixed.fade_frames) {
+            fixes.push(format!(
+                "mixed: fade_frames = {} must be in 1..=120: using 8",
+                s.mixed.fade_frames
+            ));
+            s.mixed.fade_frames = 8;
         }
         let (feedback, feedback_fixes) = s.feedback_settings.sanitized();
         s.feedback_settings = feedback;

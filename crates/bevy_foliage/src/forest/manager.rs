@@ -48,6 +48,12 @@ pub struct TreeLodState {
     /// LoD distance from the camera this frame (world distance to the crown's centre, or
     /// inverse screen size).
     pub distance: f32,
+    /// With the mixed LoD: how far the tree has faded over to its billboard cloud (0 pruned
+    /// geometry, 1 impostor).
+    pub impostor_weight: f32,
+    /// With the mixed LoD: the geometry resolution it was last given (kept while it fades to its
+    /// impostor, so its leaves thin out from there).
+    pub geometry_lod: f32,
 }
 
 impl Default for TreeLodState {
@@ -61,6 +67,8 @@ impl Default for TreeLodState {
             urgency: 0.0,
             visible: false,
             distance: f32::INFINITY,
+            impostor_weight: 0.0,
+            geometry_lod: 1.0,
         }
     }
 }
@@ -183,6 +191,9 @@ pub struct ForestManager {
     pub caches: Vec<LodCache>,
     /// Frames run.
     pub frame: u64,
+    /// Desired LoDs chosen elsewhere this frame (the mixed LoD selection), one per tree; when
+    /// its length matches the trees', it replaces the distance LoD of eq. 4.2–4.3.
+    pub desired_override: Vec<f32>,
     candidates: Vec<(f32, u32)>,
 }
 
@@ -194,6 +205,7 @@ impl ForestManager {
                 .map(|_| LodCache::new(slots.clone(), max_age, double_buffered))
                 .collect(),
             frame: 0,
+            desired_override: Vec::new(),
             candidates: Vec::new(),
         }
     }
@@ -232,7 +244,11 @@ impl ForestManager {
             state.distance = distance;
             state.visible = distance.is_finite()
                 && frustum.is_none_or(|f| f.intersects_sphere(tree.center, tree.radius));
-            state.desired_lod = desired_lod(distance, near, far, exponent);
+            state.desired_lod = if self.desired_override.len() == trees.len() {
+                self.desired_override[i].clamp(0.0, 1.0)
+            } else {
+                desired_lod(distance, near, far, exponent)
+            };
             state.urgency = 0.0;
             if !state.visible {
                 continue;

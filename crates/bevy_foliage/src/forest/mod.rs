@@ -5,6 +5,7 @@
 //! - [`feedback`]: the frame-rate feedback exponent and its controller;
 //! - [`hlod`]: decimated leaf sets for the `VisibilityRange` baseline of the benchmark;
 //! - [`manager`]: the per-frame ranking and serving under a budget, over plain arrays;
+//! - [`mixed`]: the time-critical choice between pruned geometry and billboard clouds;
 //!
 //! and on the ECS: [`components`] (tree instances, settings), [`systems`] (running the manager
 //! and drawing the trees from the pruning extractions they borrow) and the registration.
@@ -15,5 +16,6 @@ pub mod feedback;
 pub mod hlod;
 pub mod lod;
 pub mod manager;
+pub mod mixed;
 pub(crate) mod plugin;
 pub mod systems;

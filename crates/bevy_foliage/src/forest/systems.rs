@@ -20,6 +20,8 @@ use super::cache::{LodSlots, SLOT_LOD_ONE, SLOT_LOD_ZERO};
 use super::components::{ForestBudget, ForestSettings, ForestTree, TreeLod};
 use super::feedback::ExponentController;
 use super::manager::{Budget, ForestManager, Frustum, ManagerSettings, TreeInput, TreeLodState};
+use super::mixed::{MixedReport, MixedTree, Representation, select};
+use crate::impostor::assets::BillboardCloudAsset;
 use crate::impostor::systems::TreeImpostor;
 use crate::pruning::bake::BakedFoliage;
 use crate::pruning::components::{
@@ -60,6 +62,13 @@ pub struct ForestState {
     states: Vec<TreeLodState>,
     entities: Vec<Entity>,
     extraction_list: Vec<super::manager::Extraction>,
+    /// Per tree (in `inputs` order): full leaf triangles and billboard-cloud triangles.
+    mixed_costs: Vec<(u32, Option<u32>)>,
+    mixed_trees: Vec<MixedTree>,
+    mixed_index: Vec<usize>,
+    mixed_choices: Vec<Representation>,
+    /// What the last mixed LoD selection did.
+    pub mixed_last: MixedReport,
 }
 
 impl Default for ForestState {
@@ -76,6 +85,11 @@ impl Default for ForestState {
             states: Vec::new(),
             entities: Vec::new(),
             extraction_list: Vec::new(),
+            mixed_costs: Vec::new(),
+            mixed_trees: Vec::new(),
+            mixed_index: Vec::new(),
+            mixed_choices: Vec::new(),
+            mixed_last: MixedReport::default(),
         }
     }
 }
@@ -116,8 +130,9 @@ pub fn run_forest_manager(
         &GlobalTransform,
         &mut TreeLod,
         &mut Visibility,
-        Has<TreeImpostor>,
+        Option<&TreeImpostor>,
     )>,
+    clouds: Res<Assets<BillboardCloudAsset>>,
     mut params: Query<&mut PruningParams, With<ManagedPruning>>,
     mut asset_events: MessageReader<AssetEvent<BakedFoliage>>,
 ) {
@@ -183,10 +198,17 @@ pub fn run_forest_manager(
         .collect();
     state.entities.clear();
     state.states.clear();
-    for (entity, tree, transform, ..) in &trees {
+    state.mixed_costs.clear();
+    for (entity, tree, transform, .., impostor) in &trees {
         let Some(data) = baked.get(&tree.baked) else {
             continue;
         };
+        state.mixed_costs.push((
+            (data.indices.len() / 3) as u32,
+            impostor
+                .and_then(|i| clouds.get(&i.0))
+                .map(|c| c.planes * 2),
+        ));
         let id = tree.baked.id();
         let ty = match state.types.iter().position(|t| *t == id) {
             Some(ty) => ty,
@@ -261,6 +283,16 @@ pub fn run_forest_manager(
             Budget::Time(Duration::from_secs_f32(ms.clamp(0.0, 1000.0) / 1000.0))
         }
     };
+    // The time-critical mixed LoD picks every visible tree's representation under the budget;
+    // the manager then serves the geometry LoDs it chose.
+    if settings.enabled && settings.mixed.enabled {
+        choose_mixed_lods(state, &settings.mixed, camera, &view, &frustum);
+    } else {
+        state.manager.desired_override.clear();
+        for s in &mut state.states {
+            s.impostor_weight = 0.0;
+        }
+    }
     state.extraction_list.clear();
     let report = if settings.enabled {
         let ForestState {
@@ -423,7 +455,7 @@ pub fn run_forest_manager(
 
     // Write back the per-tree state.
     for (i, &entity) in state.entities.iter().enumerate() {
-        let Ok((_, _, _, mut lod, mut visibility, has_impostor)) = trees.get_mut(entity) else {
+        let Ok((_, _, _, mut lod, mut visibility, _)) = trees.get_mut(entity) else {
             continue;
         };
         let s = state.states[i];
@@ -434,13 +466,14 @@ pub fn run_forest_manager(
             frames_since_update: s.frames_since_update,
             urgency: s.urgency,
             visible: s.visible,
+            impostor_weight: s.impostor_weight,
         };
         if *lod != new {
             *lod = new;
         }
-        // A tree with a billboard cloud stays shown where its leaves are gone: the impostor
-        // child draws it (and fades in by its own visibility range).
-        let shown = s.visible && (has_impostor || !ForestManager::draws_nothing(&s));
+        // Where its leaves are gone the tree is hidden, bark and all (the bark has faded out by
+        // then); its billboard cloud is an entity of its own beside it.
+        let shown = s.visible && !ForestManager::draws_nothing(&s);
         let v = if shown {
             Visibility::Inherited
         } else {
@@ -457,6 +490,70 @@ pub fn run_forest_manager(
     diagnostics.add_measurement(&VISIBLE_TREES, || report.visible as f64);
     diagnostics.add_measurement(&MANAGER_MS, || elapsed);
     diagnostics.add_measurement(&EXPONENT, || exponent as f64);
+}
+
+/// The mixed LoD of one frame: the selection over the visible trees, each tree's fade between
+/// its representations advanced by one frame, and the manager's desired LoDs set from them (a
+/// tree fading to its impostor keeps its last geometry resolution, scaled down as it fades).
+fn choose_mixed_lods(
+    state: &mut ForestState,
+    mixed: &super::components::MixedLodSettings,
+    camera: Vec3,
+    view: &crate::distance::LodView,
+    frustum: &Frustum,
+) {
+    state.mixed_trees.clear();
+    state.mixed_index.clear();
+    for (i, tree) in state.inputs.iter().enumerate() {
+        let d = tree.center.distance(camera);
+        if !(d.is_finite() && frustum.intersects_sphere(tree.center, tree.radius)) {
+            continue;
+        }
+        let size = if view.orthographic {
+            tree.radius * view.yy
+        } else {
+            tree.radius * view.yy / d.max(1e-3)
+        };
+        let (leaf_triangles, impostor_triangles) = state.mixed_costs[i];
+        state.mixed_trees.push(MixedTree {
+            screen_size: size,
+            leaf_triangles,
+            impostor_triangles,
+        });
+        state.mixed_index.push(i);
+    }
+    let report = select(
+        &state.mixed_trees,
+        &mixed.selection(),
+        &mut state.mixed_choices,
+    );
+    state.mixed_last = report;
+    let step = 1.0 / mixed.fade_frames.max(1) as f32;
+    let n = state.inputs.len();
+    let mut desired = vec![0.0; n];
+    let mut chosen = vec![None; n];
+    for (k, &i) in state.mixed_index.iter().enumerate() {
+        chosen[i] = Some(state.mixed_choices[k]);
+    }
+    for (i, s) in state.states.iter_mut().enumerate() {
+        match chosen[i] {
+            Some(Representation::Geometry(x)) => {
+                s.geometry_lod = x;
+                s.impostor_weight = (s.impostor_weight - step).max(0.0);
+            }
+            Some(Representation::Impostor) => {
+                s.impostor_weight = (s.impostor_weight + step).min(1.0);
+            }
+            // Out of view: whatever it shows next is decided when it is back; no fade needed.
+            None => {}
+        }
+        desired[i] = if chosen[i].is_some() {
+            s.geometry_lod * (1.0 - s.impostor_weight)
+        } else {
+            0.0
+        };
+    }
+    state.manager.desired_override = desired;
 }
 
 /// Points every shown forest tree at the extraction it draws: its `MeshTag` (the extraction's
@@ -498,10 +595,6 @@ pub fn draw_forest_trees(
             continue;
         };
         if slot == SLOT_LOD_ZERO {
-            // Shown for its impostor only: the leaves draw nothing.
-            if mesh.is_some() {
-                commands.entity(entity).remove::<(Mesh3d, MeshTag)>();
-            }
             continue;
         }
         let Some(&i) = index.get(&entity) else {

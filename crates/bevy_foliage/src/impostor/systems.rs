@@ -1,7 +1,9 @@
 //! Forest trees drawn by their billboard cloud where pruning has thinned their crown to nothing.
 //!
-//! A [`ForestTree`] with a [`TreeImpostor`] gets an impostor child (the cloud's quads and
-//! `StandardMaterial`). The handover is a cross-fade over a distance band ending at the pruning's
+//! A [`ForestTree`] with a [`TreeImpostor`] gets an impostor (the cloud's quads and
+//! `StandardMaterial`): an entity beside the tree — a child of the tree's parent with the tree's
+//! transform — so that it stays drawn while the manager hides the tree itself, bark and leaves,
+//! where its leaves are gone. The handover is a cross-fade over a distance band ending at the pruning's
 //! `far` (where the desired LoD reaches 0): inside the band the impostor dithers in through Bevy's
 //! own `VisibilityRange` dithering while pruning removes the last leaves stochastically (another
 //! dither, leaf by leaf, with area compensation), and the tree's bark, marked [`TreeBark`],
@@ -14,7 +16,7 @@
 use super::assets::BillboardCloudAsset;
 use super::bake::{ImpostorBakeRequest, ImpostorBakeResult};
 use crate::distance::{LodDistances, LodView};
-use crate::forest::components::ForestTree;
+use crate::forest::components::{ForestSettings, ForestTree, TreeLod};
 use crate::pruning::components::FoliageCamera;
 use crate::pruning::systems::pruning_camera;
 use crate::settings::FoliagePruningSettings;
@@ -43,13 +45,13 @@ pub struct BakedImpostor(pub Handle<BillboardCloudAsset>);
 #[derive(Component, Clone, Copy, Debug, Default)]
 pub struct TreeBark;
 
-/// The impostor child the plugin spawned for a tree (on the tree).
+/// The impostor the plugin spawned for a tree (on the tree).
 #[derive(Component, Clone, Copy, Debug)]
 pub struct ImpostorChild(pub Entity);
 
-/// Marks an impostor child entity.
-#[derive(Component, Clone, Copy, Debug, Default)]
-pub struct ImpostorOf;
+/// On an impostor entity: the tree it draws (it is despawned with it).
+#[derive(Component, Clone, Copy, Debug)]
+pub struct ImpostorOf(pub Entity);
 
 /// Settings of the impostors.
 #[derive(Resource, Clone, Debug, PartialEq, Reflect)]
@@ -117,15 +119,42 @@ pub fn handover_ranges(far: f32, fade_band: f32) -> (VisibilityRange, Visibility
     };
     let start = far * (1.0 - fade_band.clamp(0.0, 0.9));
     (
+        // Distances to the entity's origin: what Bevy's shaders dither by, too.
         VisibilityRange {
             start_margin: start..far,
             end_margin: f32::MAX..f32::MAX,
-            use_aabb: true,
+            use_aabb: false,
         },
         VisibilityRange {
             start_margin: 0.0..0.0,
             end_margin: start..far,
-            use_aabb: true,
+            use_aabb: false,
+        },
+    )
+}
+
+/// The visibility ranges that show a tree at `distance` from the camera as `weight` of its
+/// impostor and `1 − weight` of its bark, dithered (the mixed LoD's fade over time): a window
+/// of the dithering ramp placed so the tree's distance falls `weight` of the way into it.
+pub fn fade_ranges(distance: f32, weight: f32) -> (VisibilityRange, VisibilityRange) {
+    let d = if distance.is_finite() {
+        distance.max(0.0)
+    } else {
+        0.0
+    };
+    let w = weight.clamp(0.0, 1.0);
+    let width = (0.1 * d).max(1.0);
+    let window = (d - w * width)..(d - w * width + width);
+    (
+        VisibilityRange {
+            start_margin: window.clone(),
+            end_margin: f32::MAX..f32::MAX,
+            use_aabb: false,
+        },
+        VisibilityRange {
+            start_margin: 0.0..0.0,
+            end_margin: window,
+            use_aabb: false,
         },
     )
 }
@@ -142,11 +171,15 @@ pub fn place_impostors(
     mut tinted: Local<Vec<(AssetId<StandardMaterial>, Handle<StandardMaterial>)>>,
     marked: Query<(&Camera, &GlobalTransform), With<FoliageCamera>>,
     cameras: Query<(&Camera, &GlobalTransform), With<Camera3d>>,
+    forest: Res<ForestSettings>,
     trees: Query<
         (
             Entity,
             &TreeImpostor,
             &GlobalTransform,
+            &Transform,
+            Option<&ChildOf>,
+            &TreeLod,
             Option<&ImpostorChild>,
             Option<&Children>,
         ),
@@ -156,24 +189,32 @@ pub fn place_impostors(
     mut impostors: Query<
         (
             &mut Visibility,
+            &mut Transform,
             Option<&mut MeshMaterial3d<StandardMaterial>>,
             Option<&mut VisibilityRange>,
         ),
-        With<ImpostorOf>,
+        (With<ImpostorOf>, Without<ForestTree>),
     >,
     mut barks: Query<Option<&mut VisibilityRange>, (With<TreeBark>, Without<ImpostorOf>)>,
 ) {
-    let view = pruning_camera(&marked, &cameras)
-        .map(|(_, _, view)| view)
-        .unwrap_or_default();
+    let (camera, view) = pruning_camera(&marked, &cameras)
+        .map(|(_, camera, view)| (camera, view))
+        .unwrap_or((Vec3::splat(f32::INFINITY), LodView::default()));
     let (_, far_rho) = pruning.distances.range();
-    for (tree, impostor, transform, child, children) in &trees {
+    let mixed = forest.enabled && forest.mixed.enabled;
+    for (tree, impostor, transform, local, parent, lod, child, children) in &trees {
         let Some(cloud) = clouds.get(&impostor.0) else {
             continue;
         };
         let scale = transform.scale().abs().max_element();
         let far = world_distance(&pruning.distances, far_rho, cloud.radius * scale, &view);
-        let (impostor_range, bark_range) = if settings.enabled {
+        let (impostor_range, bark_range) = if settings.enabled && mixed {
+            // The mixed LoD chose per tree and fades over time.
+            fade_ranges(
+                transform.translation().distance(camera),
+                lod.impostor_weight,
+            )
+        } else if settings.enabled {
             handover_ranges(far, settings.fade_band)
         } else {
             // Impostors off: hidden; bark drawn at every distance, as without this module.
@@ -198,8 +239,12 @@ pub fn place_impostors(
             cloud.material.clone()
         };
         match child.and_then(|c| impostors.get_mut(c.0).ok()) {
-            Some((mut visibility, mesh_material, range)) => {
-                let v = if settings.enabled {
+            Some((mut visibility, mut placed, mesh_material, range)) => {
+                if *placed != *local {
+                    *placed = *local;
+                }
+                // Not drawn at all when fully faded out (with the mixed LoD) or switched off.
+                let v = if settings.enabled && !(mixed && lod.impostor_weight <= 0.0) {
                     Visibility::Inherited
                 } else {
                     Visibility::Hidden
@@ -219,17 +264,18 @@ pub fn place_impostors(
                 }
             }
             None => {
-                let entity = commands
-                    .spawn((
-                        Name::new("billboard cloud"),
-                        ImpostorOf,
-                        Mesh3d(cloud.mesh.clone()),
-                        MeshMaterial3d(material),
-                        impostor_range,
-                        Transform::IDENTITY,
-                        ChildOf(tree),
-                    ))
-                    .id();
+                let mut spawned = commands.spawn((
+                    Name::new("billboard cloud"),
+                    ImpostorOf(tree),
+                    Mesh3d(cloud.mesh.clone()),
+                    MeshMaterial3d(material),
+                    impostor_range,
+                    *local,
+                ));
+                if let Some(parent) = parent {
+                    spawned.insert(ChildOf(parent.parent()));
+                }
+                let entity = spawned.id();
                 commands.entity(tree).insert(ImpostorChild(entity));
             }
         }
@@ -246,6 +292,19 @@ pub fn place_impostors(
                     }
                 }
             }
+        }
+    }
+}
+
+/// Despawns the impostors of trees that are gone (or no longer have one).
+pub fn despawn_orphan_impostors(
+    mut commands: Commands,
+    impostors: Query<(Entity, &ImpostorOf)>,
+    trees: Query<(), With<TreeImpostor>>,
+) {
+    for (entity, of) in &impostors {
+        if !trees.contains(of.0) {
+            commands.entity(entity).despawn();
         }
     }
 }
@@ -324,7 +383,10 @@ pub(crate) fn build(app: &mut App) {
         )
         .add_systems(
             PostUpdate,
-            place_impostors.before(bevy::camera::visibility::VisibilitySystems::CheckVisibility),
+            (despawn_orphan_impostors, place_impostors)
+                .chain()
+                .after(crate::pruning::systems::FoliageSystems::PruningParams)
+                .before(bevy::camera::visibility::VisibilitySystems::CheckVisibility),
         )
         .add_systems(
             Update,
@@ -348,6 +410,28 @@ mod tests {
         // Near: no impostor.
         assert!(!imp.is_visible_at_all(79.0));
         assert!(bark.is_visible_at_all(79.0));
+    }
+
+    #[test]
+    fn the_fade_window_puts_the_tree_its_weight_of_the_way_in() {
+        for (d, w) in [
+            (50.0, 0.0),
+            (50.0, 0.25),
+            (50.0, 1.0),
+            (300.0, 0.6),
+            (3.0, 0.5),
+        ] {
+            let (imp, bark) = fade_ranges(d, w);
+            let s = &imp.start_margin;
+            let shown = (d - s.start) / (s.end - s.start);
+            assert!((shown - w).abs() < 1e-4, "{d} {w}: {shown}");
+            let e = &bark.end_margin;
+            let bark_shown = (e.end - d) / (e.end - e.start);
+            assert!((bark_shown - (1.0 - w)).abs() < 1e-4);
+        }
+        // Fully faded to the impostor: the bark is culled outright.
+        let (_, bark) = fade_ranges(80.0, 1.0);
+        assert!(!bark.is_visible_at_all(80.0));
     }
 
     #[test]
