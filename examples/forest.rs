@@ -8,6 +8,7 @@
 //! cargo run --release --example forest -- --forest sparse --leaf-scale 1
 //! cargo run --example forest -- --headless --frames 30 --stats forest.json
 //! cargo run --release --example forest -- --forest huge --headless --frames 20 --stats huge.json
+//! cargo run --release --example forest -- --mixed 400000   # the time-critical mixed LoD
 //! ```
 //! `--leaf-scale F` scales the thesis' leaf counts (default 0.25). Press `R` (or tick
 //! `ImpostorSettings::show_representation` in the panel) to tint the trees drawn by their
@@ -15,6 +16,7 @@
 //! `feedback` on to let the frame-rate exponent steer detail, or change the slots and the budget.
 
 use bevy::prelude::*;
+use bevy_nature::foliage::forest::components::MixedLodSettings;
 use bevy_nature::foliage::impostor::bake::ImpostorBakeCamera;
 use bevy_nature::foliage::impostor::systems::ImpostorSettings;
 use bevy_nature::foliage::{FoliagePruningSettings, ForestSettings};
@@ -32,8 +34,26 @@ fn main() -> AppExit {
         eprintln!("{e}");
         std::process::exit(2)
     });
-    let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
-        eprintln!("{e} [--forest dense|sparse|huge] [--leaf-scale F]");
+    // `--mixed BUDGET`: the time-critical mixed LoD under a budget of leaf triangles.
+    let (mut mixed, mut runner_flags, mut rest) = (None, Vec::new(), rest.into_iter());
+    while let Some(arg) = rest.next() {
+        if arg == "--mixed" {
+            let v = rest.next().unwrap_or_default();
+            mixed = Some(
+                v.parse::<f32>()
+                    .ok()
+                    .filter(|b| *b >= 0.0)
+                    .unwrap_or_else(|| {
+                        eprintln!("--mixed takes a budget of triangles, not '{v}'");
+                        std::process::exit(2)
+                    }),
+            );
+        } else {
+            runner_flags.push(arg);
+        }
+    }
+    let args = ExampleArgs::parse_from(runner_flags).unwrap_or_else(|e| {
+        eprintln!("{e} [--forest dense|sparse|huge] [--leaf-scale F] [--mixed BUDGET]");
         std::process::exit(2)
     });
     ExampleRunner::with_args("forest", args)
@@ -48,6 +68,15 @@ fn main() -> AppExit {
                     leaf_scale,
                     draw: ForestDraw::Managed,
                     impostors: true,
+                })
+                .insert_resource(ForestSettings {
+                    mixed: MixedLodSettings {
+                        enabled: mixed.is_some(),
+                        budget_triangles: mixed
+                            .unwrap_or(MixedLodSettings::default().budget_triangles),
+                        ..default()
+                    },
+                    ..default()
                 })
                 .add_systems(Startup, spawn_camera)
                 .add_systems(Update, (walk, toggle_representation));
