@@ -143,6 +143,21 @@ pub fn fade_ranges(distance: f32, weight: f32) -> (VisibilityRange, VisibilityRa
         0.0
     };
     let w = weight.clamp(0.0, 1.0);
+    // Settled trees get ranges that do not depend on the distance, so only the few trees fading
+    // right now change their ranges from frame to frame (every change re-uploads Bevy's table of
+    // visibility ranges).
+    if w >= 1.0 {
+        return (
+            VisibilityRange::abrupt(0.0, f32::MAX),
+            VisibilityRange::abrupt(0.0, 0.0),
+        );
+    }
+    if w <= 0.0 {
+        return (
+            VisibilityRange::abrupt(0.0, 0.0),
+            VisibilityRange::abrupt(0.0, f32::MAX),
+        );
+    }
     let width = (0.1 * d).max(1.0);
     let window = (d - w * width)..(d - w * width + width);
     (
@@ -415,9 +430,9 @@ mod tests {
     #[test]
     fn the_fade_window_puts_the_tree_its_weight_of_the_way_in() {
         for (d, w) in [
-            (50.0, 0.0),
+            (50.0, 0.125),
             (50.0, 0.25),
-            (50.0, 1.0),
+            (50.0, 0.875),
             (300.0, 0.6),
             (3.0, 0.5),
         ] {
@@ -429,9 +444,12 @@ mod tests {
             let bark_shown = (e.end - d) / (e.end - e.start);
             assert!((bark_shown - (1.0 - w)).abs() < 1e-4);
         }
-        // Fully faded to the impostor: the bark is culled outright.
-        let (_, bark) = fade_ranges(80.0, 1.0);
-        assert!(!bark.is_visible_at_all(80.0));
+        // Settled: all of one and none of the other, at any distance.
+        let (imp, bark) = fade_ranges(80.0, 1.0);
+        assert!(!bark.is_visible_at_all(80.0) && !bark.is_visible_at_all(3.0));
+        assert!(imp.is_visible_at_all(3.0) && imp.is_visible_at_all(5000.0));
+        let (imp, bark) = fade_ranges(80.0, 0.0);
+        assert!(!imp.is_visible_at_all(80.0) && bark.is_visible_at_all(5000.0));
     }
 
     #[test]
