@@ -31,6 +31,35 @@ pub fn olive_source(leaves: usize) -> ImpostorSource {
     source
 }
 
+/// The billboard cloud of `data` as an asset, built the way the loader builds it.
+fn cloud_asset(
+    world: &mut World,
+    data: &ImpostorData,
+) -> Handle<bevy_foliage::impostor::assets::BillboardCloudAsset> {
+    use bevy_foliage::impostor::assets::BillboardCloudAsset;
+    let asset = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
+        world.resource_scope(|world, mut images: Mut<Assets<Image>>| {
+            let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+            BillboardCloudAsset::from_data(data, &mut meshes, &mut images, &mut materials)
+        })
+    });
+    world
+        .resource_mut::<Assets<BillboardCloudAsset>>()
+        .add(asset)
+}
+
+/// Fraction of the image that is not the sky colour `sky`.
+fn coverage(image: &bevy_nature_harness::compare::RgbaImage, sky: Color) -> f64 {
+    let bg = sky.to_srgba();
+    let bg = [
+        (bg.red * 255.0).round() as u8,
+        (bg.green * 255.0).round() as u8,
+        (bg.blue * 255.0).round() as u8,
+        255,
+    ];
+    bevy_nature_harness::compare::coverage_against_background(image, bg, 12)
+}
+
 /// Steps until the request's result arrives.
 fn bake(
     harness: &mut RenderHarness,
@@ -171,13 +200,12 @@ fn a_bake_that_cannot_work_fails_with_a_message() {
 /// tree is beyond `far`, where pruning leaves it no leaves.
 #[test]
 fn a_tree_beyond_far_is_drawn_by_its_impostor_close_to_the_full_tree() {
-    use bevy_foliage::impostor::assets::BillboardCloudAsset;
     use bevy_foliage::impostor::systems::{ImpostorSettings, TreeBark, TreeImpostor};
     use bevy_foliage::meshes::{bark_mesh, leaf_set_mesh};
     use bevy_foliage::pruning::bake::{BakeSettings, bake as bake_pruning};
     use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
     use bevy_foliage::{FoliagePruningSettings, ForestTree, LodDistances};
-    use bevy_nature_harness::compare::{Comparison, coverage_against_background};
+    use bevy_nature_harness::compare::Comparison;
 
     let Some(mut harness) = RenderHarness::for_test("impostor_forest", 96, 96) else {
         return;
@@ -238,17 +266,7 @@ fn a_tree_beyond_far_is_drawn_by_its_impostor_close_to_the_full_tree() {
         base_color: Color::linear_rgb(bark_colour.x, bark_colour.y, bark_colour.z),
         ..default()
     };
-    let cloud = {
-        let asset = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-            world.resource_scope(|world, mut images: Mut<Assets<Image>>| {
-                let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
-                BillboardCloudAsset::from_data(&data, &mut meshes, &mut images, &mut materials)
-            })
-        });
-        world
-            .resource_mut::<Assets<BillboardCloudAsset>>()
-            .add(asset)
-    };
+    let cloud = cloud_asset(world, &data);
     let baked = bake_pruning(&tree.leaves, &BakeSettings::default(), &|_| {})
         .unwrap()
         .0;
@@ -321,14 +339,7 @@ fn a_tree_beyond_far_is_drawn_by_its_impostor_close_to_the_full_tree() {
     harness.wait_until_ready().unwrap();
     let reference = harness.render().unwrap();
 
-    let bg = sky.to_srgba();
-    let bg = [
-        (bg.red * 255.0).round() as u8,
-        (bg.green * 255.0).round() as u8,
-        (bg.blue * 255.0).round() as u8,
-        255,
-    ];
-    let cov = |img| coverage_against_background(img, bg, 12);
+    let cov = |img| coverage(img, sky);
     let (c_ref, c_imp, c_none) = (cov(&reference), cov(&with_impostor), cov(&without));
     let blocks = |img: &bevy_nature_harness::compare::RgbaImage| {
         Comparison::new(
@@ -362,7 +373,6 @@ fn a_tree_beyond_far_is_drawn_by_its_impostor_close_to_the_full_tree() {
 fn the_mixed_lod_chooses_under_the_budget_and_fades_over_frames() {
     use bevy_foliage::forest::components::MixedLodSettings;
     use bevy_foliage::forest::systems::ForestState;
-    use bevy_foliage::impostor::assets::BillboardCloudAsset;
     use bevy_foliage::impostor::systems::{TreeBark, TreeImpostor};
     use bevy_foliage::meshes::bark_mesh;
     use bevy_foliage::pruning::bake::{BakeSettings, bake as bake_pruning};
@@ -370,7 +380,6 @@ fn the_mixed_lod_chooses_under_the_budget_and_fades_over_frames() {
     use bevy_foliage::{
         FoliagePruningSettings, ForestBudget, ForestSettings, ForestTree, LodDistances, TreeLod,
     };
-    use bevy_nature_harness::compare::coverage_against_background;
 
     let Some(mut harness) = RenderHarness::for_test("impostor_mixed_lod", 128, 64) else {
         return;
@@ -421,17 +430,7 @@ fn the_mixed_lod_chooses_under_the_budget_and_fades_over_frames() {
     let (_, result) = bake(&mut harness, source, 256);
     let data = result.expect("bake");
     let world = harness.world_mut();
-    let cloud = {
-        let asset = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-            world.resource_scope(|world, mut images: Mut<Assets<Image>>| {
-                let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
-                BillboardCloudAsset::from_data(&data, &mut meshes, &mut images, &mut materials)
-            })
-        });
-        world
-            .resource_mut::<Assets<BillboardCloudAsset>>()
-            .add(asset)
-    };
+    let cloud = cloud_asset(world, &data);
     let baked = bake_pruning(&tree.leaves, &BakeSettings::default(), &|_| {})
         .unwrap()
         .0;
@@ -484,16 +483,7 @@ fn the_mixed_lod_chooses_under_the_budget_and_fades_over_frames() {
             })
             .collect()
     };
-    let cov = |img: &bevy_nature_harness::compare::RgbaImage| {
-        let bg = sky.to_srgba();
-        let bg = [
-            (bg.red * 255.0).round() as u8,
-            (bg.green * 255.0).round() as u8,
-            (bg.blue * 255.0).round() as u8,
-            255,
-        ];
-        coverage_against_background(img, bg, 12)
-    };
+    let cov = |img: &bevy_nature_harness::compare::RgbaImage| coverage(img, sky);
 
     // No budget: every tree fades to its impostor, one step per frame.
     harness.step();

@@ -520,39 +520,35 @@ fn finish_impostor_bakes(
         job.frames += 1;
         let size = job.layout.size;
         let latest = job.latest.lock().unwrap().take();
-        let give_up = job.frames > MAX_BAKE_FRAMES;
-        let Some(padded) = latest else {
-            if give_up {
-                finish(
-                    &mut commands,
-                    entity,
-                    &job,
-                    &mut images,
-                    Err("no readback arrived".into()),
+        let pixels = latest.and_then(|padded| unpad(&padded, size, size * 2));
+        let ready = pixels.and_then(|pixels| {
+            let settled = idle.0.load(Ordering::Relaxed)
+                && job.frames >= 3
+                && job.previous.as_ref() == Some(&pixels)
+                && pixels.chunks_exact(4).any(|p| p[3] > 0);
+            if settled {
+                Some(pixels)
+            } else {
+                job.previous = Some(pixels);
+                None
+            }
+        });
+        let Some(pixels) = ready else {
+            if job.frames > MAX_BAKE_FRAMES {
+                let why = if job.previous.is_some() {
+                    "the bake never settled"
+                } else {
+                    "no readback arrived"
+                };
+                let why = format!("{why} in {MAX_BAKE_FRAMES} frames");
+                warn!(
+                    "impostor bake of {} failed: {why}; the tree keeps its pruned geometry",
+                    request.label
                 );
+                finish(&mut commands, entity, &job, &mut images, Err(why));
             }
             continue;
         };
-        let Some(pixels) = unpad(&padded, size, size * 2) else {
-            continue;
-        };
-        let settled = idle.0.load(Ordering::Relaxed)
-            && job.frames >= 3
-            && job.previous.as_ref() == Some(&pixels)
-            && pixels.chunks_exact(4).any(|p| p[3] > 0);
-        if !settled {
-            job.previous = Some(pixels);
-            if give_up {
-                finish(
-                    &mut commands,
-                    entity,
-                    &job,
-                    &mut images,
-                    Err("the bake never settled".into()),
-                );
-            }
-            continue;
-        }
         let half = (size * size * 4) as usize;
         let albedo_raw = pixels[..half].to_vec();
         // The normal pass wrote `0.5 + 0.5·n` as a colour into an sRGB target: undo the encoding.
