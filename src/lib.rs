@@ -26,6 +26,7 @@ pub use bevy_foliage as foliage;
 pub use bevy_soft_shadows as soft_shadows;
 pub use bevy_terrain_clip as terrain_clip;
 
+pub mod bench_curves;
 pub mod forest_scene;
 pub mod shadow_scene;
 pub mod showcase;
