@@ -11,8 +11,10 @@
 //! cargo run --release --example forest -- --mixed 400000   # the time-critical mixed LoD
 //! ```
 //! `--leaf-scale F` scales the thesis' leaf counts (default 0.25). Press `R` (or tick
-//! `ImpostorSettings::show_representation` in the panel) to tint the trees drawn by their
-//! billboard cloud orange. In the panel, switch `ForestSettings::enabled` off for full detail,
+//! `ImpostorSettings::show_representation` in the panel, or start with `--show-representation`)
+//! to colour-code what draws each tree:
+//! billboard clouds orange, leaf geometry blue at full detail, then cyan, green and magenta as
+//! pruning keeps fewer leaves. In the panel, switch `ForestSettings::enabled` off for full detail,
 //! `feedback` on to let the frame-rate exponent steer detail, or change the slots and the budget.
 
 use bevy::prelude::*;
@@ -36,8 +38,11 @@ fn main() -> AppExit {
     });
     // `--mixed BUDGET`: the time-critical mixed LoD under a budget of leaf triangles.
     let (mut mixed, mut runner_flags, mut rest) = (None, Vec::new(), rest.into_iter());
+    let mut show_representation = false;
     while let Some(arg) = rest.next() {
-        if arg == "--mixed" {
+        if arg == "--show-representation" {
+            show_representation = true;
+        } else if arg == "--mixed" {
             let v = rest.next().unwrap_or_default();
             mixed = Some(
                 v.parse::<f32>()
@@ -53,7 +58,9 @@ fn main() -> AppExit {
         }
     }
     let args = ExampleArgs::parse_from(runner_flags).unwrap_or_else(|e| {
-        eprintln!("{e} [--forest dense|sparse|huge] [--leaf-scale F] [--mixed BUDGET]");
+        eprintln!(
+            "{e} [--forest dense|sparse|huge] [--leaf-scale F] [--mixed BUDGET] [--show-representation]"
+        );
         std::process::exit(2)
     });
     ExampleRunner::with_args("forest", args)
@@ -78,6 +85,10 @@ fn main() -> AppExit {
                     },
                     ..default()
                 })
+                .insert_resource(ImpostorSettings {
+                    show_representation,
+                    ..default()
+                })
                 .add_systems(Startup, spawn_camera)
                 .add_systems(Update, (walk, toggle_representation));
         })
@@ -87,7 +98,7 @@ fn spawn_camera(mut commands: Commands) {
     commands.spawn((Camera3d::default(), camera_transform()));
 }
 
-/// `R` tints the impostor-drawn trees.
+/// `R` colour-codes what draws each tree.
 fn toggle_representation(
     keys: Option<Res<ButtonInput<KeyCode>>>,
     mut settings: ResMut<ImpostorSettings>,

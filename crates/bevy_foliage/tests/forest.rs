@@ -9,7 +9,8 @@ use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy_foliage::forest::cache::LodSlots;
-use bevy_foliage::forest::systems::{ForestState, LEAF_TRIANGLES};
+use bevy_foliage::forest::systems::{ForestState, GEOMETRY_TINTS, LEAF_TRIANGLES, geometry_band};
+use bevy_foliage::impostor::systems::ImpostorSettings;
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::{ManagedPruning, PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::kept_index_total;
@@ -224,6 +225,51 @@ fn forest_trees_draw_borrowed_extractions_within_the_budget() {
             slots_in_use.contains(&instance),
             "tree draws instance {instance}"
         );
+    }
+
+    // Colour coding: every shown tree draws its material tinted by the LoD band it draws, and its
+    // own material again once switched off.
+    harness
+        .world_mut()
+        .resource_mut::<ImpostorSettings>()
+        .show_representation = true;
+    harness.step();
+    let mut bands = [0usize; 4];
+    let world = harness.world_mut();
+    for &tree in &trees {
+        if world.get::<Visibility>(tree) == Some(&Visibility::Hidden) {
+            continue;
+        }
+        let lod = *world.get::<TreeLod>(tree).unwrap();
+        let drawn = world
+            .get::<MeshMaterial3d<LeafMaterial>>(tree)
+            .unwrap()
+            .0
+            .id();
+        let colour = world
+            .resource::<Assets<LeafMaterial>>()
+            .get(drawn)
+            .unwrap()
+            .base
+            .base_color;
+        let band = geometry_band(lod.stored_lod);
+        bands[band] += 1;
+        assert_eq!(colour, GEOMETRY_TINTS[band], "{lod:?}");
+    }
+    assert!(
+        bands.iter().filter(|&&n| n > 0).count() >= 2,
+        "the settled forest should draw several LoD bands: {bands:?}"
+    );
+    harness
+        .world_mut()
+        .resource_mut::<ImpostorSettings>()
+        .show_representation = false;
+    harness.step();
+    let world = harness.world_mut();
+    for &tree in &trees {
+        if let Some(drawn) = world.get::<MeshMaterial3d<LeafMaterial>>(tree) {
+            assert_eq!(drawn.0, material, "colour coding switched off");
+        }
     }
 
     // Image: the managed forest against the same forest at full detail, same run.

@@ -37,6 +37,10 @@ pub struct TreeLod {
     /// With [`MixedLodSettings`]: how far it has faded over to its billboard cloud (0 pruned
     /// geometry, 1 impostor).
     pub impostor_weight: f32,
+    /// The manager's whole memory of the tree, kept on the tree so that a forest of 100,000
+    /// trees needs no per-frame map from entities to states.
+    #[reflect(ignore)]
+    pub(crate) state: super::manager::TreeLodState,
 }
 
 /// The time-critical mixed level of detail (seed 001, ch. 8; [`crate::forest::mixed`]): every

@@ -22,7 +22,7 @@ use super::feedback::ExponentController;
 use super::manager::{Budget, ForestManager, Frustum, ManagerSettings, TreeInput, TreeLodState};
 use super::mixed::{MixedReport, MixedTree, Representation, select};
 use crate::impostor::assets::BillboardCloudAsset;
-use crate::impostor::systems::TreeImpostor;
+use crate::impostor::systems::{ImpostorSettings, TreeImpostor};
 use crate::pruning::bake::BakedFoliage;
 use crate::pruning::components::{
     FoliageCamera, FoliageShadowLight, ManagedPruning, PrunedFoliage, PruningParams,
@@ -91,6 +91,34 @@ impl Default for ForestState {
             mixed_choices: Vec::new(),
             mixed_last: MixedReport::default(),
         }
+    }
+}
+
+impl ForestState {
+    /// The index of tree type `id`, registering it (its crown sphere and an empty cache) when new.
+    fn type_of(
+        &mut self,
+        id: AssetId<BakedFoliage>,
+        data: &BakedFoliage,
+        settings: &ForestSettings,
+    ) -> usize {
+        if let Some(ty) = self.types.iter().position(|t| *t == id) {
+            return ty;
+        }
+        self.types.push(id);
+        self.type_spheres
+            .push((data.crown_center(), data.crown_radius()));
+        let mut cache = self.manager.caches.first().cloned().unwrap_or_else(|| {
+            let slots = settings.lod_slots().unwrap_or(LodSlots::uniform(8));
+            super::cache::LodCache::new(
+                slots,
+                settings.max_age_frames as u64,
+                settings.double_buffered,
+            )
+        });
+        cache.clear();
+        self.manager.caches.push(cache);
+        self.types.len() - 1
     }
 }
 
@@ -190,49 +218,53 @@ pub fn run_forest_manager(
 
     // Gather the trees (new types get a cache).
     state.inputs.clear();
-    let previous: HashMap<Entity, TreeLodState> = state
-        .entities
-        .iter()
-        .copied()
-        .zip(state.states.iter().copied())
-        .collect();
     state.entities.clear();
     state.states.clear();
     state.mixed_costs.clear();
-    for (entity, tree, transform, .., impostor) in &trees {
-        let Some(data) = baked.get(&tree.baked) else {
-            continue;
-        };
-        state.mixed_costs.push((
-            (data.indices.len() / 3) as u32,
-            impostor
-                .and_then(|i| clouds.get(&i.0))
-                .map(|c| c.planes * 2),
-        ));
+    // Assets are looked up once per type and impostor per frame, not once per tree: at 100,000
+    // trees the per-tree lookups were most of the manager's CPU time.
+    let mut known_types: Vec<(AssetId<BakedFoliage>, Option<(usize, u32)>)> = Vec::new();
+    let mut known_clouds: Vec<(AssetId<BillboardCloudAsset>, Option<u32>)> = Vec::new();
+    for (entity, tree, transform, lod, _, impostor) in &trees {
         let id = tree.baked.id();
-        let ty = match state.types.iter().position(|t| *t == id) {
-            Some(ty) => ty,
+        let known = match known_types.iter().find(|(t, _)| *t == id) {
+            Some(&(_, known)) => known,
             None => {
-                state.types.push(id);
-                state
-                    .type_spheres
-                    .push((data.crown_center(), data.crown_radius()));
-                let template = state.manager.caches.first().cloned().unwrap_or_else(|| {
-                    let slots = settings.lod_slots().unwrap_or(LodSlots::uniform(8));
-                    super::cache::LodCache::new(
-                        slots,
-                        settings.max_age_frames as u64,
-                        settings.double_buffered,
+                let known = baked.get(id).map(|data| {
+                    (
+                        state.type_of(id, data, &settings),
+                        data.indices.len() as u32 / 3,
                     )
                 });
-                let mut cache = template;
-                cache.clear();
-                state.manager.caches.push(cache);
-                state.types.len() - 1
+                known_types.push((id, known));
+                known
             }
         };
+        let Some((ty, leaf_triangles)) = known else {
+            continue;
+        };
+        let cloud_triangles = impostor.and_then(|i| {
+            let id = i.0.id();
+            match known_clouds.iter().find(|(c, _)| *c == id) {
+                Some(&(_, triangles)) => triangles,
+                None => {
+                    let triangles = clouds.get(id).map(|c| c.planes * 2);
+                    known_clouds.push((id, triangles));
+                    triangles
+                }
+            }
+        });
+        state.mixed_costs.push((leaf_triangles, cloud_triangles));
         let affine = transform.affine();
-        let scale = transform.scale().abs().max_element();
+        // The largest axis scale: the longest basis column (what `scale().abs().max_element()`
+        // gives, without decomposing the rotation).
+        let scale = affine
+            .matrix3
+            .x_axis
+            .length_squared()
+            .max(affine.matrix3.y_axis.length_squared())
+            .max(affine.matrix3.z_axis.length_squared())
+            .sqrt();
         let (crown_center, crown_radius) = state.type_spheres[ty];
         let (center, radius) = if affine.is_finite() && scale > 0.0 {
             (affine.transform_point3(crown_center), crown_radius * scale)
@@ -242,9 +274,8 @@ pub fn run_forest_manager(
         };
         state.inputs.push(TreeInput { ty, center, radius });
         state.entities.push(entity);
-        state
-            .states
-            .push(previous.get(&entity).copied().unwrap_or_default());
+        // What the manager remembers of it, kept on the tree itself.
+        state.states.push(lod.state);
     }
 
     // A forest with no trees left holds no extractions: nothing is pruned for it.
@@ -453,12 +484,15 @@ pub fn run_forest_manager(
         });
     }
 
-    // Write back the per-tree state.
-    for (i, &entity) in state.entities.iter().enumerate() {
-        let Ok((_, _, _, mut lod, mut visibility, _)) = trees.get_mut(entity) else {
+    // Write back the per-tree state, walking the query in the order the trees were gathered.
+    let mut i = 0;
+    for (entity, _, _, mut lod, mut visibility, _) in &mut trees {
+        if state.entities.get(i) != Some(&entity) {
+            // Skipped when gathered (its baked data is not loaded).
             continue;
-        };
+        }
         let s = state.states[i];
+        i += 1;
         let new = TreeLod {
             slot: s.slot.map(|x| x as u32),
             stored_lod: s.stored_lod,
@@ -467,6 +501,7 @@ pub fn run_forest_manager(
             urgency: s.urgency,
             visible: s.visible,
             impostor_weight: s.impostor_weight,
+            state: s,
         };
         if *lod != new {
             *lod = new;
@@ -556,6 +591,30 @@ fn choose_mixed_lods(
     state.manager.desired_override = desired;
 }
 
+/// With [`ImpostorSettings::show_representation`], the tints of trees drawn by leaf geometry, by
+/// LoD band ([`geometry_band`]): full detail blue, then cyan, green and magenta as pruning keeps
+/// fewer leaves. Billboard clouds are tinted orange.
+pub const GEOMETRY_TINTS: [Color; 4] = [
+    Color::srgb(0.25, 0.45, 1.0),
+    Color::srgb(0.2, 0.9, 0.9),
+    Color::srgb(0.35, 0.9, 0.2),
+    Color::srgb(0.9, 0.3, 0.9),
+];
+
+/// The LoD band of leaf geometry drawn at `lod`, an index into [`GEOMETRY_TINTS`]: 0 full detail,
+/// 1 from one half, 2 from one quarter, 3 below.
+pub fn geometry_band(lod: f32) -> usize {
+    if lod >= 0.999 {
+        0
+    } else if lod >= 0.5 {
+        1
+    } else if lod >= 0.25 {
+        2
+    } else {
+        3
+    }
+}
+
 /// Points every shown forest tree at the extraction it draws: its `MeshTag` (the extraction's
 /// instance slot) and the slot mesh that fits the extraction's kept count.
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
@@ -568,6 +627,9 @@ pub fn draw_forest_trees(
     mut meshes: ResMut<Assets<Mesh>>,
     mut diagnostics: Diagnostics,
     extractions: Query<(&FoliageSlot, &PruningParams, &PrunedFoliage), With<ManagedPruning>>,
+    impostor_settings: Option<Res<ImpostorSettings>>,
+    mut leaf_materials: ResMut<Assets<LeafMaterial>>,
+    mut tinted: Local<Vec<(AssetId<LeafMaterial>, usize, Handle<LeafMaterial>)>>,
     trees: Query<(
         Entity,
         &ForestTree,
@@ -579,15 +641,33 @@ pub fn draw_forest_trees(
     )>,
 ) {
     let per_tree = settings.enabled && !settings.borrowing;
-    let index: HashMap<Entity, usize> = state
-        .entities
-        .iter()
-        .enumerate()
-        .map(|(i, e)| (*e, i))
-        .collect();
+    // Each tree's index in the manager's lists: found by walking in step (both queries visit the
+    // trees in the same order unless one changed archetype in between), by a map otherwise.
+    let mut index: Option<HashMap<Entity, usize>> = None;
+    let mut cursor = 0;
     let mut kept_cache: HashMap<Entity, (u32, u32, u32, u32)> = HashMap::default();
     let (mut triangles, mut visible) = (0u64, 0u32);
     for (entity, tree, lod, visibility, tag, mesh, material) in &trees {
+        let i = if state.entities.get(cursor) == Some(&entity) {
+            cursor += 1;
+            cursor - 1
+        } else {
+            let map = index.get_or_insert_with(|| {
+                state
+                    .entities
+                    .iter()
+                    .enumerate()
+                    .map(|(i, e)| (*e, i))
+                    .collect()
+            });
+            match map.get(&entity) {
+                Some(&i) => {
+                    cursor = i + 1;
+                    i
+                }
+                None => continue,
+            }
+        };
         if *visibility == Visibility::Hidden {
             continue;
         }
@@ -597,9 +677,6 @@ pub fn draw_forest_trees(
         if slot == SLOT_LOD_ZERO {
             continue;
         }
-        let Some(&i) = index.get(&entity) else {
-            continue;
-        };
         let s = state.states[i];
         let ty = state.inputs[i].ty;
         let key = if per_tree {
@@ -632,8 +709,30 @@ pub fn draw_forest_trees(
         if mesh.map(|m| m.0.id()) != Some(handle.id()) {
             e.insert((Mesh3d(handle), NoFrustumCulling));
         }
-        if material.map(|m| m.0.id()) != Some(tree.material.id()) {
-            e.insert(MeshMaterial3d(tree.material.clone()));
+        let show = impostor_settings
+            .as_ref()
+            .is_some_and(|i| i.show_representation);
+        let wanted = if show {
+            // The tree's own material tinted by the LoD band it draws (one copy per band).
+            let band = geometry_band(s.stored_lod);
+            let source = tree.material.id();
+            match tinted.iter().find(|(m, b, _)| *m == source && *b == band) {
+                Some((.., handle)) => handle.clone(),
+                None => {
+                    let mut m = leaf_materials.get(source).cloned().unwrap_or_else(|| {
+                        crate::pruning::material::leaf_material(StandardMaterial::default())
+                    });
+                    m.base.base_color = GEOMETRY_TINTS[band];
+                    let handle = leaf_materials.add(m);
+                    tinted.push((source, band, handle.clone()));
+                    handle
+                }
+            }
+        } else {
+            tree.material.clone()
+        };
+        if material.map(|m| m.0.id()) != Some(wanted.id()) {
+            e.insert(MeshMaterial3d(wanted));
         }
     }
     // Kept-index bytes of the extraction regions (each holds up to its type's full count).

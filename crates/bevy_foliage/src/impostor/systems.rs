@@ -61,7 +61,9 @@ pub struct ImpostorSettings {
     pub enabled: bool,
     /// Width of the cross-fade band before `far`, as a fraction of `far` (world distance).
     pub fade_band: f32,
-    /// Tint impostors orange, to see which trees they draw.
+    /// Colour-code each tree by what draws it: billboard clouds orange, leaf geometry by LoD band
+    /// ([`GEOMETRY_TINTS`](crate::forest::systems::GEOMETRY_TINTS): full detail blue, pruned
+    /// cyan, green, magenta).
     pub show_representation: bool,
 }
 
