@@ -33,6 +33,10 @@ pub struct ScreenSpaceSoftShadows {
     /// point it would be on the centre pixel's tangent plane, instead of being dropped — this
     /// removes light leaks around blockers that hide their own shadow from the camera.
     pub lazy_shadowing: bool,
+    /// Blur only the 8×8 screen tiles where the blur can change a pixel (`ssss::tiles`): near
+    /// shadow edges, within the kernels' reach. The result is the same as blurring every pixel
+    /// (off: every tile is blurred, to compare or measure).
+    pub tile_classification: bool,
 }
 
 impl Default for ScreenSpaceSoftShadows {
@@ -45,6 +49,7 @@ impl Default for ScreenSpaceSoftShadows {
             depth_rejection: 0.05,
             taps_per_side: 5,
             lazy_shadowing: true,
+            tile_classification: true,
         }
     }
 }

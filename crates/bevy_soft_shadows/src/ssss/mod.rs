@@ -16,6 +16,7 @@ pub mod distance;
 pub mod kernel;
 pub mod min_filter;
 pub mod penumbra;
+pub mod tiles;
 
 pub mod receiver;
 pub mod render;

@@ -18,7 +18,8 @@ use bevy::prelude::*;
 use bevy::render::diagnostic::RecordDiagnostics;
 use bevy::render::render_asset::RenderAssets;
 use bevy::render::render_resource::binding_types::{
-    texture_2d, texture_2d_array, texture_storage_2d_array, uniform_buffer,
+    storage_buffer_read_only_sized, storage_buffer_sized, texture_2d, texture_2d_array,
+    texture_storage_2d_array, uniform_buffer,
 };
 use bevy::render::render_resource::*;
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery};
@@ -54,6 +55,8 @@ pub struct SsssUniform {
     pub light_index: u32,
     /// For a spot light, the coarse dilation radius `R` (`min_filter::spot_coarse_radius`).
     pub spot_radius: u32,
+    /// 1: blur every screen tile; 0: only the active ones ([`super::tiles`]).
+    pub all_tiles: u32,
 }
 
 /// [`SsssUniform::light_kind`] of a directional light (`ssss_types.wgsl`).
@@ -76,6 +79,7 @@ impl SsssUniform {
             light_kind: LIGHT_KIND_DIRECTIONAL,
             light_index: 0,
             spot_radius: 0,
+            all_tiles: (!s.tile_classification) as u32,
         }
     }
 }
@@ -91,6 +95,63 @@ pub struct SsssDilationReadback {
     pub coarse: Option<(Buffer, UVec2)>,
     /// The form of the min filter that made it: `Direct` or `Segments`.
     pub filter: Option<SsssDilationFilter>,
+}
+
+/// Insert into the render world to get, after the next frame, copies of the tile
+/// classification's output: the indirect draw arguments of the blur passes (four `u32`: vertex
+/// count, active tile count, 0, 0) and the active tile list (`x | y << 16` each, in no particular
+/// order; only the first count are valid), with the tile grid — for tests against
+/// [`tiles::active_tiles`](super::tiles::active_tiles) and for the active-tile fraction.
+#[derive(Resource, Default, Clone)]
+pub struct SsssTileReadback {
+    /// The draw arguments.
+    pub args: Option<Buffer>,
+    /// The tile list.
+    pub list: Option<Buffer>,
+    /// Tiles across and down.
+    pub grid: UVec2,
+}
+
+/// The classification's buffers, sized to the screen's tile grid.
+#[derive(Resource, Default)]
+struct SsssTileBuffers {
+    grid: UVec2,
+    stats: Option<Buffer>,
+    list: Option<Buffer>,
+    args: Option<Buffer>,
+}
+
+fn prepare_tile_buffers(
+    device: Res<RenderDevice>,
+    extracted: Res<ExtractedSsss>,
+    mut buffers: ResMut<SsssTileBuffers>,
+) {
+    let size = extracted.textures.size.max(UVec2::ONE);
+    let tile = super::tiles::TILE as u32;
+    let grid = UVec2::new(size.x.div_ceil(tile), size.y.div_ceil(tile));
+    if buffers.grid == grid && buffers.args.is_some() {
+        return;
+    }
+    let tiles = (grid.x * grid.y) as u64;
+    let buffer = |label: &'static str, size: u64, usage: BufferUsages| {
+        Some(device.create_buffer(&BufferDescriptor {
+            label: Some(label),
+            size,
+            usage: usage | BufferUsages::STORAGE | BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        }))
+    };
+    *buffers = SsssTileBuffers {
+        grid,
+        // `TileStats`: eight 4-byte fields.
+        stats: buffer("ssss_tile_stats", tiles * 32, BufferUsages::empty()),
+        list: buffer("ssss_tile_list", tiles * 4, BufferUsages::empty()),
+        args: buffer(
+            "ssss_tile_draw_args",
+            16,
+            BufferUsages::INDIRECT | BufferUsages::COPY_DST,
+        ),
+    };
 }
 
 #[derive(Resource, Default)]
@@ -196,6 +257,10 @@ struct SsssPipelines {
     /// The direct filter along rows, then columns.
     dilate_direct: [CachedComputePipelineId; 2],
     copy_shadow: CachedComputePipelineId,
+    tiles_layout: BindGroupLayoutDescriptor,
+    /// Tile statistics, then the active tile list (`tiles.wgsl`).
+    tile_reduce: CachedComputePipelineId,
+    tile_classify: CachedComputePipelineId,
 }
 
 fn init_pipelines(
@@ -227,11 +292,38 @@ fn init_pipelines(
             (
                 texture_2d_array(unfiltered),
                 uniform_buffer::<SsssUniform>(false),
+                // The tile quads' vertex stage reads the screen size from it.
+                texture_2d(unfiltered).visibility(ShaderStages::VERTEX_FRAGMENT),
                 texture_2d(unfiltered),
-                texture_2d(unfiltered),
+                storage_buffer_read_only_sized(false, None).visibility(ShaderStages::VERTEX),
             ),
         ),
     );
+    let tiles_layout = BindGroupLayoutDescriptor::new(
+        "ssss_tiles_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::COMPUTE,
+            (
+                texture_2d(unfiltered),
+                uniform_buffer::<SsssUniform>(false),
+                storage_buffer_sized(false, None),
+                storage_buffer_sized(false, None),
+                storage_buffer_sized(false, None),
+            ),
+        ),
+    );
+    let tiles_shader = load_embedded_asset!(asset_server.as_ref(), "tiles.wgsl");
+    let tile_pipeline = |entry: &'static str| {
+        pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
+            label: Some(format!("ssss_tiles_{entry}").into()),
+            layout: vec![tiles_layout.clone()],
+            shader: tiles_shader.clone(),
+            entry_point: Some(entry.into()),
+            ..default()
+        })
+    };
+    let tile_reduce = tile_pipeline("reduce");
+    let tile_classify = tile_pipeline("classify");
     let dilate_shader = load_embedded_asset!(asset_server.as_ref(), "min_filter.wgsl");
     let queue = |entry: &'static str| {
         pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
@@ -261,6 +353,9 @@ fn init_pipelines(
         dilate_passes,
         dilate_direct,
         copy_shadow,
+        tiles_layout,
+        tile_reduce,
+        tile_classify,
     });
 }
 
@@ -279,12 +374,44 @@ impl SpecializedRenderPipeline for SsssPipelines {
             shader_defs.push("MULTISAMPLED".into());
         }
         let layout = self.mesh_pipeline.get_view_layout(key.into());
-        let (entry, format, label) = match pass {
-            SsssPass::Distance => ("distance", TextureFormat::Rgba32Float, "ssss_distance"),
-            SsssPass::BlurHorizontal => {
-                ("blur_horizontal", TextureFormat::Rg32Float, "ssss_blur_h")
-            }
-            SsssPass::BlurVertical => ("blur_vertical", TextureFormat::Rg32Float, "ssss_blur_v"),
+        let target = |format| {
+            Some(ColorTargetState {
+                format,
+                blend: None,
+                write_mask: ColorWrites::ALL,
+            })
+        };
+        // The distance pass covers the screen and also writes both blur targets (what a tile
+        // the blur skips keeps); the blur passes draw one quad per active tile.
+        let tile_quads = VertexState {
+            shader: self.shader.clone(),
+            shader_defs: shader_defs.clone(),
+            entry_point: Some("tile_vertex".into()),
+            buffers: vec![],
+        };
+        let (entry, vertex, targets, label) = match pass {
+            SsssPass::Distance => (
+                "distance",
+                self.fullscreen.to_vertex_state(),
+                vec![
+                    target(TextureFormat::Rgba32Float),
+                    target(TextureFormat::Rg32Float),
+                    target(TextureFormat::Rg32Float),
+                ],
+                "ssss_distance",
+            ),
+            SsssPass::BlurHorizontal => (
+                "blur_horizontal",
+                tile_quads,
+                vec![target(TextureFormat::Rg32Float)],
+                "ssss_blur_h",
+            ),
+            SsssPass::BlurVertical => (
+                "blur_vertical",
+                tile_quads,
+                vec![target(TextureFormat::Rg32Float)],
+                "ssss_blur_v",
+            ),
         };
         RenderPipelineDescriptor {
             label: Some(label.into()),
@@ -293,16 +420,12 @@ impl SpecializedRenderPipeline for SsssPipelines {
                 layout.binding_array_layout,
                 self.screen_layout.clone(),
             ],
-            vertex: self.fullscreen.to_vertex_state(),
+            vertex,
             fragment: Some(FragmentState {
                 shader: self.shader.clone(),
                 shader_defs,
                 entry_point: Some(entry.into()),
-                targets: vec![Some(ColorTargetState {
-                    format,
-                    blend: None,
-                    write_mask: ColorWrites::ALL,
-                })],
+                targets,
             }),
             ..default()
         }
@@ -426,6 +549,8 @@ fn ssss(
     light_meta: Res<LightMeta>,
     images: Res<RenderAssets<GpuImage>>,
     readback: Option<ResMut<SsssDilationReadback>>,
+    tile_readback: Option<ResMut<SsssTileReadback>>,
+    tile_buffers: Res<SsssTileBuffers>,
     filter: Option<Res<SsssDilationFilter>>,
     mut ctx: RenderContext,
 ) {
@@ -453,6 +578,11 @@ fn ssss(
         Some(distance),
         Some(horizontal),
         Some(visibility),
+        Some(tile_reduce),
+        Some(tile_classify),
+        Some(tile_stats),
+        Some(tile_list),
+        Some(tile_args),
     ) = (
         pipeline_cache.get_compute_pipeline(pipelines.dilate_reduce),
         pipeline_cache.get_compute_pipeline(pipelines.dilate_passes[0]),
@@ -467,6 +597,11 @@ fn ssss(
         images.get(&extracted.textures.distance),
         images.get(&extracted.textures.horizontal),
         images.get(&extracted.textures.visibility),
+        pipeline_cache.get_compute_pipeline(pipelines.tile_reduce),
+        pipeline_cache.get_compute_pipeline(pipelines.tile_classify),
+        tile_buffers.stats.as_ref(),
+        tile_buffers.list.as_ref(),
+        tile_buffers.args.as_ref(),
     )
     else {
         return;
@@ -527,14 +662,33 @@ fn ssss(
                 uniform_binding.clone(),
                 distances,
                 blur_in,
+                tile_list.as_entire_binding(),
             )),
         )
     };
-    // The distance pass may not sample its own target: it binds the horizontal texture there
-    // (unused by its shader).
-    let distance_group = screen_group(&horizontal.texture_view, &horizontal.texture_view);
+    // The distance pass may not sample its own targets: it binds a 1×1 texture there (unused
+    // by its shader).
+    let unused = dilation
+        .scan_sink
+        .texture
+        .create_view(&TextureViewDescriptor {
+            dimension: Some(TextureViewDimension::D2),
+            ..default()
+        });
+    let distance_group = screen_group(&unused, &unused);
     let blur_h_group = screen_group(&distance.texture_view, &distance.texture_view);
     let blur_v_group = screen_group(&distance.texture_view, &horizontal.texture_view);
+    let tiles_group = device.create_bind_group(
+        "ssss_tiles",
+        &pipeline_cache.get_bind_group_layout(&pipelines.tiles_layout),
+        &BindGroupEntries::sequential((
+            &distance.texture_view,
+            uniform_binding.clone(),
+            tile_stats.as_entire_binding(),
+            tile_list.as_entire_binding(),
+            tile_args.as_entire_binding(),
+        )),
+    );
 
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
@@ -563,27 +717,68 @@ fn ssss(
         }
         span.end(&mut pass);
     }
+    // The distance pass: every pixel, writing the distance map and, into both blur targets,
+    // what a pixel the blur leaves alone keeps.
+    let attachment = |view, load| {
+        Some(RenderPassColorAttachment {
+            view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: Operations {
+                load,
+                store: StoreOp::Store,
+            },
+        })
+    };
+    {
+        let clear = LoadOp::Clear(LinearRgba::NONE.into());
+        let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+            label: Some("ssss_distance"),
+            color_attachments: &[
+                attachment(&distance.texture_view, clear),
+                attachment(&horizontal.texture_view, clear),
+                attachment(&visibility.texture_view, clear),
+            ],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        let span = diagnostics.pass_span(&mut pass, "ssss_distance");
+        pass.set_render_pipeline(distance_pipeline);
+        pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
+        pass.set_bind_group(1, &mesh_view.binding_array, &[]);
+        pass.set_bind_group(2, &distance_group, &[]);
+        pass.draw(0..3, 0..1);
+        span.end(&mut pass);
+    }
+    // The classification: tile statistics, then the active tiles appended to the draw
+    // arguments' instance count (cleared first).
+    ctx.command_encoder().clear_buffer(tile_args, 0, None);
+    {
+        let grid = tile_buffers.grid;
+        let mut pass = ctx
+            .command_encoder()
+            .begin_compute_pass(&ComputePassDescriptor {
+                label: Some("ssss_tiles"),
+                timestamp_writes: None,
+            });
+        let span = diagnostics.pass_span(&mut pass, "ssss_tiles");
+        pass.set_bind_group(0, &tiles_group, &[]);
+        pass.set_pipeline(tile_reduce);
+        pass.dispatch_workgroups(grid.x, grid.y, 1);
+        pass.set_pipeline(tile_classify);
+        pass.dispatch_workgroups((grid.x * grid.y).div_ceil(64), 1, 1);
+        span.end(&mut pass);
+    }
+    // The blur passes: one quad per active tile, over what the distance pass wrote.
     for (label, pipeline, group, target) in [
-        (
-            "ssss_distance",
-            distance_pipeline,
-            &distance_group,
-            distance,
-        ),
         ("ssss_blur_h", blur_h_pipeline, &blur_h_group, horizontal),
         ("ssss_blur_v", blur_v_pipeline, &blur_v_group, visibility),
     ] {
         let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
             label: Some(label),
-            color_attachments: &[Some(RenderPassColorAttachment {
-                view: &target.texture_view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: Operations {
-                    load: LoadOp::Clear(Default::default()),
-                    store: StoreOp::Store,
-                },
-            })],
+            color_attachments: &[attachment(&target.texture_view, LoadOp::Load)],
             depth_stencil_attachment: None,
             timestamp_writes: None,
             occlusion_query_set: None,
@@ -594,8 +789,24 @@ fn ssss(
         pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
         pass.set_bind_group(1, &mesh_view.binding_array, &[]);
         pass.set_bind_group(2, group, &[]);
-        pass.draw(0..3, 0..1);
+        pass.draw_indirect(tile_args, 0);
         span.end(&mut pass);
+    }
+    if let Some(mut tile_readback) = tile_readback {
+        let copy = |ctx: &mut RenderContext, source: &Buffer, label: &'static str| {
+            let buffer = ctx.render_device().create_buffer(&BufferDescriptor {
+                label: Some(label),
+                size: source.size(),
+                usage: BufferUsages::COPY_SRC | BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            ctx.command_encoder()
+                .copy_buffer_to_buffer(source, 0, &buffer, 0, source.size());
+            buffer
+        };
+        tile_readback.args = Some(copy(&mut ctx, tile_args, "ssss_tile_args_copy"));
+        tile_readback.list = Some(copy(&mut ctx, tile_list, "ssss_tile_list_copy"));
+        tile_readback.grid = tile_buffers.grid;
     }
     if let Some(mut readback) = readback {
         readback.filter = Some(if direct {
@@ -727,6 +938,7 @@ pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "ssss_types.wgsl");
     embedded_asset!(app, "min_filter.wgsl");
     embedded_asset!(app, "ssss.wgsl");
+    embedded_asset!(app, "tiles.wgsl");
     app.add_plugins(bevy::render::extract_component::ExtractComponentPlugin::<
         SoftShadowCamera,
     >::default())
@@ -746,6 +958,7 @@ pub(crate) fn build(app: &mut App) {
     render_app
         .init_resource::<ExtractedSsss>()
         .init_resource::<SsssUniformBuffer>()
+        .init_resource::<SsssTileBuffers>()
         .init_resource::<SpecializedRenderPipelines<SsssPipelines>>()
         .add_systems(RenderStartup, init_pipelines.after(MeshPipelineSystems))
         .add_systems(ExtractSchedule, extract_ssss)
@@ -753,7 +966,8 @@ pub(crate) fn build(app: &mut App) {
             Render,
             (
                 prepare_pipelines.in_set(RenderSystems::Prepare),
-                (prepare_uniform, prepare_dilation).in_set(RenderSystems::PrepareResources),
+                (prepare_uniform, prepare_dilation, prepare_tile_buffers)
+                    .in_set(RenderSystems::PrepareResources),
             ),
         )
         .add_systems(

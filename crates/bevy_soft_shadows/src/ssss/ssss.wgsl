@@ -5,10 +5,13 @@
 //   shadow map, the penumbra width by eq. 6.1 (a spot light, or its limit for a light at
 //   infinity) and eq. 6.2 (in pixels), and
 //   the kernel's σ along x and y from the surface normal; written as (hard, σx, σy, eye depth).
+//   It also writes the hard visibility into both blur targets: a tile the blur cannot change
+//   keeps it (`ssss::tiles`).
 // - `blur_horizontal`, `blur_vertical`: the separable Gaussian with depth rejection and lazy
-//   shadowing.
+//   shadowing, drawn as one 8×8 quad per active tile (`tile_vertex`, an indirect draw whose
+//   instance count the classification pass `ssss_tiles.wgsl` wrote).
 //
-// CPU references: `ssss::penumbra`, `ssss::kernel`, `ssss::blur`.
+// CPU references: `ssss::penumbra`, `ssss::kernel`, `ssss::blur`, `ssss::tiles`.
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_pbr::{
     mesh_view_bindings as view_bindings,
@@ -23,12 +26,43 @@
 #import bevy_render::maths::orthonormalize
 #import bevy_soft_shadows::ssss_types::{
     SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS, MAX_DILATION_TEXELS, DILATION_BLOCK, LIGHT_KIND_SPOT,
+    TILE,
 }
 
 @group(2) @binding(0) var dilated: texture_2d_array<f32>;
 @group(2) @binding(1) var<uniform> ssss: SsssUniform;
 @group(2) @binding(2) var distances: texture_2d<f32>;
 @group(2) @binding(3) var blur_in: texture_2d<f32>;
+// The active tiles, `x | y << 16` (`ssss_tiles.wgsl`).
+@group(2) @binding(4) var<storage, read> active_tiles: array<u32>;
+
+// One quad per active tile: instance `i` covers tile `active_tiles[i]`, clipped to the screen.
+@vertex
+fn tile_vertex(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> FullscreenVertexOutput {
+    let packed = active_tiles[instance];
+    let tile = vec2(packed & 0xffffu, packed >> 16u);
+    // Two triangles: (0,0) (1,0) (0,1) and (0,1) (1,0) (1,1).
+    var corners = array(vec2(0u, 0u), vec2(1u, 0u), vec2(0u, 1u), vec2(0u, 1u), vec2(1u, 0u), vec2(1u, 1u));
+    let size = textureDimensions(distances);
+    let px = vec2<f32>(min((tile + corners[vertex % 6u]) * TILE, size));
+    let uv = px / vec2<f32>(size);
+    var out: FullscreenVertexOutput;
+    out.position = vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, 0.0, 1.0);
+    out.uv = uv;
+    return out;
+}
+
+// What a pixel is when the blur does not change it (the blur passes' results for σ = 0, or with
+// SSSS off: −1 for the receivers).
+struct DistanceOutput {
+    @location(0) distance: vec4<f32>,
+    @location(1) horizontal: vec4<f32>,
+    @location(2) visibility: vec4<f32>,
+}
+
+fn receiver_light() -> f32 {
+    return select(-1.0, f32(ssss.light_index), ssss.light_kind == LIGHT_KIND_SPOT);
+}
 
 // The SSSS light: a spot light's clustered index, or the first shadow-casting directional light.
 fn ssss_light() -> u32 {
@@ -144,7 +178,18 @@ fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>) -> f32 {
 }
 
 @fragment
-fn distance(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+fn distance(in: FullscreenVertexOutput) -> DistanceOutput {
+    let d = distance_map(in);
+    // The blur passes' results where they leave the pixel as it is.
+    let hard = select(d.x, -1.0, ssss.enabled == 0u);
+    var out: DistanceOutput;
+    out.distance = d;
+    out.horizontal = vec4(hard, d.w, 0.0, 1.0);
+    out.visibility = vec4(hard, receiver_light(), 0.0, 1.0);
+    return out;
+}
+
+fn distance_map(in: FullscreenVertexOutput) -> vec4<f32> {
     let frag = vec4(in.position.xy, 0.0, 1.0);
     let depth = prepass_depth(frag, 0u);
     let i = ssss_light();
@@ -287,6 +332,5 @@ fn blur_horizontal(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
 // for the directional light (`receiver_functions::apply_soft_shadow`).
 @fragment
 fn blur_vertical(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    let light = select(-1.0, f32(ssss.light_index), ssss.light_kind == LIGHT_KIND_SPOT);
-    return vec4(blur(in, vec2(0, 1), 2u, 1u), light, 0.0, 1.0);
+    return vec4(blur(in, vec2(0, 1), 2u, 1u), receiver_light(), 0.0, 1.0);
 }

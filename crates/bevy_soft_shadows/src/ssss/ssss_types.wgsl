@@ -18,6 +18,8 @@ struct SsssUniform {
     light_index: u32,
     // A spot light's coarse dilation radius (`ssss::min_filter::spot_coarse_radius`).
     spot_radius: u32,
+    // 1: blur every screen tile; 0: only the active ones (`ssss::tiles`).
+    all_tiles: u32,
 }
 
 const LIGHT_KIND_DIRECTIONAL: u32 = 0u;
@@ -30,3 +32,7 @@ const DILATION_BLOCK: u32 = 4u;
 const NO_LIGHT: u32 = 0xffffffffu;
 // Kernel reach in standard deviations (`ssss::kernel::KERNEL_REACH_SIGMAS`).
 const KERNEL_REACH_SIGMAS: f32 = 2.5;
+// Side of a screen tile of the classification (`ssss::tiles::TILE`).
+const TILE: u32 = 8u;
+// `ssss::tiles::DEPTH_RANGE_MARGIN`.
+const DEPTH_RANGE_MARGIN: f32 = 0.99;

@@ -1,0 +1,147 @@
+// Tile classification of SSSS (CPU reference: `ssss::tiles`): which 8×8 screen tiles the blur
+// passes must run on.
+//
+// - `reduce`: one workgroup per tile reads the distance map (hard, σx, σy, eye depth) and writes
+//   the tile's statistics: hard visibility range, depth range, background, kernel reaches.
+// - `classify`: one invocation per tile gathers the statistics of the region the two blur passes
+//   read from it (the vertical reach of its pixels, then the horizontal reach of each tile row
+//   met) and appends the tile to the active list — the instance count of an indirect draw —
+//   unless the blur cannot change any of its pixels.
+#import bevy_soft_shadows::ssss_types::{SsssUniform, TILE, KERNEL_REACH_SIGMAS, DEPTH_RANGE_MARGIN}
+
+// Mirrors `ssss::tiles::TileStats`.
+struct TileStats {
+    hard_min: f32,
+    hard_max: f32,
+    depth_min: f32,
+    depth_max: f32,
+    reach_x: u32,
+    reach_y: u32,
+    background: u32,
+    padding: u32,
+}
+
+// `DrawIndirectArgs`: six vertices (two triangles) per active tile.
+struct TileArgs {
+    vertex_count: u32,
+    instance_count: atomic<u32>,
+    first_vertex: u32,
+    first_instance: u32,
+}
+
+@group(0) @binding(0) var distances: texture_2d<f32>;
+@group(0) @binding(1) var<uniform> ssss: SsssUniform;
+@group(0) @binding(2) var<storage, read_write> stats: array<TileStats>;
+@group(0) @binding(3) var<storage, read_write> tiles: array<u32>;
+@group(0) @binding(4) var<storage, read_write> args: TileArgs;
+
+const F32_MAX: f32 = 3.40282347e38;
+
+var<workgroup> partial: array<TileStats, 64>;
+
+fn tile_grid() -> vec2<u32> {
+    return (textureDimensions(distances) + vec2(TILE - 1u)) / TILE;
+}
+
+// `tiles::kernel_reach`: the largest tap offset of a kernel of σ px.
+fn kernel_reach(sigma: f32) -> u32 {
+    if sigma > 0.0 {
+        return u32(ceil(KERNEL_REACH_SIGMAS * sigma));
+    }
+    return 0u;
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn reduce(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+    @builtin(workgroup_id) tile: vec3<u32>,
+) {
+    var s = TileStats(F32_MAX, -F32_MAX, F32_MAX, 0.0, 0u, 0u, 0u, 0u);
+    if all(id.xy < textureDimensions(distances)) {
+        let d = textureLoad(distances, id.xy, 0);
+        s.hard_min = d.x;
+        s.hard_max = d.x;
+        if d.w > 0.0 {
+            s.depth_min = d.w;
+            s.depth_max = d.w;
+        } else {
+            s.background = 1u;
+        }
+        s.reach_x = kernel_reach(d.y);
+        s.reach_y = kernel_reach(d.z);
+    }
+    partial[local] = s;
+    workgroupBarrier();
+    if local != 0u {
+        return;
+    }
+    for (var i = 1u; i < 64u; i += 1u) {
+        let p = partial[i];
+        s.hard_min = min(s.hard_min, p.hard_min);
+        s.hard_max = max(s.hard_max, p.hard_max);
+        s.depth_min = min(s.depth_min, p.depth_min);
+        s.depth_max = max(s.depth_max, p.depth_max);
+        s.reach_x = max(s.reach_x, p.reach_x);
+        s.reach_y = max(s.reach_y, p.reach_y);
+        s.background = max(s.background, p.background);
+    }
+    stats[tile.y * tile_grid().x + tile.x] = s;
+}
+
+// `tiles::tile_span`: the tiles covering pixels `tile·TILE − reach ..= tile·TILE + TILE − 1 +
+// reach`.
+fn tile_span(tile: u32, reach: u32, count: u32) -> vec2<u32> {
+    let start = i32(tile * TILE);
+    let first = max(start - i32(reach), 0) / i32(TILE);
+    let last = min((start + i32(TILE) - 1 + i32(reach)) / i32(TILE), i32(count) - 1);
+    return vec2(u32(first), u32(last));
+}
+
+// `tiles::is_active`.
+fn is_active(x: u32, y: u32, grid: vec2<u32>) -> bool {
+    let own = stats[y * grid.x + x];
+    if own.reach_x == 0u && own.reach_y == 0u {
+        return false;
+    }
+    var hard_min = F32_MAX;
+    var hard_max = -F32_MAX;
+    var depth_min = F32_MAX;
+    var depth_max = 0.0;
+    var background = 0u;
+    let rows = tile_span(y, own.reach_y, grid.y);
+    for (var row = rows.x; row <= rows.y; row += 1u) {
+        let cols = tile_span(x, stats[row * grid.x + x].reach_x, grid.x);
+        for (var col = cols.x; col <= cols.y; col += 1u) {
+            let s = stats[row * grid.x + col];
+            hard_min = min(hard_min, s.hard_min);
+            hard_max = max(hard_max, s.hard_max);
+            depth_min = min(depth_min, s.depth_min);
+            depth_max = max(depth_max, s.depth_max);
+            background = max(background, s.background);
+        }
+    }
+    if hard_min != hard_max {
+        return true;
+    }
+    return ssss.lazy_shadowing != 0u
+        && (background != 0u
+            || depth_max - depth_min > DEPTH_RANGE_MARGIN * ssss.depth_rejection * depth_min);
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x == 0u {
+        args.vertex_count = 6u;
+    }
+    let grid = tile_grid();
+    if id.x >= grid.x * grid.y || ssss.enabled == 0u {
+        return;
+    }
+    let x = id.x % grid.x;
+    let y = id.x / grid.x;
+    if ssss.all_tiles != 0u || is_active(x, y, grid) {
+        let slot = atomicAdd(&args.instance_count, 1u);
+        tiles[slot] = x | (y << 16u);
+    }
+}
