@@ -46,6 +46,10 @@ pub struct ShadowDemo {
     pub light_size: f32,
     /// Light the scene with the lamp (a spot light) instead of the sun (key 4 toggles).
     pub spot: bool,
+    /// Which blockers stand on the ground: 0 the posts, panel and sphere ([`PoleScenePart`]),
+    /// 1 a canopy of three trees of small leaf quads ([`CanopyPart`]: many penumbra tiles, the
+    /// worst case of tiled soft shadows). Key 5 toggles.
+    pub scene: u32,
     /// Bevy's PCSS size per radian of light size: PCSS's `soft_shadow_size` has no physical unit
     /// shared with an angular size; this factor gave PCSS its lowest error against the
     /// area-light reference on the pole scene (`ssss_vs_pcss` test sweep).
@@ -58,6 +62,7 @@ impl Default for ShadowDemo {
             technique: 2,
             light_size: 0.1,
             spot: false,
+            scene: 0,
             pcss_size_per_radian: PCSS_SIZE_PER_RADIAN,
         }
     }
@@ -81,6 +86,64 @@ pub const PCSS_SPOT_RADIUS_SCALE: f32 = 30.0;
 /// The scene's sun.
 #[derive(Component)]
 pub struct DemoSun;
+
+/// A blocker of the pole scene ([`ShadowDemo::scene`] 0).
+#[derive(Component)]
+pub struct PoleScenePart;
+
+/// A part of the canopy scene ([`ShadowDemo::scene`] 1).
+#[derive(Component)]
+pub struct CanopyPart;
+
+/// Leaves per crown of the canopy scene.
+pub const CANOPY_LEAVES: usize = 1500;
+
+/// One crown of the canopy scene: `leaves` square leaves of side `leaf` m, centres uniform in an
+/// ellipsoid of radii `radii` around the origin, randomly turned (a fixed seed: the same crown
+/// every run).
+pub fn crown_mesh(leaves: usize, radii: Vec3, leaf: f32, seed: u64) -> Mesh {
+    // SplitMix64: a tiny deterministic generator is enough for leaf placement.
+    let mut state = seed;
+    let mut next = move || {
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let (mut positions, mut normals, mut indices) = (Vec::new(), Vec::new(), Vec::new());
+    while positions.len() < leaves * 4 {
+        let p = Vec3::new(next(), next(), next()) * 2.0 - 1.0;
+        if p.length_squared() > 1.0 {
+            continue;
+        }
+        let centre = p * radii;
+        let rotation = Quat::from_euler(
+            EulerRot::YXZ,
+            next() * std::f32::consts::TAU,
+            next() * std::f32::consts::PI,
+            next() * std::f32::consts::TAU,
+        );
+        let (u, v, n) = (
+            rotation * Vec3::X * leaf * 0.5,
+            rotation * Vec3::Z * leaf * 0.5,
+            rotation * Vec3::Y,
+        );
+        let base = positions.len() as u32;
+        for corner in [-u - v, u - v, u + v, -u + v] {
+            positions.push((centre + corner).to_array());
+            normals.push(n.to_array());
+        }
+        indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+    Mesh::new(
+        bevy::mesh::PrimitiveTopology::TriangleList,
+        bevy::asset::RenderAssetUsages::default(),
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+    .with_inserted_indices(bevy::mesh::Indices::U32(indices))
+}
 
 /// The scene's lamp (a spot light), used instead of the sun when [`ShadowDemo::spot`] is on.
 #[derive(Component)]
@@ -133,6 +196,7 @@ pub fn spawn_shadow_scene(
     // Posts of increasing height: longer posts cast shadows whose tips are wider.
     for (i, h) in [1.0f32, 2.0, 3.0, 4.0].into_iter().enumerate() {
         commands.spawn((
+            PoleScenePart,
             Mesh3d(meshes.add(Cuboid::new(0.25, h, 0.25))),
             MeshMaterial3d(props.clone()),
             Transform::from_xyz(-3.0 + 1.6 * i as f32, h / 2.0, -1.5),
@@ -140,22 +204,61 @@ pub fn spawn_shadow_scene(
     }
     // A panel on four legs: a shadow hard at the legs and soft under the top's edge.
     commands.spawn((
+        PoleScenePart,
         Mesh3d(meshes.add(Cuboid::new(2.0, 0.08, 1.2))),
         MeshMaterial3d(props.clone()),
         Transform::from_xyz(1.5, 1.2, 1.8),
     ));
     for (x, z) in [(-0.9, -0.5), (0.9, -0.5), (-0.9, 0.5), (0.9, 0.5)] {
         commands.spawn((
+            PoleScenePart,
             Mesh3d(meshes.add(Cuboid::new(0.08, 1.2, 0.08))),
             MeshMaterial3d(props.clone()),
             Transform::from_xyz(1.5 + x, 0.6, 1.8 + z),
         ));
     }
     commands.spawn((
+        PoleScenePart,
         Mesh3d(meshes.add(Sphere::new(0.6).mesh().uv(32, 16))),
-        MeshMaterial3d(props),
+        MeshMaterial3d(props.clone()),
         Transform::from_xyz(-2.0, 0.6, 2.0),
     ));
+    // The canopy: three trees whose crowns of small leaves fill the view with penumbrae.
+    let leaves = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.25, 0.45, 0.15),
+        perceptual_roughness: 0.9,
+        cull_mode: None,
+        double_sided: true,
+        ..default()
+    });
+    for (i, (x, z, height)) in [
+        (-2.2f32, -0.8f32, 3.2f32),
+        (0.6, -1.6, 3.6),
+        (1.8, 1.4, 2.8),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        commands.spawn((
+            CanopyPart,
+            Mesh3d(meshes.add(Cylinder::new(0.12, height))),
+            MeshMaterial3d(props.clone()),
+            Transform::from_xyz(x, height / 2.0, z),
+            Visibility::Hidden,
+        ));
+        commands.spawn((
+            CanopyPart,
+            Mesh3d(meshes.add(crown_mesh(
+                CANOPY_LEAVES,
+                Vec3::new(1.4, 1.0, 1.4),
+                0.22,
+                i as u64 + 1,
+            ))),
+            MeshMaterial3d(leaves.clone()),
+            Transform::from_xyz(x, height + 0.6, z),
+            Visibility::Hidden,
+        ));
+    }
     commands.spawn((
         DemoSun,
         DirectionalLight {
@@ -212,9 +315,28 @@ pub fn apply_shadow_demo(
     mut commands: Commands,
     mut sun: Query<(Entity, &mut DirectionalLight, &mut Visibility), With<DemoSun>>,
     mut lamp: Query<(Entity, &mut SpotLight, &mut Visibility), Without<DemoSun>>,
+    mut parts: Query<
+        (&mut Visibility, Has<CanopyPart>),
+        (
+            Or<(With<PoleScenePart>, With<CanopyPart>)>,
+            Without<DemoSun>,
+            Without<SpotLight>,
+        ),
+    >,
 ) {
     if !demo.is_changed() {
         return;
+    }
+    for (mut visibility, canopy) in &mut parts {
+        let shown = canopy == (demo.scene == 1);
+        let v = if shown {
+            Visibility::Inherited
+        } else {
+            Visibility::Hidden
+        };
+        if *visibility != v {
+            *visibility = v;
+        }
     }
     let technique = demo.technique();
     for (entity, mut light, mut visibility) in &mut sun {
@@ -256,11 +378,15 @@ pub fn apply_shadow_demo(
     }
 }
 
-/// Keys 1, 2, 3 pick hard shadows, PCSS or SSSS; key 4 switches between the sun and the lamp.
+/// Keys 1, 2, 3 pick hard shadows, PCSS or SSSS; key 4 switches between the sun and the lamp,
+/// key 5 between the pole and the canopy scene.
 pub fn switch_with_keys(keys: Option<Res<ButtonInput<KeyCode>>>, mut demo: ResMut<ShadowDemo>) {
     let Some(keys) = keys else { return };
     if keys.just_pressed(KeyCode::Digit4) {
         demo.spot = !demo.spot;
+    }
+    if keys.just_pressed(KeyCode::Digit5) {
+        demo.scene = 1 - demo.scene.min(1);
     }
     for (key, technique) in [
         (KeyCode::Digit1, 0),

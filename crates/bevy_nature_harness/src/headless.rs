@@ -468,6 +468,74 @@ impl RenderHarness {
             .value()
     }
 
+    /// Whether GPU pass times come from timestamp queries (the adapter supports them and
+    /// [`HarnessConfig::gpu_timing`] is on).
+    pub fn has_gpu_timestamps(&self) -> bool {
+        self.config.gpu_timing && self.adapter.as_ref().is_some_and(|a| a.timestamp_queries)
+    }
+
+    /// Median GPU time in ms of a named render pass from timestamp queries, over the frames since
+    /// the last [`reset_timing`](Self::reset_timing) — an error, never a fallback, when the
+    /// adapter has no timestamp queries or the pass recorded no span.
+    pub fn gpu_pass_time_ms(&self, pass: &str) -> Result<f64, String> {
+        if !self.has_gpu_timestamps() {
+            return Err("no GPU timestamp queries on this adapter".into());
+        }
+        let store = self
+            .app
+            .world()
+            .get_resource::<DiagnosticsStore>()
+            .ok_or("no diagnostics store")?;
+        collect_diagnostics(store)
+            .0
+            .get(pass)
+            .copied()
+            .ok_or_else(|| format!("no GPU timestamp span '{pass}' was recorded"))
+    }
+
+    /// Median over the frames since the last [`reset_timing`](Self::reset_timing) of the GPU
+    /// time of the whole frame: per frame, the sum of every top-level timestamp span (shadow
+    /// maps, prepasses, main passes, post-processing, and any plugin's own passes). An error
+    /// without timestamp queries or without spans.
+    pub fn gpu_frame_time_ms(&self) -> Result<f64, String> {
+        if !self.has_gpu_timestamps() {
+            return Err("no GPU timestamp queries on this adapter".into());
+        }
+        let store = self
+            .app
+            .world()
+            .get_resource::<DiagnosticsStore>()
+            .ok_or("no diagnostics store")?;
+        let mut frames: Vec<f64> = Vec::new();
+        for diagnostic in store.iter() {
+            let path = diagnostic.path().as_str();
+            let Some(pass) = path
+                .strip_prefix("render/")
+                .and_then(|p| p.strip_suffix("/elapsed_gpu"))
+            else {
+                continue;
+            };
+            if pass.contains('/') {
+                // Nested in a span already counted.
+                continue;
+            }
+            // Latest frames last: align every span's history on the newest frame.
+            let values: Vec<f64> = diagnostic.values().copied().collect();
+            if frames.len() < values.len() {
+                let missing = values.len() - frames.len();
+                frames.splice(0..0, std::iter::repeat_n(0.0, missing));
+            }
+            let offset = frames.len() - values.len();
+            for (i, v) in values.iter().enumerate() {
+                frames[offset + i] += v;
+            }
+        }
+        if frames.is_empty() {
+            return Err("no GPU timestamp spans were recorded".into());
+        }
+        Ok(FrameStats::from_millis(&frames).median_ms)
+    }
+
     /// Median GPU (or, without timestamp queries, CPU span) time in ms of a named render pass,
     /// e.g. `"main_opaque_pass_3d"`, over the frames since the last [`reset_timing`](Self::reset_timing).
     pub fn pass_time_ms(&self, pass: &str) -> Option<f64> {

@@ -233,3 +233,52 @@ fn the_hidden_shadow_of_a_hovering_panel_is_classified_with_lazy_shadowing() {
         "hovering panel (lazy)",
     );
 }
+
+#[test]
+fn switching_ssss_off_leaves_the_scene_as_it_was() {
+    use bevy::core_pipeline::prepass::{DepthPrepass, NormalPrepass};
+    use bevy_soft_shadows::ssss::receiver::SoftShadowCamera;
+    let Some(mut harness) = pole_harness("ssss_off") else {
+        return;
+    };
+    harness.wait_until_ready().unwrap();
+    let hard = to_linear(&harness.render().unwrap());
+    let sun = sun_entity(&mut harness);
+    harness
+        .world_mut()
+        .entity_mut(sun)
+        .insert(ScreenSpaceSoftShadows {
+            light_size: THETA,
+            max_occluder_distance: 6.0,
+            ..default()
+        });
+    let soft = render_until(&mut harness, &hard, |img| rmse(img, &hard) > 0.003);
+    let camera_has = |harness: &mut RenderHarness| {
+        let world = harness.world_mut();
+        let mut q = world.query_filtered::<(Has<SoftShadowCamera>, Has<DepthPrepass>, Has<NormalPrepass>), With<Camera3d>>();
+        q.single(world).unwrap()
+    };
+    assert_eq!(camera_has(&mut harness), (true, true, true));
+    harness
+        .world_mut()
+        .entity_mut(sun)
+        .remove::<ScreenSpaceSoftShadows>();
+    harness.render().unwrap();
+    let off = to_linear(&harness.render().unwrap());
+    // The prepasses SSSS added are gone (the camera had none), the receivers read "inactive",
+    // and the image is the hard-shadow one.
+    assert_eq!(camera_has(&mut harness), (false, false, false));
+    let textures = harness.world_mut().resource::<SsssTextures>().clone();
+    let visibility = floats(
+        &harness
+            .read_image(textures.visibility.clone(), SIZE, SIZE, 8)
+            .unwrap(),
+    );
+    assert!(
+        visibility.iter().step_by(2).all(|&v| v == -1.0),
+        "the visibility texture reads 'inactive' for materials that keep it bound"
+    );
+    let (e_off, e_soft) = (rmse(&off, &hard), rmse(&soft, &hard));
+    println!("RMSE against hard: SSSS on {e_soft:.4}, switched off {e_off:.5}");
+    assert!(e_off < 0.1 * e_soft, "off {e_off} vs on {e_soft}");
+}

@@ -80,6 +80,16 @@ fn screen_image(size: UVec2, format: TextureFormat) -> Image {
 #[derive(Resource, Clone, Copy, Default, Debug, PartialEq, Eq)]
 pub struct SsssActive(pub bool);
 
+/// On the SSSS camera: which prepasses SSSS added to it (and takes away again when no light has
+/// SSSS any more, so that switching SSSS off leaves the camera as it was — and costs nothing).
+#[derive(Component, Clone, Copy, Debug)]
+pub struct SsssAddedPrepasses {
+    /// SSSS added `DepthPrepass`.
+    pub depth: bool,
+    /// SSSS added `NormalPrepass`.
+    pub normal: bool,
+}
+
 /// Adds the prepasses and the camera marker, and (re)sizes the textures to the camera.
 #[allow(clippy::type_complexity)]
 fn prepare_cameras_and_textures(
@@ -91,7 +101,17 @@ fn prepare_cameras_and_textures(
             Or<(With<DirectionalLight>, With<SpotLight>)>,
         ),
     >,
-    cameras: Query<(Entity, &Camera, Has<SoftShadowCamera>), With<Camera3d>>,
+    cameras: Query<
+        (
+            Entity,
+            &Camera,
+            Has<SoftShadowCamera>,
+            Has<DepthPrepass>,
+            Has<NormalPrepass>,
+            Option<&SsssAddedPrepasses>,
+        ),
+        With<Camera3d>,
+    >,
     mut textures: ResMut<SsssTextures>,
     mut images: ResMut<Assets<Image>>,
     mut active: ResMut<SsssActive>,
@@ -101,13 +121,33 @@ fn prepare_cameras_and_textures(
         active.0 = any;
     }
     if !any {
+        // SSSS is off: its camera goes back to what it was.
+        for (entity, _, marked, _, _, added) in &cameras {
+            if !marked {
+                continue;
+            }
+            let mut camera = commands.entity(entity);
+            camera.remove::<(SoftShadowCamera, SsssAddedPrepasses)>();
+            if let Some(added) = added {
+                if added.depth {
+                    camera.remove::<DepthPrepass>();
+                }
+                if added.normal {
+                    camera.remove::<NormalPrepass>();
+                }
+            }
+        }
         return;
     }
+    let cameras = cameras
+        .iter()
+        .map(|(entity, camera, marked, depth, normal, _)| {
+            (entity, camera, (marked, depth, normal))
+        });
     // The scene's camera is the active 3D camera of the lowest order (as for the foliage and the
     // terrain); cameras drawing after it into other targets (offscreen bakes, overlays) are left
     // alone: the passes' screen textures are sized to one camera.
-    let Some((entity, camera, marked)) = cameras
-        .iter()
+    let Some((entity, camera, (marked, depth, normal))) = cameras
         .filter(|(_, c, _)| c.is_active)
         .min_by_key(|(_, c, _)| c.order)
     else {
@@ -115,9 +155,15 @@ fn prepare_cameras_and_textures(
     };
     if !marked {
         info!("Screen Space Soft Shadows: adding depth and normal prepasses to camera {entity}");
-        commands
-            .entity(entity)
-            .insert((SoftShadowCamera, DepthPrepass, NormalPrepass));
+        commands.entity(entity).insert((
+            SoftShadowCamera,
+            DepthPrepass,
+            NormalPrepass,
+            SsssAddedPrepasses {
+                depth: !depth,
+                normal: !normal,
+            },
+        ));
     }
     let Some(size) = camera.physical_target_size() else {
         return;
@@ -183,7 +229,9 @@ impl Default for ConvertStandardMaterials {
 }
 
 /// Swaps `StandardMaterial`s for [`SoftShadowMaterial`]s sharing their parameters (one receiver
-/// material per standard material).
+/// material per standard material). They stay swapped when SSSS goes off: they then read
+/// "inactive" and shade as Bevy would. (Swapping back in the frame the camera loses its
+/// prepasses leaves Bevy 0.19's prepass phase drawing with the other material's bind group.)
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn convert_receivers(
     mut commands: Commands,

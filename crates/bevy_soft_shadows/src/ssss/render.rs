@@ -236,6 +236,51 @@ fn prepare_uniform(
     buffer.0.write_buffer(&device, &queue);
 }
 
+/// With no light left with SSSS its passes stop (the camera loses its prepasses, receivers get
+/// their standard materials back), but materials that keep reading the visibility texture (the
+/// terrain and leaf receivers bind it themselves) must then see "inactive" (−1) rather than the
+/// last soft shadow: the texture is cleared to −1 once, when SSSS goes off.
+fn clear_visibility_when_off(
+    extracted: Res<ExtractedSsss>,
+    images: Res<RenderAssets<GpuImage>>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    mut cleared: Local<bool>,
+) {
+    if extracted.uniform.enabled != 0 {
+        *cleared = false;
+        return;
+    }
+    if *cleared {
+        return;
+    }
+    // Before SSSS first ran the handle is Bevy's default image: nothing to clear.
+    let Some(image) = images
+        .get(&extracted.textures.visibility)
+        .filter(|i| i.texture.usage().contains(TextureUsages::RENDER_ATTACHMENT))
+    else {
+        return;
+    };
+    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor {
+        label: Some("ssss_clear_visibility"),
+    });
+    encoder.begin_render_pass(&RenderPassDescriptor {
+        label: Some("ssss_clear_visibility"),
+        color_attachments: &[Some(RenderPassColorAttachment {
+            view: &image.texture_view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: Operations {
+                load: LoadOp::Clear(LinearRgba::new(-1.0, -1.0, 0.0, 1.0).into()),
+                store: StoreOp::Store,
+            },
+        })],
+        ..default()
+    });
+    queue.submit([encoder.finish()]);
+    *cleared = true;
+}
+
 /// Which fullscreen pass a pipeline runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 enum SsssPass {
@@ -966,7 +1011,12 @@ pub(crate) fn build(app: &mut App) {
             Render,
             (
                 prepare_pipelines.in_set(RenderSystems::Prepare),
-                (prepare_uniform, prepare_dilation, prepare_tile_buffers)
+                (
+                    prepare_uniform,
+                    prepare_dilation,
+                    prepare_tile_buffers,
+                    clear_visibility_when_off,
+                )
                     .in_set(RenderSystems::PrepareResources),
             ),
         )
