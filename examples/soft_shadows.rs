@@ -6,30 +6,40 @@
 //! ```text
 //! cargo run --release --example soft_shadows                 # windowed, egui panel
 //! cargo run --example soft_shadows -- --headless --frames 30 --stats ssss.json
-//! cargo run --example soft_shadows -- --bench [--frames N]   # the issue-6 table, JSON
+//! cargo run --example soft_shadows -- --bench [--frames N] [--stats FILE]  # cost and error table
 //! cargo run --example soft_shadows -- --bench --spot          # the same under a lamp
 //! ```
 //!
-//! Key 4 (or `spot` in the panel) switches from the sun to a lamp (a spot light) above the scene.
+//! Key 4 (or `spot` in the panel) switches from the sun to a lamp (a spot light) above the scene,
+//! key 5 (`scene`) from the posts to a canopy of three trees.
 //!
-//! `--bench` measures, in one process, for small / medium / large light sizes at two
-//! resolutions: the GPU time of soft shadowing over hard shadows (timestamp queries: PCSS = its
-//! main opaque pass minus the hard-shadow one; SSSS = its own passes plus its main pass minus the
-//! hard-shadow one; SSSS as by default, then with its direct and its O(1)-per-texel segment
-//! min filter forced) and each image's RMSE against an area-light reference (48 hard-shadowed
-//! suns jittered over the light's disk, averaged in linear light — or with `--spot`, 48 spot
-//! lights spread over the lamp's disk) rendered in the same run.
+//! `--bench` measures, in one process and for small / medium / large light sizes, on the pole
+//! scene and on the canopy scene (640×360 unless `--size`), each technique's GPU cost over hard
+//! shadows and its image's RMSE against an area-light reference rendered in the same run (48
+//! hard-shadowed suns jittered over the light's disk, averaged in linear light — or with
+//! `--spot`, 48 lamps spread over the lamp's disk). GPU time is the whole frame from timestamp
+//! queries written before and after everything the frame submits (shadow maps, prepasses, main
+//! pass, TAA, the SSSS passes: `bevy_nature_harness::frame_timer`), so a technique's cost
+//! includes everything it turns on; the GPU is warmed up before anything is timed; without timestamp queries the bench says so
+//! and exits with an error. Rows: hard; Bevy's PCSS at the best of a sweep of its size per light;
+//! Bevy's PCSS as Bevy intends it (`ShadowFilteringMethod::Temporal` under TAA, compared once TAA
+//! has converged); SSSS on the classified tiles (with the active-tile fraction and the blur's cost
+//! per active tile) and on every tile. Every scene's baseline rows run before SSSS first runs.
+//! `--stats FILE` writes the rows as JSON (`"timing": "timestamps"`).
 
+use bevy::anti_alias::taa::TemporalAntiAliasing;
+use bevy::light::ShadowFilteringMethod;
 use bevy::prelude::*;
+use bevy::render::RenderApp;
 use bevy_nature::shadow_scene::{
-    DemoLamp, DemoSun, LAMP_AIM, LAMP_POSITION, ShadowDemo, ShadowTechnique, add_shadow_demo,
-    lamp_diameter, lamp_transform, spawn_shadow_scene, sun_direction,
+    DemoLamp, DemoSun, LAMP_AIM, LAMP_POSITION, PCSS_SIZE_PER_RADIAN, ShadowDemo, ShadowTechnique,
+    add_shadow_demo, lamp_diameter, lamp_transform, spawn_shadow_scene, sun_direction,
 };
 use bevy_nature::soft_shadows::ScreenSpaceSoftShadows;
 use bevy_nature::soft_shadows::reference::{
     LinearAverage, jittered_directions, jittered_positions, srgb_to_linear,
 };
-use bevy_nature::soft_shadows::ssss::render::SsssDilationFilter;
+use bevy_nature::soft_shadows::ssss::render::SsssTileReadback;
 use bevy_nature_harness::headless::HarnessConfig;
 use bevy_nature_harness::{ExampleArgs, ExampleRunner, RenderHarness, require_adapter};
 
@@ -73,139 +83,378 @@ fn rmse(a: &[f32], b: &[f32]) -> f64 {
     (sum / n as f64).sqrt()
 }
 
+/// One measured row of the bench.
+struct Row {
+    scene: &'static str,
+    light: String,
+    light_size: f32,
+    technique: &'static str,
+    params: String,
+    frame_gpu_ms: f64,
+    rmse: f64,
+    /// SSSS rows: active tiles / all tiles, and the blur passes' GPU time.
+    tiles: Option<(f64, usize, f64)>,
+}
+
+/// The GPU time of the whole frame (timestamps bracketing everything it submits, median over
+/// `frames` after `settle` frames) and the image's RMSE against `reference`.
+fn measure(
+    harness: &mut RenderHarness,
+    frames: u32,
+    settle: u32,
+    reference: &[f32],
+) -> Result<(f64, f64), String> {
+    harness
+        .run_frames(settle.max(4))
+        .map_err(|e| e.to_string())?;
+    harness.reset_timing();
+    // Whole-frame timestamps are read back a frame or two late: two more frames of the same
+    // configuration bring the last ones in.
+    harness.run_frames(frames + 2).map_err(|e| e.to_string())?;
+    let frame = harness.gpu_frame_time_ms()?;
+    let image = linear(&harness.render().map_err(|e| e.to_string())?.data);
+    Ok((frame, rmse(&image, reference)))
+}
+
+/// The SSSS classification's active tiles of the last frame, and all tiles.
+fn active_tiles(harness: &mut RenderHarness) -> Result<(usize, usize), String> {
+    let mut grid = UVec2::ZERO;
+    let bytes = harness
+        .read_render_buffer(|world| {
+            let r = world.get_resource::<SsssTileReadback>()?;
+            grid = r.grid;
+            r.args.clone()
+        })
+        .map_err(|e| e.to_string())?;
+    let active = u32::from_le_bytes([bytes[4], bytes[5], bytes[6], bytes[7]]) as usize;
+    Ok((active, (grid.x * grid.y) as usize))
+}
+
+fn set_technique(harness: &mut RenderHarness, technique: ShadowTechnique, light_size: f32) {
+    let mut demo = harness.world_mut().resource_mut::<ShadowDemo>();
+    demo.technique = ShadowTechnique::ALL
+        .iter()
+        .position(|t| *t == technique)
+        .unwrap() as u32;
+    demo.light_size = light_size;
+}
+
+/// The area-light reference: hard shadows from suns jittered over the light's disk (or lamps
+/// spread over the lamp's disk), averaged in linear light.
+fn reference(harness: &mut RenderHarness, light_size: f32, spot: bool) -> Result<Vec<f32>, String> {
+    set_technique(harness, ShadowTechnique::Hard, light_size);
+    harness.run_frames(3).map_err(|e| e.to_string())?;
+    let world = harness.world_mut();
+    let sun = world
+        .query_filtered::<Entity, With<DemoSun>>()
+        .single(world)
+        .unwrap();
+    let lamp = world
+        .query_filtered::<Entity, With<DemoLamp>>()
+        .single(world)
+        .unwrap();
+    let mut average = LinearAverage::default();
+    let poses: Vec<(Entity, Transform)> = if spot {
+        let diameter = lamp_diameter(light_size);
+        jittered_positions(LAMP_POSITION, LAMP_AIM - LAMP_POSITION, diameter, 48)
+            .into_iter()
+            .map(|p| (lamp, lamp_transform(p)))
+            .collect()
+    } else {
+        jittered_directions(sun_direction(), light_size, 48)
+            .into_iter()
+            .map(|d| (sun, Transform::default().looking_to(-d, Vec3::Y)))
+            .collect()
+    };
+    for (light, pose) in poses {
+        *harness.world_mut().get_mut::<Transform>(light).unwrap() = pose;
+        average.add(&harness.render().map_err(|e| e.to_string())?.data);
+    }
+    *harness.world_mut().get_mut::<Transform>(sun).unwrap() =
+        Transform::default().looking_to(-sun_direction(), Vec3::Y);
+    *harness.world_mut().get_mut::<Transform>(lamp).unwrap() = lamp_transform(LAMP_POSITION);
+    Ok(average.linear())
+}
+
+/// The scene's camera (not an offscreen one of a plugin).
+fn scene_camera(harness: &mut RenderHarness) -> Entity {
+    let world = harness.world_mut();
+    world
+        .query_filtered::<Entity, (With<Camera3d>, With<ShadowFilteringMethod>)>()
+        .single(world)
+        .unwrap()
+}
+
+const LIGHTS: [(&str, f32); 3] = [("small", 0.03), ("medium", 0.1), ("large", 0.25)];
+/// PCSS sizes swept, as factors of the demo's default size per radian.
+const PCSS_FACTORS: [f32; 7] = [0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0];
+/// Frames TAA gets to converge before the temporal PCSS row is timed and compared.
+const TAA_FRAMES: u32 = 48;
+
+/// A harness showing `scene`, ready.
+fn scene_harness(scene: u32, size: UVec2, spot: bool) -> Result<RenderHarness, String> {
+    let mut harness =
+        RenderHarness::new(HarnessConfig::sized(size.x, size.y)).map_err(|e| e.to_string())?;
+    harness
+        .app_mut()
+        .add_plugins(bevy_nature::soft_shadows::SoftShadowsPlugin)
+        .add_systems(Startup, spawn_shadow_scene);
+    add_shadow_demo(harness.app_mut());
+    {
+        let mut demo = harness.world_mut().resource_mut::<ShadowDemo>();
+        demo.spot = spot;
+        demo.scene = scene;
+    }
+    harness.wait_until_ready().map_err(|e| e.to_string())?;
+    // A real GPU raises its clocks under load: warm it up before anything is timed.
+    harness.run_frames(60).map_err(|e| e.to_string())?;
+    Ok(harness)
+}
+
+/// One scene: references first, then every baseline row (before SSSS ever runs: receivers and
+/// camera untouched), then the SSSS rows.
+fn bench_scene(
+    scene: u32,
+    size: UVec2,
+    frames: u32,
+    spot: bool,
+    rows: &mut Vec<Row>,
+) -> Result<(), String> {
+    let scene_name = if scene == 0 { "poles" } else { "canopy" };
+    let mut harness = scene_harness(scene, size, spot)?;
+    let light_name = |label: &str| format!("{}{label}", if spot { "spot " } else { "" });
+    let mut references = Vec::new();
+    for (label, light_size) in LIGHTS {
+        eprintln!(
+            "soft_shadows --bench: {scene_name}, {label} light: area-light reference (48 renders)"
+        );
+        references.push(reference(&mut harness, light_size, spot)?);
+    }
+    let push = |rows: &mut Vec<Row>, row: Row| {
+        eprintln!(
+            "  {:<7} {:<8} {:<20} {:<26} GPU frame {:>8.2} ms  RMSE {:.5}{}",
+            row.scene,
+            row.light,
+            row.technique,
+            row.params,
+            row.frame_gpu_ms,
+            row.rmse,
+            row.tiles
+                .map(|(f, n, _)| format!("  active tiles {:.1} % ({n})", 100.0 * f))
+                .unwrap_or_default()
+        );
+        rows.push(row);
+    };
+    let row = |technique, light: (&str, f32), params: String, (frame, rmse): (f64, f64)| Row {
+        scene: scene_name,
+        light: light_name(light.0),
+        light_size: light.1,
+        technique,
+        params,
+        frame_gpu_ms: frame,
+        rmse,
+        tiles: None,
+    };
+    // Hard shadows.
+    for (light, reference) in LIGHTS.iter().zip(&references) {
+        set_technique(&mut harness, ShadowTechnique::Hard, light.1);
+        let m = measure(&mut harness, frames, 8, reference)?;
+        push(rows, row("hard", *light, String::new(), m));
+    }
+    // Bevy's PCSS, its size swept per light (best RMSE timed), then as Bevy intends it: the
+    // temporal filter under TAA, at the best size, once TAA has converged.
+    let mut best_pcss = Vec::new();
+    for (light, reference) in LIGHTS.iter().zip(&references) {
+        set_technique(&mut harness, ShadowTechnique::Pcss, light.1);
+        let mut best = (f64::INFINITY, 1.0f32);
+        let mut sweep = Vec::new();
+        for factor in PCSS_FACTORS {
+            harness
+                .world_mut()
+                .resource_mut::<ShadowDemo>()
+                .pcss_size_per_radian = factor * PCSS_SIZE_PER_RADIAN;
+            harness.render().map_err(|e| e.to_string())?;
+            let image = linear(&harness.render().map_err(|e| e.to_string())?.data);
+            let e = rmse(&image, reference);
+            sweep.push(format!(
+                "{:.2}:{e:.5}",
+                factor * PCSS_SIZE_PER_RADIAN * light.1
+            ));
+            if e < best.0 {
+                best = (e, factor);
+            }
+        }
+        let pcss_size = best.1 * PCSS_SIZE_PER_RADIAN * light.1;
+        harness
+            .world_mut()
+            .resource_mut::<ShadowDemo>()
+            .pcss_size_per_radian = best.1 * PCSS_SIZE_PER_RADIAN;
+        let m = measure(&mut harness, frames, 4, reference)?;
+        eprintln!("    PCSS sweep (soft_shadow_size:RMSE) {}", sweep.join(" "));
+        push(
+            rows,
+            row(
+                "pcss",
+                *light,
+                format!("soft_shadow_size {pcss_size:.2}"),
+                m,
+            ),
+        );
+        best_pcss.push(best.1);
+    }
+    // PCSS as Bevy intends it, in a harness of its own (taking TAA off a camera again trips
+    // Bevy 0.19's motion-vector prepass), at each light's best size.
+    {
+        let mut taa = scene_harness(scene, size, spot)?;
+        let camera = scene_camera(&mut taa);
+        taa.world_mut().entity_mut(camera).insert((
+            TemporalAntiAliasing::default(),
+            ShadowFilteringMethod::Temporal,
+        ));
+        for ((light, reference), factor) in LIGHTS.iter().zip(&references).zip(&best_pcss) {
+            set_technique(&mut taa, ShadowTechnique::Pcss, light.1);
+            taa.world_mut()
+                .resource_mut::<ShadowDemo>()
+                .pcss_size_per_radian = factor * PCSS_SIZE_PER_RADIAN;
+            let m = measure(&mut taa, frames, TAA_FRAMES, reference)?;
+            let pcss_size = factor * PCSS_SIZE_PER_RADIAN * light.1;
+            push(
+                rows,
+                row(
+                    "pcss_temporal_taa",
+                    *light,
+                    format!("soft_shadow_size {pcss_size:.2}, TAA"),
+                    m,
+                ),
+            );
+        }
+    }
+    harness
+        .world_mut()
+        .resource_mut::<ShadowDemo>()
+        .pcss_size_per_radian = PCSS_SIZE_PER_RADIAN;
+    // SSSS: classified tiles (the default), then every tile blurred (the same image).
+    harness
+        .app_mut()
+        .get_sub_app_mut(RenderApp)
+        .unwrap()
+        .world_mut()
+        .init_resource::<SsssTileReadback>();
+    for (light, reference) in LIGHTS.iter().zip(&references) {
+        for all_tiles in [false, true] {
+            set_technique(&mut harness, ShadowTechnique::Ssss, light.1);
+            harness
+                .world_mut()
+                .resource_mut::<ShadowDemo>()
+                .ssss_all_tiles = all_tiles;
+            let m = measure(&mut harness, frames, 8, reference)?;
+            let blur = harness.gpu_pass_time_ms("ssss/ssss_blur_h")?
+                + harness.gpu_pass_time_ms("ssss/ssss_blur_v")?;
+            let (active, total) = active_tiles(&mut harness)?;
+            let mut r = row(
+                if all_tiles { "ssss_all_tiles" } else { "ssss" },
+                *light,
+                "taps_per_side 11, max_kernel_px 40".into(),
+                m,
+            );
+            r.tiles = Some((active as f64 / total as f64, active, blur));
+            push(rows, r);
+        }
+    }
+    harness
+        .world_mut()
+        .resource_mut::<ShadowDemo>()
+        .ssss_all_tiles = false;
+    Ok(())
+}
+
 fn run_bench(args: &ExampleArgs, spot: bool) -> AppExit {
-    if require_adapter("soft_shadows").is_none() {
+    let Some(adapter) = require_adapter("soft_shadows") else {
+        return AppExit::error();
+    };
+    if !adapter.timestamp_queries {
+        eprintln!(
+            "soft_shadows --bench: the adapter '{}' has no GPU timestamp queries, so GPU costs \
+             cannot be measured; no figures are reported",
+            adapter.name
+        );
         return AppExit::error();
     }
     let frames = args.frames.unwrap_or(12);
+    let size = args.size.unwrap_or(UVec2::new(640, 360));
     let mut rows = Vec::new();
-    for size in [UVec2::new(320, 180), UVec2::new(640, 360)] {
-        let mut harness =
-            RenderHarness::new(HarnessConfig::sized(size.x, size.y)).expect("harness");
-        harness
-            .app_mut()
-            .add_plugins(bevy_nature::soft_shadows::SoftShadowsPlugin)
-            .add_systems(Startup, spawn_shadow_scene);
-        add_shadow_demo(harness.app_mut());
-        harness.world_mut().resource_mut::<ShadowDemo>().spot = spot;
-        harness.wait_until_ready().expect("scene ready");
-        for (label, light_size) in [("small", 0.03f32), ("medium", 0.1), ("large", 0.25)] {
-            let set = |harness: &mut RenderHarness, technique: ShadowTechnique| {
-                let mut demo = harness.world_mut().resource_mut::<ShadowDemo>();
-                demo.technique = ShadowTechnique::ALL
-                    .iter()
-                    .position(|t| *t == technique)
-                    .unwrap() as u32;
-                demo.light_size = light_size;
-            };
-            // The reference: hard shadows from suns jittered over the light's disk, or lamps
-            // spread over the lamp's disk.
-            set(&mut harness, ShadowTechnique::Hard);
-            harness.run_frames(3).unwrap();
-            let (sun, lamp) = {
-                let world = harness.world_mut();
-                let sun = world
-                    .query_filtered::<Entity, With<DemoSun>>()
-                    .single(world)
-                    .unwrap();
-                let lamp = world
-                    .query_filtered::<Entity, With<DemoLamp>>()
-                    .single(world)
-                    .unwrap();
-                (sun, lamp)
-            };
-            let mut average = LinearAverage::default();
-            let poses: Vec<(Entity, Transform)> = if spot {
-                let diameter = lamp_diameter(light_size);
-                jittered_positions(LAMP_POSITION, LAMP_AIM - LAMP_POSITION, diameter, 48)
-                    .into_iter()
-                    .map(|p| (lamp, lamp_transform(p)))
-                    .collect()
-            } else {
-                jittered_directions(sun_direction(), light_size, 48)
-                    .into_iter()
-                    .map(|d| (sun, Transform::default().looking_to(-d, Vec3::Y)))
-                    .collect()
-            };
-            for (light, pose) in poses {
-                *harness.world_mut().get_mut::<Transform>(light).unwrap() = pose;
-                average.add(&harness.render().unwrap().data);
-            }
-            *harness.world_mut().get_mut::<Transform>(sun).unwrap() =
-                Transform::default().looking_to(-sun_direction(), Vec3::Y);
-            *harness.world_mut().get_mut::<Transform>(lamp).unwrap() =
-                lamp_transform(LAMP_POSITION);
-            let reference = average.linear();
-            let mut measured = Vec::new();
-            // SSSS as it runs by default (the min filter picked by radius), then with each min
-            // filter forced, timed side by side (same maps, so the same image).
-            let runs = [
-                (ShadowTechnique::Hard, SsssDilationFilter::Auto, "hard"),
-                (ShadowTechnique::Pcss, SsssDilationFilter::Auto, "pcss"),
-                (ShadowTechnique::Ssss, SsssDilationFilter::Auto, "ssss"),
-                (
-                    ShadowTechnique::Ssss,
-                    SsssDilationFilter::Direct,
-                    "ssss_direct_filter",
-                ),
-                (
-                    ShadowTechnique::Ssss,
-                    SsssDilationFilter::Segments,
-                    "ssss_segment_filter",
-                ),
-            ];
-            for (technique, filter, name) in runs {
-                set(&mut harness, technique);
-                harness.world_mut().insert_resource(filter);
-                // Let pipelines compile and the receivers switch, then time.
-                harness.run_frames(8).unwrap();
-                harness.reset_timing();
-                harness.run_frames(frames).unwrap();
-                let main = harness
-                    .pass_time_ms("main_opaque_pass_3d")
-                    .unwrap_or(f64::NAN);
-                let ssss = harness.pass_time_ms("ssss").unwrap_or(0.0);
-                let breakdown: Vec<String> = ["reduce", "dilate", "distance", "blur_h", "blur_v"]
-                    .iter()
-                    .filter_map(|p| {
-                        let ms = harness.pass_time_ms(&format!("ssss/ssss_{p}"))?;
-                        Some(format!("\"{p}\": {ms:.3}"))
-                    })
-                    .collect();
-                let image = linear(&harness.render().unwrap().data);
-                let error = rmse(&image, &reference);
-                let breakdown = if technique == ShadowTechnique::Ssss {
-                    breakdown.join(", ")
-                } else {
-                    String::new()
-                };
-                measured.push((technique, name, main, ssss, error, breakdown));
-            }
-            harness
-                .world_mut()
-                .insert_resource(SsssDilationFilter::Auto);
-            let hard_main = measured[0].2;
-            for (technique, name, main, ssss, error, breakdown) in &measured {
-                let passes = if *technique == ShadowTechnique::Ssss {
-                    *ssss
-                } else {
-                    0.0
-                };
-                let cost = main + passes - hard_main;
-                rows.push(format!(
-                    "{{\"size\": [{}, {}], \"light\": \"{}{label}\", \"light_size_rad\": {light_size}, \"technique\": \"{}\", \"main_pass_ms\": {main:.3}, \"ssss_passes_ms\": {passes:.3}, \"cost_over_hard_ms\": {cost:.3}, \"rmse_vs_reference\": {error:.5}, \"ssss_pass_ms\": {{{breakdown}}}}}",
-                    size.x,
-                    size.y,
-                    if spot { "spot " } else { "" },
-                    name
-                ));
-                eprintln!("{}", rows.last().unwrap());
-            }
+    for scene in [0, 1] {
+        if let Err(e) = bench_scene(scene, size, frames, spot, &mut rows) {
+            eprintln!("soft_shadows --bench: {e}");
+            return AppExit::error();
         }
     }
-    println!(
-        "{{\"frames\": {frames}, \"rows\": [\n  {}\n]}}",
-        rows.join(",\n  ")
+    // Cost over hard shadows: the whole GPU frame against the hard row of the same scene and
+    // light (prepasses, TAA and the SSSS passes included).
+    let hard: Vec<(&str, String, f64)> = rows
+        .iter()
+        .filter(|r| r.technique == "hard")
+        .map(|r| (r.scene, r.light.clone(), r.frame_gpu_ms))
+        .collect();
+    let json_rows: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|r| {
+            let hard_ms = hard
+                .iter()
+                .find(|(s, l, _)| *s == r.scene && *l == r.light)
+                .map(|h| h.2)
+                .unwrap_or(f64::NAN);
+            let cost = r.frame_gpu_ms - hard_ms;
+            let mut row = serde_json::json!({
+                "scene": r.scene,
+                "size": [size.x, size.y],
+                "light": r.light,
+                "light_size_rad": r.light_size,
+                "technique": r.technique,
+                "params": r.params,
+                "frame_gpu_ms": r.frame_gpu_ms,
+                "cost_over_hard_ms": cost,
+                "rmse": r.rmse,
+                "active_tile_fraction": r.tiles.map(|t| t.0),
+            });
+            if let Some((_, active, blur)) = r.tiles {
+                row["active_tiles"] = active.into();
+                row["blur_passes_ms"] = blur.into();
+                row["blur_us_per_active_tile"] = (1000.0 * blur / active.max(1) as f64).into();
+            }
+            row
+        })
+        .collect();
+    let headline: serde_json::Map<String, serde_json::Value> = json_rows
+        .iter()
+        .filter(|r| r["scene"] == "poles" && r["technique"] == "ssss")
+        .map(|r| {
+            (
+                r["light"].as_str().unwrap_or_default().to_string(),
+                r["cost_over_hard_ms"].clone(),
+            )
+        })
+        .collect();
+    let out = serde_json::json!({
+        "timing": "timestamps",
+        "adapter": adapter.name,
+        "frames": frames,
+        "headline": {"ssss_cost_over_hard_ms_on_poles": headline},
+        "rows": json_rows,
+    });
+    let text = serde_json::to_string_pretty(&out).unwrap();
+    eprintln!(
+        "HEADLINE ssss_cost_over_hard_ms_on_poles ({}x{}, GPU timestamps): {}",
+        size.x,
+        size.y,
+        serde_json::to_string(&out["headline"]["ssss_cost_over_hard_ms_on_poles"]).unwrap()
     );
+    if let Some(path) = &args.stats
+        && let Err(e) = bevy_nature_harness::stats::write_atomically(path, &text)
+    {
+        eprintln!("soft_shadows --bench: {e}");
+        return AppExit::error();
+    }
+    println!("{text}");
     AppExit::Success
 }

@@ -50,6 +50,9 @@ pub struct ShadowDemo {
     /// 1 a canopy of three trees of small leaf quads ([`CanopyPart`]: many penumbra tiles, the
     /// worst case of tiled soft shadows). Key 5 toggles.
     pub scene: u32,
+    /// SSSS blurs every screen tile instead of the classified ones (same image, for comparing
+    /// costs).
+    pub ssss_all_tiles: bool,
     /// Bevy's PCSS size per radian of light size: PCSS's `soft_shadow_size` has no physical unit
     /// shared with an angular size; this factor gave PCSS its lowest error against the
     /// area-light reference on the pole scene (`ssss_vs_pcss` test sweep).
@@ -63,6 +66,7 @@ impl Default for ShadowDemo {
             light_size: 0.1,
             spot: false,
             scene: 0,
+            ssss_all_tiles: false,
             pcss_size_per_radian: PCSS_SIZE_PER_RADIAN,
         }
     }
@@ -298,18 +302,24 @@ pub fn spawn_shadow_scene(
 }
 
 /// The SSSS settings of the demo for a light of `light_size` (rad, or m for the lamp).
-fn ssss_settings(light_size: f32, max_occluder_distance: f32) -> ScreenSpaceSoftShadows {
+fn ssss_settings(
+    light_size: f32,
+    max_occluder_distance: f32,
+    all_tiles: bool,
+) -> ScreenSpaceSoftShadows {
     ScreenSpaceSoftShadows {
         light_size,
         max_occluder_distance,
         taps_per_side: 11,
         max_kernel_px: 40.0,
+        tile_classification: !all_tiles,
         ..default()
     }
 }
 
 /// Applies [`ShadowDemo`] to the sun and the lamp when it changes: the light in use is visible
 /// and shadowed with the technique chosen, the other hidden.
+#[allow(clippy::type_complexity)]
 pub fn apply_shadow_demo(
     demo: Res<ShadowDemo>,
     mut commands: Commands,
@@ -348,9 +358,11 @@ pub fn apply_shadow_demo(
         light.soft_shadow_size = (technique == ShadowTechnique::Pcss)
             .then(|| demo.light_size * demo.pcss_size_per_radian);
         if technique == ShadowTechnique::Ssss && !demo.spot {
-            commands
-                .entity(entity)
-                .insert(ssss_settings(demo.light_size, 5.0));
+            commands.entity(entity).insert(ssss_settings(
+                demo.light_size,
+                5.0,
+                demo.ssss_all_tiles,
+            ));
         } else {
             commands.entity(entity).remove::<ScreenSpaceSoftShadows>();
         }
@@ -371,7 +383,9 @@ pub fn apply_shadow_demo(
         // Blockers at least 3.5 m from the lamp and up to 3.5 m above their receivers get
         // their whole penumbra (`min_filter::spot_coarse_radius`): the posts and the panel.
         if technique == ShadowTechnique::Ssss && demo.spot {
-            commands.entity(entity).insert(ssss_settings(diameter, 3.5));
+            commands
+                .entity(entity)
+                .insert(ssss_settings(diameter, 3.5, demo.ssss_all_tiles));
         } else {
             commands.entity(entity).remove::<ScreenSpaceSoftShadows>();
         }

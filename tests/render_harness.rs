@@ -325,3 +325,54 @@ fn showcase_distant_trees_are_billboard_clouds() {
     let drawn = harness.diagnostic(&IMPOSTORS_DRAWN).unwrap_or(0.0);
     assert!(drawn > 20.0, "{drawn} impostors drawn");
 }
+
+/// The whole-frame GPU timer brackets every pass: a frame takes at least as long as its main pass,
+/// and without timestamp queries there is no figure rather than another clock's.
+#[test]
+fn whole_frame_gpu_time_covers_the_main_pass() {
+    let Some(mut harness) = RenderHarness::for_test("frame_timer", 96, 64) else {
+        return;
+    };
+    {
+        let world = harness.world_mut();
+        let mesh = world
+            .resource_mut::<Assets<Mesh>>()
+            .add(Sphere::new(1.0).mesh().uv(64, 32));
+        let material = world
+            .resource_mut::<Assets<StandardMaterial>>()
+            .add(StandardMaterial::default());
+        world.spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+        world.spawn((
+            DirectionalLight {
+                shadow_maps_enabled: true,
+                ..default()
+            },
+            Transform::default().looking_to(Vec3::new(-1.0, -1.0, -0.5), Vec3::Y),
+        ));
+        world.spawn((
+            Camera3d::default(),
+            Transform::from_xyz(0.0, 0.0, 4.0).looking_at(Vec3::ZERO, Vec3::Y),
+        ));
+    }
+    harness.wait_until_ready().unwrap();
+    if !harness.has_gpu_timestamps() {
+        assert!(harness.gpu_frame_time_ms().is_err());
+        assert!(harness.gpu_pass_time_ms("main_opaque_pass_3d").is_err());
+        return;
+    }
+    harness.run_frames(4).unwrap();
+    harness.reset_timing();
+    assert!(
+        harness.gpu_frame_time_ms().is_err(),
+        "no figure before any frame was timed"
+    );
+    harness.run_frames(10).unwrap();
+    let frame = harness.gpu_frame_time_ms().unwrap();
+    let main = harness.gpu_pass_time_ms("main_opaque_pass_3d").unwrap();
+    println!("whole frame {frame:.3} ms, main pass {main:.3} ms");
+    assert!(
+        frame > 0.0 && frame >= 0.9 * main,
+        "frame {frame} vs main pass {main}"
+    );
+    assert!(harness.gpu_pass_time_ms("no_such_pass").is_err());
+}

@@ -190,7 +190,10 @@ pub fn add_headless_plugins(app: &mut App, config: &HarnessConfig) {
     }
     app.add_plugins(plugins);
     if config.gpu_timing {
-        app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
+        app.add_plugins((
+            bevy::render::diagnostic::RenderDiagnosticsPlugin,
+            crate::frame_timer::FrameTimerPlugin,
+        ));
     }
 }
 
@@ -427,6 +430,13 @@ impl RenderHarness {
     /// Forgets the measured frame times (e.g. between two configurations measured in one run).
     pub fn reset_timing(&mut self) {
         self.frame_times.clear();
+        if let Some(times) = self
+            .app
+            .world()
+            .get_resource::<crate::frame_timer::GpuFrameTimes>()
+        {
+            times.0.lock().unwrap().clear();
+        }
         if let Some(mut store) = self.app.world_mut().get_resource_mut::<DiagnosticsStore>() {
             for diagnostic in store.iter_mut() {
                 diagnostic.clear_history();
@@ -494,46 +504,27 @@ impl RenderHarness {
     }
 
     /// Median over the frames since the last [`reset_timing`](Self::reset_timing) of the GPU
-    /// time of the whole frame: per frame, the sum of every top-level timestamp span (shadow
-    /// maps, prepasses, main passes, post-processing, and any plugin's own passes). An error
-    /// without timestamp queries or without spans.
+    /// time of the whole frame: timestamps written before and after everything the frame submits
+    /// ([`frame_timer`](crate::frame_timer): shadow maps, prepasses, main passes,
+    /// post-processing, any plugin's passes). Results arrive a frame or two late: step a few
+    /// frames after the measured ones. An error without timestamp queries or without results.
     pub fn gpu_frame_time_ms(&self) -> Result<f64, String> {
         if !self.has_gpu_timestamps() {
             return Err("no GPU timestamp queries on this adapter".into());
         }
-        let store = self
+        let times = self
             .app
             .world()
-            .get_resource::<DiagnosticsStore>()
-            .ok_or("no diagnostics store")?;
-        let mut frames: Vec<f64> = Vec::new();
-        for diagnostic in store.iter() {
-            let path = diagnostic.path().as_str();
-            let Some(pass) = path
-                .strip_prefix("render/")
-                .and_then(|p| p.strip_suffix("/elapsed_gpu"))
-            else {
-                continue;
-            };
-            if pass.contains('/') {
-                // Nested in a span already counted.
-                continue;
-            }
-            // Latest frames last: align every span's history on the newest frame.
-            let values: Vec<f64> = diagnostic.values().copied().collect();
-            if frames.len() < values.len() {
-                let missing = values.len() - frames.len();
-                frames.splice(0..0, std::iter::repeat_n(0.0, missing));
-            }
-            let offset = frames.len() - values.len();
-            for (i, v) in values.iter().enumerate() {
-                frames[offset + i] += v;
-            }
+            .get_resource::<crate::frame_timer::GpuFrameTimes>()
+            .ok_or("the frame timer is not installed")?
+            .0
+            .lock()
+            .unwrap()
+            .clone();
+        if times.is_empty() {
+            return Err("no whole-frame GPU timestamps were read back".into());
         }
-        if frames.is_empty() {
-            return Err("no GPU timestamp spans were recorded".into());
-        }
-        Ok(FrameStats::from_millis(&frames).median_ms)
+        Ok(FrameStats::from_millis(&times).median_ms)
     }
 
     /// Median GPU (or, without timestamp queries, CPU span) time in ms of a named render pass,

@@ -20,6 +20,7 @@
 
 pub mod adapter;
 pub mod compare;
+pub mod frame_timer;
 pub mod headless;
 #[cfg(feature = "windowed")]
 pub mod panel;

@@ -268,6 +268,23 @@ fn convert_receivers(
     }
 }
 
+/// SSSS softens directional and spot lights only: a point light's six cube-face shadow maps
+/// would each need their own dilation (eq. 6.1 per face), which is not built. A point light with
+/// [`ScreenSpaceSoftShadows`] keeps Bevy's shadow and gets a warning, once.
+fn warn_about_point_lights(
+    lights: Query<Entity, (With<ScreenSpaceSoftShadows>, With<PointLight>)>,
+    mut warned: Local<bevy::platform::collections::HashSet<Entity>>,
+) {
+    for entity in &lights {
+        if warned.insert(entity) {
+            warn!(
+                "ScreenSpaceSoftShadows on point light {entity}: SSSS supports directional and \
+                 spot lights only; this light keeps Bevy's shadows"
+            );
+        }
+    }
+}
+
 /// Registers the main-world side.
 pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "receiver.wgsl");
@@ -284,5 +301,6 @@ pub(crate) fn build(app: &mut App) {
                 convert_receivers,
             )
                 .chain(),
-        );
+        )
+        .add_systems(PostUpdate, warn_about_point_lights);
 }

@@ -117,6 +117,7 @@ pub struct SsssTileReadback {
 struct SsssTileBuffers {
     grid: UVec2,
     stats: Option<Buffer>,
+    row_stats: Option<Buffer>,
     list: Option<Buffer>,
     args: Option<Buffer>,
 }
@@ -145,6 +146,7 @@ fn prepare_tile_buffers(
         grid,
         // `TileStats`: eight 4-byte fields.
         stats: buffer("ssss_tile_stats", tiles * 32, BufferUsages::empty()),
+        row_stats: buffer("ssss_tile_row_stats", tiles * 32, BufferUsages::empty()),
         list: buffer("ssss_tile_list", tiles * 4, BufferUsages::empty()),
         args: buffer(
             "ssss_tile_draw_args",
@@ -303,8 +305,9 @@ struct SsssPipelines {
     dilate_direct: [CachedComputePipelineId; 2],
     copy_shadow: CachedComputePipelineId,
     tiles_layout: BindGroupLayoutDescriptor,
-    /// Tile statistics, then the active tile list (`tiles.wgsl`).
+    /// Tile statistics, their spread along rows, then the active tile list (`tiles.wgsl`).
     tile_reduce: CachedComputePipelineId,
+    tile_spread: CachedComputePipelineId,
     tile_classify: CachedComputePipelineId,
 }
 
@@ -354,6 +357,7 @@ fn init_pipelines(
                 storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
+                storage_buffer_sized(false, None),
             ),
         ),
     );
@@ -368,6 +372,7 @@ fn init_pipelines(
         })
     };
     let tile_reduce = tile_pipeline("reduce");
+    let tile_spread = tile_pipeline("spread");
     let tile_classify = tile_pipeline("classify");
     let dilate_shader = load_embedded_asset!(asset_server.as_ref(), "min_filter.wgsl");
     let queue = |entry: &'static str| {
@@ -400,6 +405,7 @@ fn init_pipelines(
         copy_shadow,
         tiles_layout,
         tile_reduce,
+        tile_spread,
         tile_classify,
     });
 }
@@ -624,8 +630,10 @@ fn ssss(
         Some(horizontal),
         Some(visibility),
         Some(tile_reduce),
+        Some(tile_spread),
         Some(tile_classify),
         Some(tile_stats),
+        Some(tile_row_stats),
         Some(tile_list),
         Some(tile_args),
     ) = (
@@ -643,8 +651,10 @@ fn ssss(
         images.get(&extracted.textures.horizontal),
         images.get(&extracted.textures.visibility),
         pipeline_cache.get_compute_pipeline(pipelines.tile_reduce),
+        pipeline_cache.get_compute_pipeline(pipelines.tile_spread),
         pipeline_cache.get_compute_pipeline(pipelines.tile_classify),
         tile_buffers.stats.as_ref(),
+        tile_buffers.row_stats.as_ref(),
         tile_buffers.list.as_ref(),
         tile_buffers.args.as_ref(),
     )
@@ -732,6 +742,7 @@ fn ssss(
             tile_stats.as_entire_binding(),
             tile_list.as_entire_binding(),
             tile_args.as_entire_binding(),
+            tile_row_stats.as_entire_binding(),
         )),
     );
 
@@ -810,10 +821,10 @@ fn ssss(
             });
         let span = diagnostics.pass_span(&mut pass, "ssss_tiles");
         pass.set_bind_group(0, &tiles_group, &[]);
-        pass.set_pipeline(tile_reduce);
-        pass.dispatch_workgroups(grid.x, grid.y, 1);
-        pass.set_pipeline(tile_classify);
-        pass.dispatch_workgroups((grid.x * grid.y).div_ceil(64), 1, 1);
+        for pipeline in [tile_reduce, tile_spread, tile_classify] {
+            pass.set_pipeline(pipeline);
+            pass.dispatch_workgroups((grid.x * grid.y).div_ceil(64), 1, 1);
+        }
         span.end(&mut pass);
     }
     // The blur passes: one quad per active tile, over what the distance pass wrote.

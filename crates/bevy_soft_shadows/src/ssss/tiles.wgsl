@@ -1,11 +1,13 @@
 // Tile classification of SSSS (CPU reference: `ssss::tiles`): which 8×8 screen tiles the blur
 // passes must run on.
 //
-// - `reduce`: one workgroup per tile reads the distance map (hard, σx, σy, eye depth) and writes
+// - `reduce`: one invocation per tile reads the distance map (hard, σx, σy, eye depth) and writes
 //   the tile's statistics: hard visibility range, depth range, background, kernel reaches.
-// - `classify`: one invocation per tile gathers the statistics of the region the two blur passes
-//   read from it (the vertical reach of its pixels, then the horizontal reach of each tile row
-//   met) and appends the tile to the active list — the instance count of an indirect draw —
+// - `spread`: one invocation per tile combines the statistics of the tiles its own horizontal
+//   reach covers (what the horizontal pass reads from its row).
+// - `classify`: one invocation per tile combines the spread statistics of the tile rows its
+//   vertical reach covers — the region the two blur passes read, in two 1-D walks instead of one
+//   2-D one — and appends the tile to the active list (the instance count of an indirect draw)
 //   unless the blur cannot change any of its pixels.
 #import bevy_soft_shadows::ssss_types::{SsssUniform, TILE, KERNEL_REACH_SIGMAS, DEPTH_RANGE_MARGIN}
 
@@ -34,10 +36,9 @@ struct TileArgs {
 @group(0) @binding(2) var<storage, read_write> stats: array<TileStats>;
 @group(0) @binding(3) var<storage, read_write> tiles: array<u32>;
 @group(0) @binding(4) var<storage, read_write> args: TileArgs;
+@group(0) @binding(5) var<storage, read_write> row_stats: array<TileStats>;
 
 const F32_MAX: f32 = 3.40282347e38;
-
-var<workgroup> partial: array<TileStats, 64>;
 
 fn tile_grid() -> vec2<u32> {
     return (textureDimensions(distances) + vec2(TILE - 1u)) / TILE;
@@ -51,42 +52,37 @@ fn kernel_reach(sigma: f32) -> u32 {
     return 0u;
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn reduce(
-    @builtin(global_invocation_id) id: vec3<u32>,
-    @builtin(local_invocation_index) local: u32,
-    @builtin(workgroup_id) tile: vec3<u32>,
-) {
-    var s = TileStats(F32_MAX, -F32_MAX, F32_MAX, 0.0, 0u, 0u, 0u, 0u);
-    if all(id.xy < textureDimensions(distances)) {
-        let d = textureLoad(distances, id.xy, 0);
-        s.hard_min = d.x;
-        s.hard_max = d.x;
-        if d.w > 0.0 {
-            s.depth_min = d.w;
-            s.depth_max = d.w;
-        } else {
-            s.background = 1u;
-        }
-        s.reach_x = kernel_reach(d.y);
-        s.reach_y = kernel_reach(d.z);
-    }
-    partial[local] = s;
-    workgroupBarrier();
-    if local != 0u {
+// One invocation per tile walks its pixels (no workgroup barrier: on a software rasteriser's
+// compute path a barrier per tile cost more than the loads).
+@compute @workgroup_size(64, 1, 1)
+fn reduce(@builtin(global_invocation_id) id: vec3<u32>) {
+    let grid = tile_grid();
+    if id.x >= grid.x * grid.y {
         return;
     }
-    for (var i = 1u; i < 64u; i += 1u) {
-        let p = partial[i];
-        s.hard_min = min(s.hard_min, p.hard_min);
-        s.hard_max = max(s.hard_max, p.hard_max);
-        s.depth_min = min(s.depth_min, p.depth_min);
-        s.depth_max = max(s.depth_max, p.depth_max);
-        s.reach_x = max(s.reach_x, p.reach_x);
-        s.reach_y = max(s.reach_y, p.reach_y);
-        s.background = max(s.background, p.background);
+    let size = textureDimensions(distances);
+    let origin = vec2(id.x % grid.x, id.x / grid.x) * TILE;
+    var s = TileStats(F32_MAX, -F32_MAX, F32_MAX, 0.0, 0u, 0u, 0u, 0u);
+    for (var j = 0u; j < TILE; j += 1u) {
+        for (var i = 0u; i < TILE; i += 1u) {
+            let p = origin + vec2(i, j);
+            if any(p >= size) {
+                continue;
+            }
+            let d = textureLoad(distances, p, 0);
+            s.hard_min = min(s.hard_min, d.x);
+            s.hard_max = max(s.hard_max, d.x);
+            if d.w > 0.0 {
+                s.depth_min = min(s.depth_min, d.w);
+                s.depth_max = max(s.depth_max, d.w);
+            } else {
+                s.background = 1u;
+            }
+            s.reach_x = max(s.reach_x, kernel_reach(d.y));
+            s.reach_y = max(s.reach_y, kernel_reach(d.z));
+        }
     }
-    stats[tile.y * tile_grid().x + tile.x] = s;
+    stats[id.x] = s;
 }
 
 // `tiles::tile_span`: the tiles covering pixels `tile·TILE − reach ..= tile·TILE + TILE − 1 +
@@ -98,35 +94,51 @@ fn tile_span(tile: u32, reach: u32, count: u32) -> vec2<u32> {
     return vec2(u32(first), u32(last));
 }
 
-// `tiles::is_active`.
+fn combine(a: TileStats, b: TileStats) -> TileStats {
+    var s = a;
+    s.hard_min = min(a.hard_min, b.hard_min);
+    s.hard_max = max(a.hard_max, b.hard_max);
+    s.depth_min = min(a.depth_min, b.depth_min);
+    s.depth_max = max(a.depth_max, b.depth_max);
+    s.background = max(a.background, b.background);
+    return s;
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn spread(@builtin(global_invocation_id) id: vec3<u32>) {
+    let grid = tile_grid();
+    if id.x >= grid.x * grid.y {
+        return;
+    }
+    let x = id.x % grid.x;
+    let y = id.x / grid.x;
+    let own = stats[id.x];
+    var s = TileStats(F32_MAX, -F32_MAX, F32_MAX, 0.0, own.reach_x, own.reach_y, 0u, 0u);
+    let cols = tile_span(x, own.reach_x, grid.x);
+    for (var col = cols.x; col <= cols.y; col += 1u) {
+        s = combine(s, stats[y * grid.x + col]);
+    }
+    row_stats[id.x] = s;
+}
+
+// `tiles::is_active`: over the tile rows its vertical reach covers, what each row's horizontal
+// reach covers.
 fn is_active(x: u32, y: u32, grid: vec2<u32>) -> bool {
     let own = stats[y * grid.x + x];
     if own.reach_x == 0u && own.reach_y == 0u {
         return false;
     }
-    var hard_min = F32_MAX;
-    var hard_max = -F32_MAX;
-    var depth_min = F32_MAX;
-    var depth_max = 0.0;
-    var background = 0u;
+    var s = TileStats(F32_MAX, -F32_MAX, F32_MAX, 0.0, 0u, 0u, 0u, 0u);
     let rows = tile_span(y, own.reach_y, grid.y);
     for (var row = rows.x; row <= rows.y; row += 1u) {
-        let cols = tile_span(x, stats[row * grid.x + x].reach_x, grid.x);
-        for (var col = cols.x; col <= cols.y; col += 1u) {
-            let s = stats[row * grid.x + col];
-            hard_min = min(hard_min, s.hard_min);
-            hard_max = max(hard_max, s.hard_max);
-            depth_min = min(depth_min, s.depth_min);
-            depth_max = max(depth_max, s.depth_max);
-            background = max(background, s.background);
-        }
+        s = combine(s, row_stats[row * grid.x + x]);
     }
-    if hard_min != hard_max {
+    if s.hard_min != s.hard_max {
         return true;
     }
     return ssss.lazy_shadowing != 0u
-        && (background != 0u
-            || depth_max - depth_min > DEPTH_RANGE_MARGIN * ssss.depth_rejection * depth_min);
+        && (s.background != 0u
+            || s.depth_max - s.depth_min > DEPTH_RANGE_MARGIN * ssss.depth_rejection * s.depth_min);
 }
 
 @compute @workgroup_size(64, 1, 1)
