@@ -52,30 +52,8 @@ fn ssss_matches_its_cpu_reference_and_follows_eq_6_2() {
     assert_eq!(textures.size, UVec2::splat(SIZE));
 
     // 1. The blur passes against the CPU reference on the GPU's own distance map.
-    let distance = floats(
-        &harness
-            .read_image(textures.distance.clone(), SIZE, SIZE, 16)
-            .unwrap(),
-    );
-    // (visibility, light) per pixel: keep the visibility.
-    let visibility: Vec<f32> = floats(
-        &harness
-            .read_image(textures.visibility.clone(), SIZE, SIZE, 8)
-            .unwrap(),
-    )
-    .into_iter()
-    .step_by(2)
-    .collect();
+    let (visibility, buffers) = read_ssss_screen(&mut harness);
     let n = (SIZE * SIZE) as usize;
-    let buffers = ScreenBuffers {
-        width: SIZE as usize,
-        height: SIZE as usize,
-        hard: (0..n).map(|i| distance[4 * i]).collect(),
-        sigma: (0..n)
-            .map(|i| [distance[4 * i + 1], distance[4 * i + 2]])
-            .collect(),
-        depth: (0..n).map(|i| distance[4 * i + 3]).collect(),
-    };
     let s = settings();
     let cpu = soft_shadow(
         &buffers,

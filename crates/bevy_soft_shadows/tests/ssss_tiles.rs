@@ -12,41 +12,11 @@ mod common;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy_nature_harness::RenderHarness;
-use bevy_soft_shadows::ssss::blur::ScreenBuffers;
 use bevy_soft_shadows::ssss::receiver::SsssTextures;
 use bevy_soft_shadows::ssss::render::SsssTileReadback;
 use bevy_soft_shadows::ssss::tiles::{TileSettings, active_tiles};
 use bevy_soft_shadows::{ScreenSpaceSoftShadows, SoftShadowsPlugin};
 use common::*;
-
-/// The soft visibility and distance map of the last frame.
-fn read_screen(harness: &mut RenderHarness) -> (Vec<f32>, ScreenBuffers) {
-    let textures = harness.world_mut().resource::<SsssTextures>().clone();
-    let distance = floats(
-        &harness
-            .read_image(textures.distance.clone(), SIZE, SIZE, 16)
-            .unwrap(),
-    );
-    let visibility: Vec<f32> = floats(
-        &harness
-            .read_image(textures.visibility.clone(), SIZE, SIZE, 8)
-            .unwrap(),
-    )
-    .into_iter()
-    .step_by(2)
-    .collect();
-    let n = (SIZE * SIZE) as usize;
-    let buffers = ScreenBuffers {
-        width: SIZE as usize,
-        height: SIZE as usize,
-        hard: (0..n).map(|i| distance[4 * i]).collect(),
-        sigma: (0..n)
-            .map(|i| [distance[4 * i + 1], distance[4 * i + 2]])
-            .collect(),
-        depth: (0..n).map(|i| distance[4 * i + 3]).collect(),
-    };
-    (visibility, buffers)
-}
 
 /// The GPU's active tiles of the last frame, sorted, and the tile count.
 fn read_tiles(harness: &mut RenderHarness) -> (Vec<[u32; 2]>, usize) {
@@ -73,6 +43,41 @@ fn read_tiles(harness: &mut RenderHarness) -> (Vec<[u32; 2]>, usize) {
         .collect();
     tiles.sort_by_key(|t| (t[1], t[0]));
     (tiles, (grid.x * grid.y) as usize)
+}
+
+/// The soft visibility in grey with the active tiles tinted orange and outlined
+/// (`target/nature-artifacts/ssss_tiles/`).
+fn save_tile_image(scene: &str, visibility: &[f32], active: &[[u32; 2]]) {
+    use bevy_nature_harness::artifacts_dir;
+    use bevy_nature_harness::compare::RgbaImage;
+    use bevy_soft_shadows::reference::linear_to_srgb;
+    let mut data = Vec::with_capacity(visibility.len() * 4);
+    for (i, &v) in visibility.iter().enumerate() {
+        let (x, y) = (i as u32 % SIZE, i as u32 / SIZE);
+        let g = linear_to_srgb(0.15 + 0.85 * v.clamp(0.0, 1.0)) as f32;
+        let tile = [x / 8, y / 8];
+        let rgb = if active.contains(&tile) {
+            let edge = x % 8 == 0 || y % 8 == 0;
+            if edge {
+                [255.0, 140.0, 0.0]
+            } else {
+                [0.6 * g + 0.4 * 255.0, 0.6 * g + 0.4 * 150.0, 0.6 * g]
+            }
+        } else {
+            [g, g, g]
+        };
+        data.extend(rgb.map(|c| c as u8));
+        data.push(255);
+    }
+    let dir = artifacts_dir().join("ssss_tiles");
+    std::fs::create_dir_all(&dir).ok();
+    let name: String = scene
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    RgbaImage::new(SIZE, SIZE, data)
+        .save_png(dir.join(format!("{name}.png")))
+        .ok();
 }
 
 fn words(bytes: &[u8]) -> Vec<u32> {
@@ -114,7 +119,7 @@ fn check_scene(
         frames += 1;
         assert!(frames < 100, "{scene}: the receivers were never drawn");
     }
-    let (tiled, buffers) = read_screen(harness);
+    let (tiled, buffers) = read_ssss_screen(harness);
     let (gpu_tiles, total) = read_tiles(harness);
     let cpu_tiles = active_tiles(
         &buffers,
@@ -132,6 +137,7 @@ fn check_scene(
         gpu_tiles, cpu_tiles,
         "{scene}: the GPU's active tiles differ from the CPU classification"
     );
+    save_tile_image(scene, &tiled, &gpu_tiles);
     let fraction = gpu_tiles.len() as f32 / total as f32;
     assert!(
         !gpu_tiles.is_empty() && fraction < 0.6,
@@ -149,7 +155,7 @@ fn check_scene(
         });
     harness.render().unwrap();
     harness.render().unwrap();
-    let (full, _) = read_screen(harness);
+    let (full, _) = read_ssss_screen(harness);
     let (all_tiles, _) = read_tiles(harness);
     assert_eq!(all_tiles.len(), total, "{scene}: every tile blurred");
     let worst = tiled

@@ -348,3 +348,37 @@ pub fn assert_distance_pass_matches(
     );
     (agree, ground, penumbra)
 }
+
+/// The last frame's SSSS soft visibility (per pixel) and its distance map as the CPU references
+/// take it (hard shadow, σ, eye depth), read back from `SsssTextures`.
+pub fn read_ssss_screen(
+    harness: &mut RenderHarness,
+) -> (Vec<f32>, bevy_soft_shadows::ssss::blur::ScreenBuffers) {
+    use bevy_soft_shadows::ssss::receiver::SsssTextures;
+    let textures = harness.world_mut().resource::<SsssTextures>().clone();
+    let distance = floats(
+        &harness
+            .read_image(textures.distance.clone(), SIZE, SIZE, 16)
+            .unwrap(),
+    );
+    // (visibility, light) per pixel: keep the visibility.
+    let visibility: Vec<f32> = floats(
+        &harness
+            .read_image(textures.visibility.clone(), SIZE, SIZE, 8)
+            .unwrap(),
+    )
+    .into_iter()
+    .step_by(2)
+    .collect();
+    let n = (SIZE * SIZE) as usize;
+    let buffers = bevy_soft_shadows::ssss::blur::ScreenBuffers {
+        width: SIZE as usize,
+        height: SIZE as usize,
+        hard: (0..n).map(|i| distance[4 * i]).collect(),
+        sigma: (0..n)
+            .map(|i| [distance[4 * i + 1], distance[4 * i + 2]])
+            .collect(),
+        depth: (0..n).map(|i| distance[4 * i + 3]).collect(),
+    };
+    (visibility, buffers)
+}
