@@ -12,7 +12,7 @@ use bevy::prelude::*;
 use bevy_nature_harness::compare::RgbaImage;
 use bevy_nature_harness::{RenderHarness, artifacts_dir};
 use bevy_soft_shadows::reference::{disk_rise_fraction, linear_to_srgb, rise_width};
-use bevy_soft_shadows::ssss::blur::{BlurSettings, ScreenBuffers, soft_shadow};
+use bevy_soft_shadows::ssss::blur::{BlurSettings, soft_shadow};
 use bevy_soft_shadows::ssss::receiver::SsssTextures;
 use bevy_soft_shadows::{ScreenSpaceSoftShadows, SoftShadowsPlugin};
 use common::*;
