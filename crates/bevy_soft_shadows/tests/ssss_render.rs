@@ -276,7 +276,7 @@ fn the_dilation_and_distance_passes_match_their_cpu_references() {
     use bevy::light::Cascades;
     use bevy::render::RenderApp;
     use bevy_soft_shadows::ssss::distance::{
-        CoarseMap, DirectionalCascade, directional_penumbra_width,
+        CoarseMap, DirectionalCascade, FineMap, directional_penumbra_width,
     };
     use bevy_soft_shadows::ssss::min_filter::{DepthConvention, coarse_dilate, coarse_radius};
     use bevy_soft_shadows::ssss::render::{SsssDilationFilter, SsssDilationReadback};
@@ -358,10 +358,16 @@ fn the_dilation_and_distance_passes_match_their_cpu_references() {
         map_size: fine_size.x as f32,
         radius,
     };
+    let fine_map = FineMap {
+        depth: &fine,
+        width: w,
+        height: h,
+    };
     assert_distance_pass_matches(&mut harness, &s, |world| {
         directional_penumbra_width(
             &cascade,
             &coarse,
+            &fine_map,
             world,
             Vec3::Y,
             sun_direction(),
@@ -451,12 +457,10 @@ fn ssss_follows_eq_6_1_in_a_second_cascade() {
 
 /// A thin blocker under a large light: a 0.1 m pole 4 m tall under a 0.25 rad sun. Its shadow is
 /// narrower than the penumbra from a metre behind the pole on, so the area-light reference shows
-/// a faint line whose contrast falls with the distance. SSSS follows it from 3 m behind the pole
-/// on, but nearer the pole it keeps only 58–75 % of the reference's contrast: the min filter of
-/// §6.2.1 finds the blocker nearest the light within its window — the pole's top — not the part
-/// of the pole in front of the light's centre, so the penumbra it estimates is too wide. This test
-/// holds today's behaviour (and fails if the line is washed out or left hard); closing the gap
-/// needs a blocker estimate other than the window's minimum.
+/// a faint line whose contrast falls with the distance. SSSS must keep that contrast, neither
+/// washing the line out nor leaving it hard. With the coarse map's blocker alone — the pole's
+/// top, nearest the light in the dilation window — it kept only 58–75 % of it within 2 m of the
+/// pole; the refined blocker (`distance::refined_gap`) keeps 83 % at 0.5 m and 92–97 % beyond.
 #[test]
 fn a_thin_blocker_keeps_its_contrast_under_a_large_light() {
     const THETA_LARGE: f32 = 0.25;
@@ -513,13 +517,13 @@ fn a_thin_blocker_keeps_its_contrast_under_a_large_light() {
         println!("s = {s} m: contrast hard {h:.3}, SSSS {c:.3}, reference {r:.3}");
         assert!(h > 0.95, "s = {s}: the hard shadow is a dark line ({h})");
         assert!(
-            c >= 0.5 * r && c <= 1.2 * r,
+            c >= 0.8 * r && c <= 1.2 * r,
             "s = {s}: SSSS contrast {c} against the reference's {r}"
         );
-        if s >= 3.0 {
+        if s >= 1.0 {
             assert!(
-                (c - r).abs() <= 0.2 * r,
-                "s = {s}: far behind the pole SSSS matches the reference: {c} vs {r}"
+                (c - r).abs() <= 0.1 * r,
+                "s = {s}: SSSS contrast {c} against the reference's {r}"
             );
         }
     }

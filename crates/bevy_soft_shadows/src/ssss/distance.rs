@@ -110,13 +110,15 @@ impl DirectionalCascade {
 }
 
 /// Eq. 6.1 for a light at infinity (angular diameter `angular_diameter`): the world width of the
-/// penumbra at receiver `world` (unit `normal`; `direction_to_light` unit) behind the blocker the
-/// coarse map holds at its texel, the gap measured along the light from the cascade's linear
-/// depth. Zero outside the cascade, with no blocker nearer the light, or when the "blocker" is
-/// the receiver's own surface across the dilation footprint ([`own_surface_gap`]).
+/// penumbra at receiver `world` (unit `normal`; `direction_to_light` unit) behind the blocker
+/// found for it, the gap measured along the light from the cascade's linear depth: the coarse
+/// map's blocker at its texel, refined on the fine map ([`refined_gap`]). Zero outside the
+/// cascade, with no blocker nearer the light, or when the "blocker" is the receiver's own
+/// surface across the dilation footprint ([`own_surface_gap`]).
 pub fn directional_penumbra_width(
     cascade: &DirectionalCascade,
     coarse: &CoarseMap,
+    fine: &FineMap,
     world: Vec3,
     normal: Vec3,
     direction_to_light: Vec3,
@@ -125,13 +127,89 @@ pub fn directional_penumbra_width(
     let Some((uv, depth)) = cascade.project(world) else {
         return 0.0;
     };
-    let gap = (coarse.at(uv) - depth) / cascade.depth_per_metre().max(1e-8);
+    let depth_per_metre = cascade.depth_per_metre();
+    let gap = (coarse.at(uv) - depth) / depth_per_metre.max(1e-8);
     let reach = ((coarse.radius + 1) * DILATION_BLOCK) as f32 * cascade.texel_size;
     let cos_nl = normal.dot(direction_to_light);
     if cos_nl > 0.0 && gap <= own_surface_gap(reach, cos_nl) {
         return 0.0;
     }
+    let gap = refined_gap(
+        fine,
+        uv,
+        depth,
+        gap,
+        cascade.texel_size,
+        depth_per_metre,
+        cos_nl,
+        angular_diameter,
+    );
     directional_penumbra_width_of_gap(gap, angular_diameter)
+}
+
+/// Half-width in samples of the grid [`refined_gap`] searches (`BLOCKER_GRID` in
+/// `ssss_types.wgsl`): 7×7 samples.
+pub const BLOCKER_GRID: i32 = 3;
+
+/// One layer of the fine shadow map, as the distance pass reads it.
+#[derive(Clone, Copy, Debug)]
+pub struct FineMap<'a> {
+    /// Row-major depths (reverse Z).
+    pub depth: &'a [f32],
+    /// Size in texels.
+    pub width: usize,
+    /// Size in texels.
+    pub height: usize,
+}
+
+/// The blocker's gap for eq. 6.1 at a receiver of shadow-map coordinates `uv` and stored depth
+/// `receiver_depth`, given the coarse map's gap `gap_max` (`refined_gap` in `ssss.wgsl`).
+///
+/// The coarse map holds the blocker nearest the light within the dilation window (§6.2.1). For a
+/// long thin blocker — a trunk, a pole — that is its far end, not the part in front of the
+/// light's centre, so the penumbra comes out too wide and the thin shadow too faint. Here the
+/// fine map is searched on a (2·[`BLOCKER_GRID`] + 1)² grid spanning the reach of that farthest
+/// blocker, `gap_max · tan(θ/2)`; a texel counts when its blocker hides part of the light's disk
+/// from the receiver — at gap `g` the disk spans `g · tan(θ/2)` around the receiver's light ray
+/// — and is not the receiver's own plane (rising by `tan` of its angle to the light per metre,
+/// plus one texel). The mean of their gaps is the blocker's; with none, `gap_max` stands.
+#[allow(clippy::too_many_arguments)]
+pub fn refined_gap(
+    fine: &FineMap,
+    uv: Vec2,
+    receiver_depth: f32,
+    gap_max: f32,
+    texel_size: f32,
+    depth_per_metre: f32,
+    cos_nl: f32,
+    angular_diameter: f32,
+) -> f32 {
+    let (w, h) = (fine.width as i32, fine.height as i32);
+    let centre_x = ((uv.x * w as f32).floor() as i32).clamp(0, w - 1);
+    let centre_y = ((uv.y * h as f32).floor() as i32).clamp(0, h - 1);
+    let t = (0.5 * angular_diameter).tan();
+    let reach_texels = gap_max * t / texel_size.max(1e-6);
+    let slope = (1.0 - cos_nl * cos_nl).max(0.0).sqrt() / cos_nl.max(0.05);
+    let (mut sum, mut count) = (0.0f32, 0.0f32);
+    for j in -BLOCKER_GRID..=BLOCKER_GRID {
+        for i in -BLOCKER_GRID..=BLOCKER_GRID {
+            // WGSL's `round` rounds halves to even.
+            let ox = (i as f32 * reach_texels / BLOCKER_GRID as f32).round_ties_even() as i32;
+            let oy = (j as f32 * reach_texels / BLOCKER_GRID as f32).round_ties_even() as i32;
+            let (x, y) = (centre_x + ox, centre_y + oy);
+            if x < 0 || y < 0 || x >= w || y >= h {
+                continue;
+            }
+            let depth = fine.depth[(y * w + x) as usize];
+            let gap = (depth - receiver_depth) / depth_per_metre.max(1e-8);
+            let r = Vec2::new(ox as f32, oy as f32).length() * texel_size;
+            if gap > 0.0 && r <= gap * t && (cos_nl <= 0.0 || gap > (r + texel_size) * slope) {
+                sum += gap;
+                count += 1.0;
+            }
+        }
+    }
+    if count > 0.0 { sum / count } else { gap_max }
 }
 
 fn directional_penumbra_width_of_gap(gap: f32, angular_diameter: f32) -> f32 {
@@ -330,7 +408,15 @@ mod tests {
             map_size: 2048.0,
             radius: 2,
         };
-        let w = directional_penumbra_width(&cascade, &coarse, Vec3::ZERO, Vec3::Y, Vec3::Y, 0.1);
+        // The fine map: nothing but the receiver's own plane, so the coarse map's blocker stands.
+        let plane = vec![0.5f32; 64 * 64];
+        let fine = FineMap {
+            depth: &plane,
+            width: 64,
+            height: 64,
+        };
+        let w =
+            directional_penumbra_width(&cascade, &coarse, &fine, Vec3::ZERO, Vec3::Y, Vec3::Y, 0.1);
         assert!((w - 2.0 * 0.05f32.tan()).abs() < 1e-4, "{w}");
         // No blocker above: nothing.
         let none = [0.5];
@@ -338,9 +424,52 @@ mod tests {
             depth: &none,
             ..coarse
         };
-        let w =
-            directional_penumbra_width(&cascade, &coarse_none, Vec3::ZERO, Vec3::Y, Vec3::Y, 0.1);
+        let w = directional_penumbra_width(
+            &cascade,
+            &coarse_none,
+            &fine,
+            Vec3::ZERO,
+            Vec3::Y,
+            Vec3::Y,
+            0.1,
+        );
         assert_eq!(w, 0.0);
+    }
+
+    #[test]
+    fn the_refined_blocker_is_the_one_hiding_the_lights_disk() {
+        // A receiver at the centre of a 64² map of 1 cm texels, a 0.2 rad light straight above
+        // (depth 1 per metre). A plank 0.5 m above it over the whole map, and the coarse map's
+        // blocker 3.7 m up (a post somewhere in the dilation window): the plank hides the
+        // light's disk only within 0.5·tan(0.1) = 5 cm of the receiver's ray — the grid's centre
+        // sample — and its gap is the blocker's.
+        let (n, texel) = (64usize, 0.01f32);
+        let plank = vec![0.5f32; n * n];
+        let fine = FineMap {
+            depth: &plank,
+            width: n,
+            height: n,
+        };
+        let uv = Vec2::splat(32.5 / n as f32);
+        assert_eq!(refined_gap(&fine, uv, 0.0, 3.7, texel, 1.0, 1.0, 0.2), 0.5);
+        // A 3 m post 12 cm to the side hides part of the disk too (3·tan(0.1) = 30 cm): the
+        // mean of both.
+        let mut post = plank.clone();
+        let grid_step = (3.7 * 0.1f32.tan() / texel / 3.0).round_ties_even() as usize;
+        post[32 * n + 32 + grid_step] = 3.0;
+        let with_post = FineMap {
+            depth: &post,
+            ..fine
+        };
+        let refined = refined_gap(&with_post, uv, 0.0, 3.7, texel, 1.0, 1.0, 0.2);
+        assert!((refined - 1.75).abs() < 1e-5, "{refined}");
+        // Nothing but the receiver's plane nearby: the coarse gap stands.
+        let flat = vec![0.0f32; n * n];
+        let empty = FineMap {
+            depth: &flat,
+            ..fine
+        };
+        assert_eq!(refined_gap(&empty, uv, 0.0, 3.7, texel, 1.0, 1.0, 0.2), 3.7);
     }
 
     #[test]

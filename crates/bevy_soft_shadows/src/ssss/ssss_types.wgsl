@@ -36,3 +36,5 @@ const KERNEL_REACH_SIGMAS: f32 = 2.5;
 const TILE: u32 = 8u;
 // `ssss::tiles::DEPTH_RANGE_MARGIN`.
 const DEPTH_RANGE_MARGIN: f32 = 0.99;
+// Half-width of the refined blocker search grid, in samples (`ssss::distance::BLOCKER_GRID`).
+const BLOCKER_GRID: i32 = 3;
