@@ -19,7 +19,7 @@ use bevy_nature_harness::{RenderHarness, artifacts_dir};
 use bevy_soft_shadows::reference::{
     LinearAverage, disk_rise_fraction, jittered_positions, linear_to_srgb, rise_width,
 };
-use bevy_soft_shadows::ssss::distance::{CoarseMap, SpotProjection, spot_penumbra_width};
+use bevy_soft_shadows::ssss::distance::{CoarseMap, FineMap, SpotProjection, spot_penumbra_width};
 use bevy_soft_shadows::ssss::min_filter::{
     DepthConvention, MAX_DILATION_TEXELS, coarse_dilate, spot_coarse_radius,
 };
@@ -305,9 +305,21 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
         map_size: fine_size.x as f32,
         radius,
     };
+    let fine_map = FineMap {
+        depth: &fine,
+        width: fine_size.x as usize,
+        height: fine_size.y as usize,
+    };
     let s = settings();
     assert_distance_pass_matches(&mut harness, &s, |world| {
-        spot_penumbra_width(&projection, &coarse, world, Vec3::Y, s.light_size)
+        spot_penumbra_width(
+            &projection,
+            &coarse,
+            &fine_map,
+            world,
+            Vec3::Y,
+            s.light_size,
+        )
     });
 
     // 3. Penumbra widths (10–90 %) across the side edge, in visibility (over the unshadowed

@@ -172,7 +172,7 @@ pub struct FineMap<'a> {
 /// blocker, `gap_max · tan(θ/2)`; a texel counts when its blocker hides part of the light's disk
 /// from the receiver — at gap `g` the disk spans `g · tan(θ/2)` around the receiver's light ray
 /// — and is not the receiver's own plane (rising by `tan` of its angle to the light per metre,
-/// plus one texel). The mean of their gaps is the blocker's; with none, `gap_max` stands.
+/// plus one texel) nor within a texel of it (depth precision). The mean of their gaps is the blocker's; with none, `gap_max` stands.
 #[allow(clippy::too_many_arguments)]
 pub fn refined_gap(
     fine: &FineMap,
@@ -203,7 +203,8 @@ pub fn refined_gap(
             let depth = fine.depth[(y * w + x) as usize];
             let gap = (depth - receiver_depth) / depth_per_metre.max(1e-8);
             let r = Vec2::new(ox as f32, oy as f32).length() * texel_size;
-            if gap > 0.0 && r <= gap * t && (cos_nl <= 0.0 || gap > (r + texel_size) * slope) {
+            if gap > texel_size && r <= gap * t && (cos_nl <= 0.0 || gap > (r + texel_size) * slope)
+            {
                 sum += gap;
                 count += 1.0;
             }
@@ -247,6 +248,7 @@ impl CoarseMap<'_> {
 pub fn spot_penumbra_width(
     projection: &SpotProjection,
     coarse: &CoarseMap,
+    fine: &FineMap,
     world: Vec3,
     normal: Vec3,
     light_size: f32,
@@ -269,7 +271,64 @@ pub fn spot_penumbra_width(
     if cos_nl > 0.0 && gap <= own_surface_gap(reach, cos_nl) {
         return 0.0;
     }
+    let d_blocker = refined_spot_blocker(
+        projection, fine, uv, d_receiver, d_blocker, cos_nl, light_size,
+    );
     penumbra_width(d_receiver, d_blocker, light_size)
+}
+
+/// [`refined_gap`] for a spot light of diameter `light_size` (`refined_spot_blocker` in
+/// `ssss.wgsl`): the mean distance from the light of the fine-map blockers hiding part of the
+/// lamp's disk from the receiver, `d_receiver` from the light — seen from the receiver, the disk
+/// spans `light_size/2 · g / d_receiver` around its ray at a blocker `g` in front of it — over a
+/// grid spanning the reach of the coarse map's nearest blocker `d_nearest`; with none,
+/// `d_nearest` stands.
+pub fn refined_spot_blocker(
+    projection: &SpotProjection,
+    fine: &FineMap,
+    uv: Vec2,
+    d_receiver: f32,
+    d_nearest: f32,
+    cos_nl: f32,
+    light_size: f32,
+) -> f32 {
+    let (w, h) = (fine.width as i32, fine.height as i32);
+    let centre_x = ((uv.x * w as f32).floor() as i32).clamp(0, w - 1);
+    let centre_y = ((uv.y * h as f32).floor() as i32).clamp(0, h - 1);
+    let half = 0.5 * light_size;
+    let texel_per_distance = 2.0 * projection.tan_outer / w as f32;
+    let reach_texels =
+        half * (d_receiver - d_nearest) / d_receiver / (d_nearest * texel_per_distance).max(1e-8);
+    let slope = (1.0 - cos_nl * cos_nl).max(0.0).sqrt() / cos_nl.max(0.05);
+    let receiver_texel = d_receiver * texel_per_distance;
+    let (mut sum, mut count) = (0.0f32, 0.0f32);
+    for j in -BLOCKER_GRID..=BLOCKER_GRID {
+        for i in -BLOCKER_GRID..=BLOCKER_GRID {
+            let ox = (i as f32 * reach_texels / BLOCKER_GRID as f32).round_ties_even() as i32;
+            let oy = (j as f32 * reach_texels / BLOCKER_GRID as f32).round_ties_even() as i32;
+            let (x, y) = (centre_x + ox, centre_y + oy);
+            if x < 0 || y < 0 || x >= w || y >= h {
+                continue;
+            }
+            let depth = fine.depth[(y * w + x) as usize];
+            if depth <= projection.near / d_receiver {
+                continue;
+            }
+            let d = projection.near / depth;
+            let gap = d_receiver - d;
+            let texels = Vec2::new(ox as f32, oy as f32).length();
+            let lateral = texels * d * texel_per_distance;
+            let own = (texels * receiver_texel + receiver_texel) * slope;
+            if gap > receiver_texel
+                && lateral <= half * gap / d_receiver
+                && (cos_nl <= 0.0 || gap > own)
+            {
+                sum += d;
+                count += 1.0;
+            }
+        }
+    }
+    if count > 0.0 { sum / count } else { d_nearest }
 }
 
 /// The kernel's σ (pixels) for a penumbra `width_px` wide on screen: σ = width/4, zero when the
@@ -355,10 +414,26 @@ mod tests {
             radius: 2,
         };
         assert_eq!(coarse.at(uv), depth[0]);
-        // Facing the light: no own-surface gap to discount.
+        // Facing the light: no own-surface gap to discount. The fine map holds only the
+        // receiver's own plane: the coarse map's blocker stands.
         let normal = -p.forward;
-        let w = spot_penumbra_width(&p, &coarse, receiver, normal, 0.5);
+        let plane = vec![p.depth(8.0); 64 * 64];
+        let fine = FineMap {
+            depth: &plane,
+            width: 64,
+            height: 64,
+        };
+        let w = spot_penumbra_width(&p, &coarse, &fine, receiver, normal, 0.5);
         assert!((w - 0.5).abs() < 1e-4, "{w}");
+        // A fine map holding a plank at 6 m over everything: the plank hides the lamp's disk
+        // around the receiver's ray, and eq. 6.1 takes it instead of the coarse 4 m blocker.
+        let plank = vec![p.depth(6.0); 64 * 64];
+        let planked = FineMap {
+            depth: &plank,
+            ..fine
+        };
+        let w = spot_penumbra_width(&p, &coarse, &planked, receiver, normal, 0.5);
+        assert!((w - penumbra_width(8.0, 6.0, 0.5)).abs() < 1e-4, "{w}");
         // The blocker behind the receiver casts nothing; nor does a gap within the receiver's
         // own slope across the footprint, at grazing light.
         let behind = [p.depth(9.0)];
@@ -367,7 +442,7 @@ mod tests {
             ..coarse
         };
         assert_eq!(
-            spot_penumbra_width(&p, &coarse_behind, receiver, normal, 0.5),
+            spot_penumbra_width(&p, &coarse_behind, &fine, receiver, normal, 0.5),
             0.0
         );
         let near = [p.depth(7.99)];
@@ -377,10 +452,10 @@ mod tests {
             ..coarse
         };
         assert_eq!(
-            spot_penumbra_width(&p, &coarse_near, receiver, grazing, 0.5),
+            spot_penumbra_width(&p, &coarse_near, &fine, receiver, grazing, 0.5),
             0.0
         );
-        assert!(spot_penumbra_width(&p, &coarse_near, receiver, normal, 0.5) > 0.0);
+        assert!(spot_penumbra_width(&p, &coarse_near, &fine, receiver, normal, 0.5) > 0.0);
     }
 
     #[test]

@@ -165,8 +165,9 @@ fn refined_gap(local: vec3<f32>, gap_max: f32, texel_size: f32, depth_per_metre:
             let r = length(vec2<f32>(offset)) * texel_size;
             // A blocker hiding part of the light's disk, and not the receiver's own plane (which
             // rises towards the light by up to `slope` per metre, plus a texel of slack: the
-            // receiver's own texel holds its surface at the texel's centre).
-            if gap > 0.0 && r <= gap * t && (cos_nl <= 0.0 || gap > (r + texel_size) * slope) {
+            // receiver's own texel holds its surface at the texel's centre), nor closer to it
+            // than a texel (depth precision).
+            if gap > texel_size && r <= gap * t && (cos_nl <= 0.0 || gap > (r + texel_size) * slope) {
                 sum += gap;
                 count += 1.0;
             }
@@ -213,10 +214,55 @@ fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>) -> f32 {
     let fine = f32(textureDimensions(view_bindings::directional_shadow_textures).x);
     let texel_size = 2.0 * d_r * tan_outer / fine;
     let reach = (f32(ssss.spot_radius) + 1.0) * f32(DILATION_BLOCK) * texel_size;
-    if is_own_surface(gap, reach, dot(normal, normalize(to_light))) {
+    let cos_nl = dot(normal, normalize(to_light));
+    if is_own_surface(gap, reach, cos_nl) {
         return 0.0;
     }
-    return gap * ssss.light_size / d_b;
+    let refined = refined_spot_blocker(uv, d_r, d_b, near, tan_outer, cos_nl, layer);
+    return (d_r - refined) * ssss.light_size / refined;
+}
+
+// `refined_gap` for a spot light (`distance::refined_spot_blocker`): the distance from the light
+// of the blockers hiding part of the lamp's disk from the receiver, averaged. Seen from the
+// receiver `d_r` away, the disk of diameter `light_size` spans `light_size/2 · g / d_r` around
+// the receiver's ray at a blocker `g` in front of the receiver; a texel spans
+// `2 d tan_outer / size` metres at distance `d` from the light.
+fn refined_spot_blocker(uv: vec2<f32>, d_r: f32, d_nearest: f32, near: f32, tan_outer: f32, cos_nl: f32, layer: i32) -> f32 {
+    let size = vec2<i32>(textureDimensions(view_bindings::directional_shadow_textures).xy);
+    let centre = clamp(vec2<i32>(floor(uv * vec2<f32>(size))), vec2(0), size - 1);
+    let half = 0.5 * ssss.light_size;
+    let texel_per_distance = 2.0 * tan_outer / f32(size.x);
+    let reach_texels = half * (d_r - d_nearest) / d_r / max(d_nearest * texel_per_distance, 1e-8);
+    let slope = sqrt(max(1.0 - cos_nl * cos_nl, 0.0)) / max(cos_nl, 0.05);
+    let receiver_texel = d_r * texel_per_distance;
+    var sum = 0.0;
+    var count = 0.0;
+    for (var j = -BLOCKER_GRID; j <= BLOCKER_GRID; j += 1) {
+        for (var i = -BLOCKER_GRID; i <= BLOCKER_GRID; i += 1) {
+            let offset = vec2<i32>(round(vec2<f32>(vec2(i, j)) * reach_texels / f32(BLOCKER_GRID)));
+            let p = centre + offset;
+            if any(p < vec2(0)) || any(p >= size) {
+                continue;
+            }
+            let depth = textureLoad(view_bindings::directional_shadow_textures, p, layer, 0);
+            if depth <= near / d_r {
+                continue;
+            }
+            let d = near / depth;
+            let gap = d_r - d;
+            let texels = length(vec2<f32>(offset));
+            let lateral = texels * d * texel_per_distance;
+            let own = (texels * receiver_texel + receiver_texel) * slope;
+            if gap > receiver_texel && lateral <= half * gap / d_r && (cos_nl <= 0.0 || gap > own) {
+                sum += d;
+                count += 1.0;
+            }
+        }
+    }
+    if count > 0.0 {
+        return sum / count;
+    }
+    return d_nearest;
 }
 
 @fragment
