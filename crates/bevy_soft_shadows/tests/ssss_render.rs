@@ -129,19 +129,10 @@ fn ssss_matches_its_cpu_reference_and_follows_eq_6_2() {
 #[test]
 fn lazy_shadowing_removes_the_light_leak_of_a_blocker_hiding_its_shadow() {
     const THETA_PANEL: f32 = 0.3;
-    let Some(mut harness) = RenderHarness::for_test("ssss_lazy", SIZE, SIZE) else {
+    let Some(mut harness) = panel_harness("ssss_lazy") else {
         return;
     };
-    harness.app_mut().add_plugins(SoftShadowsPlugin);
-    let sun = Vec3::new(0.02, 1.0, 0.01).normalize();
-    setup_scene(
-        &mut harness,
-        Cuboid::new(2.0, 0.05, 2.0),
-        Vec3::new(0.0, 1.5, 0.0),
-        sun,
-        Vec3::ZERO,
-    );
-    harness.wait_until_ready().unwrap();
+    let sun = panel_sun();
     let hard = to_linear(&harness.render().unwrap());
     let reference = area_light_reference_towards(&mut harness, sun, THETA_PANEL).linear();
     let sun = sun_entity(&mut harness);

@@ -12,10 +12,10 @@ mod common;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy_nature_harness::RenderHarness;
+use bevy_soft_shadows::ScreenSpaceSoftShadows;
 use bevy_soft_shadows::ssss::receiver::SsssTextures;
 use bevy_soft_shadows::ssss::render::SsssTileReadback;
 use bevy_soft_shadows::ssss::tiles::{TileSettings, active_tiles};
-use bevy_soft_shadows::{ScreenSpaceSoftShadows, SoftShadowsPlugin};
 use common::*;
 
 /// The GPU's active tiles of the last frame, sorted, and the tile count.
@@ -209,19 +209,9 @@ fn active_tiles_match_the_cpu_and_give_the_full_screen_result() {
 
 #[test]
 fn the_hidden_shadow_of_a_hovering_panel_is_classified_with_lazy_shadowing() {
-    let Some(mut harness) = RenderHarness::for_test("ssss_tiles_panel", SIZE, SIZE) else {
+    let Some(mut harness) = panel_harness("ssss_tiles_panel") else {
         return;
     };
-    harness.app_mut().add_plugins(SoftShadowsPlugin);
-    let sun = Vec3::new(0.02, 1.0, 0.01).normalize();
-    setup_scene(
-        &mut harness,
-        Cuboid::new(2.0, 0.05, 2.0),
-        Vec3::new(0.0, 1.5, 0.0),
-        sun,
-        Vec3::ZERO,
-    );
-    harness.wait_until_ready().unwrap();
     let hard = to_linear(&harness.render().unwrap());
     let sun = sun_entity(&mut harness);
     check_scene(

@@ -162,6 +162,31 @@ pub struct FineMap<'a> {
     pub height: usize,
 }
 
+impl FineMap<'_> {
+    /// The texels of the refined blocker search around `uv`: a (2·[`BLOCKER_GRID`] + 1)² grid
+    /// spanning `reach_texels` each way (offsets rounded as WGSL's `round`, halves to even),
+    /// each as (offset in texels, stored depth); texels off the map are left out.
+    fn blocker_grid(&self, uv: Vec2, reach_texels: f32) -> impl Iterator<Item = (Vec2, f32)> + '_ {
+        let (w, h) = (self.width as i32, self.height as i32);
+        let centre_x = ((uv.x * w as f32).floor() as i32).clamp(0, w - 1);
+        let centre_y = ((uv.y * h as f32).floor() as i32).clamp(0, h - 1);
+        let offset =
+            move |k: i32| (k as f32 * reach_texels / BLOCKER_GRID as f32).round_ties_even() as i32;
+        (-BLOCKER_GRID..=BLOCKER_GRID)
+            .flat_map(|j| (-BLOCKER_GRID..=BLOCKER_GRID).map(move |i| (i, j)))
+            .filter_map(move |(i, j)| {
+                let (ox, oy) = (offset(i), offset(j));
+                let (x, y) = (centre_x + ox, centre_y + oy);
+                (x >= 0 && y >= 0 && x < w && y < h).then(|| {
+                    (
+                        Vec2::new(ox as f32, oy as f32),
+                        self.depth[(y * w + x) as usize],
+                    )
+                })
+            })
+    }
+}
+
 /// The blocker's gap for eq. 6.1 at a receiver of shadow-map coordinates `uv` and stored depth
 /// `receiver_depth`, given the coarse map's gap `gap_max` (`refined_gap` in `ssss.wgsl`).
 ///
@@ -184,30 +209,16 @@ pub fn refined_gap(
     cos_nl: f32,
     angular_diameter: f32,
 ) -> f32 {
-    let (w, h) = (fine.width as i32, fine.height as i32);
-    let centre_x = ((uv.x * w as f32).floor() as i32).clamp(0, w - 1);
-    let centre_y = ((uv.y * h as f32).floor() as i32).clamp(0, h - 1);
     let t = (0.5 * angular_diameter).tan();
     let reach_texels = gap_max * t / texel_size.max(1e-6);
     let slope = (1.0 - cos_nl * cos_nl).max(0.0).sqrt() / cos_nl.max(0.05);
     let (mut sum, mut count) = (0.0f32, 0.0f32);
-    for j in -BLOCKER_GRID..=BLOCKER_GRID {
-        for i in -BLOCKER_GRID..=BLOCKER_GRID {
-            // WGSL's `round` rounds halves to even.
-            let ox = (i as f32 * reach_texels / BLOCKER_GRID as f32).round_ties_even() as i32;
-            let oy = (j as f32 * reach_texels / BLOCKER_GRID as f32).round_ties_even() as i32;
-            let (x, y) = (centre_x + ox, centre_y + oy);
-            if x < 0 || y < 0 || x >= w || y >= h {
-                continue;
-            }
-            let depth = fine.depth[(y * w + x) as usize];
-            let gap = (depth - receiver_depth) / depth_per_metre.max(1e-8);
-            let r = Vec2::new(ox as f32, oy as f32).length() * texel_size;
-            if gap > texel_size && r <= gap * t && (cos_nl <= 0.0 || gap > (r + texel_size) * slope)
-            {
-                sum += gap;
-                count += 1.0;
-            }
+    for (offset, depth) in fine.blocker_grid(uv, reach_texels) {
+        let gap = (depth - receiver_depth) / depth_per_metre.max(1e-8);
+        let r = offset.length() * texel_size;
+        if gap > texel_size && r <= gap * t && (cos_nl <= 0.0 || gap > (r + texel_size) * slope) {
+            sum += gap;
+            count += 1.0;
         }
     }
     if count > 0.0 { sum / count } else { gap_max }
@@ -292,40 +303,28 @@ pub fn refined_spot_blocker(
     cos_nl: f32,
     light_size: f32,
 ) -> f32 {
-    let (w, h) = (fine.width as i32, fine.height as i32);
-    let centre_x = ((uv.x * w as f32).floor() as i32).clamp(0, w - 1);
-    let centre_y = ((uv.y * h as f32).floor() as i32).clamp(0, h - 1);
     let half = 0.5 * light_size;
-    let texel_per_distance = 2.0 * projection.tan_outer / w as f32;
+    let texel_per_distance = 2.0 * projection.tan_outer / fine.width as f32;
     let reach_texels =
         half * (d_receiver - d_nearest) / d_receiver / (d_nearest * texel_per_distance).max(1e-8);
     let slope = (1.0 - cos_nl * cos_nl).max(0.0).sqrt() / cos_nl.max(0.05);
     let receiver_texel = d_receiver * texel_per_distance;
     let (mut sum, mut count) = (0.0f32, 0.0f32);
-    for j in -BLOCKER_GRID..=BLOCKER_GRID {
-        for i in -BLOCKER_GRID..=BLOCKER_GRID {
-            let ox = (i as f32 * reach_texels / BLOCKER_GRID as f32).round_ties_even() as i32;
-            let oy = (j as f32 * reach_texels / BLOCKER_GRID as f32).round_ties_even() as i32;
-            let (x, y) = (centre_x + ox, centre_y + oy);
-            if x < 0 || y < 0 || x >= w || y >= h {
-                continue;
-            }
-            let depth = fine.depth[(y * w + x) as usize];
-            if depth <= projection.near / d_receiver {
-                continue;
-            }
-            let d = projection.near / depth;
-            let gap = d_receiver - d;
-            let texels = Vec2::new(ox as f32, oy as f32).length();
-            let lateral = texels * d * texel_per_distance;
-            let own = (texels * receiver_texel + receiver_texel) * slope;
-            if gap > receiver_texel
-                && lateral <= half * gap / d_receiver
-                && (cos_nl <= 0.0 || gap > own)
-            {
-                sum += d;
-                count += 1.0;
-            }
+    for (offset, depth) in fine.blocker_grid(uv, reach_texels) {
+        if depth <= projection.near / d_receiver {
+            continue;
+        }
+        let d = projection.near / depth;
+        let gap = d_receiver - d;
+        let texels = offset.length();
+        let lateral = texels * d * texel_per_distance;
+        let own = (texels * receiver_texel + receiver_texel) * slope;
+        if gap > receiver_texel
+            && lateral <= half * gap / d_receiver
+            && (cos_nl <= 0.0 || gap > own)
+        {
+            sum += d;
+            count += 1.0;
         }
     }
     if count > 0.0 { sum / count } else { d_nearest }

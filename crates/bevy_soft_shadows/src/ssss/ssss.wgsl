@@ -138,6 +138,16 @@ fn directional_penumbra(i: u32, world: vec3<f32>, normal: vec3<f32>, view_z: f32
     return max(refined, 0.0) * 2.0 * tan(0.5 * ssss.light_size);
 }
 
+// The refined blocker search's grid (`distance::FineMap::blocker_grid`): the receiver's texel of
+// the fine map, and the offset of sample (i, j) of a grid spanning `reach_texels` each way.
+fn blocker_grid_centre(uv: vec2<f32>, size: vec2<i32>) -> vec2<i32> {
+    return clamp(vec2<i32>(floor(uv * vec2<f32>(size))), vec2(0), size - 1);
+}
+
+fn blocker_grid_offset(i: i32, j: i32, reach_texels: f32) -> vec2<i32> {
+    return vec2<i32>(round(vec2<f32>(vec2(i, j)) * reach_texels / f32(BLOCKER_GRID)));
+}
+
 // The blocker estimate for eq. 6.1 (`distance::refined_gap`). The dilated map holds the blocker
 // nearest the light within the window, which for a long thin blocker (a trunk, a pole) is its far
 // end, not the part in front of the light's centre: the penumbra comes out too wide and the thin
@@ -147,7 +157,7 @@ fn directional_penumbra(i: u32, world: vec3<f32>, normal: vec3<f32>, view_z: f32
 // with none found the dilated map's gap stands.
 fn refined_gap(local: vec3<f32>, gap_max: f32, texel_size: f32, depth_per_metre: f32, cos_nl: f32, layer: i32) -> f32 {
     let size = vec2<i32>(textureDimensions(view_bindings::directional_shadow_textures).xy);
-    let centre = clamp(vec2<i32>(floor(local.xy * vec2<f32>(size))), vec2(0), size - 1);
+    let centre = blocker_grid_centre(local.xy, size);
     let t = tan(0.5 * ssss.light_size);
     let reach_texels = gap_max * t / max(texel_size, 1e-6);
     let slope = sqrt(max(1.0 - cos_nl * cos_nl, 0.0)) / max(cos_nl, 0.05);
@@ -155,7 +165,7 @@ fn refined_gap(local: vec3<f32>, gap_max: f32, texel_size: f32, depth_per_metre:
     var count = 0.0;
     for (var j = -BLOCKER_GRID; j <= BLOCKER_GRID; j += 1) {
         for (var i = -BLOCKER_GRID; i <= BLOCKER_GRID; i += 1) {
-            let offset = vec2<i32>(round(vec2<f32>(vec2(i, j)) * reach_texels / f32(BLOCKER_GRID)));
+            let offset = blocker_grid_offset(i, j, reach_texels);
             let p = centre + offset;
             if any(p < vec2(0)) || any(p >= size) {
                 continue;
@@ -229,7 +239,7 @@ fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>) -> f32 {
 // `2 d tan_outer / size` metres at distance `d` from the light.
 fn refined_spot_blocker(uv: vec2<f32>, d_r: f32, d_nearest: f32, near: f32, tan_outer: f32, cos_nl: f32, layer: i32) -> f32 {
     let size = vec2<i32>(textureDimensions(view_bindings::directional_shadow_textures).xy);
-    let centre = clamp(vec2<i32>(floor(uv * vec2<f32>(size))), vec2(0), size - 1);
+    let centre = blocker_grid_centre(uv, size);
     let half = 0.5 * ssss.light_size;
     let texel_per_distance = 2.0 * tan_outer / f32(size.x);
     let reach_texels = half * (d_r - d_nearest) / d_r / max(d_nearest * texel_per_distance, 1e-8);
@@ -239,7 +249,7 @@ fn refined_spot_blocker(uv: vec2<f32>, d_r: f32, d_nearest: f32, near: f32, tan_
     var count = 0.0;
     for (var j = -BLOCKER_GRID; j <= BLOCKER_GRID; j += 1) {
         for (var i = -BLOCKER_GRID; i <= BLOCKER_GRID; i += 1) {
-            let offset = vec2<i32>(round(vec2<f32>(vec2(i, j)) * reach_texels / f32(BLOCKER_GRID)));
+            let offset = blocker_grid_offset(i, j, reach_texels);
             let p = centre + offset;
             if any(p < vec2(0)) || any(p >= size) {
                 continue;

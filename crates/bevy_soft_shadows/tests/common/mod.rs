@@ -189,6 +189,30 @@ pub fn sun_entity(harness: &mut RenderHarness) -> Entity {
         .unwrap()
 }
 
+/// Towards the sun of the hovering-panel scene: almost straight above.
+pub fn panel_sun() -> Vec3 {
+    Vec3::new(0.02, 1.0, 0.01).normalize()
+}
+
+/// A harness for `test` with the soft shadows plugin and the hovering-panel scene (the thesis'
+/// fig. 6.6: a 2 m panel 1.5 m over the ground, the sun almost straight above, so the panel hides
+/// its own shadow from the camera above it), ready.
+pub fn panel_harness(test: &str) -> Option<RenderHarness> {
+    let mut harness = RenderHarness::for_test(test, SIZE, SIZE)?;
+    harness
+        .app_mut()
+        .add_plugins(bevy_soft_shadows::SoftShadowsPlugin);
+    setup_scene(
+        &mut harness,
+        Cuboid::new(2.0, 0.05, 2.0),
+        Vec3::new(0.0, 1.5, 0.0),
+        panel_sun(),
+        Vec3::ZERO,
+    );
+    harness.wait_until_ready().unwrap();
+    Some(harness)
+}
+
 /// A harness for `test` with the soft shadows plugin and the pole scene (not yet ready).
 pub fn pole_harness(test: &str) -> Option<RenderHarness> {
     let mut harness = RenderHarness::for_test(test, SIZE, SIZE)?;
