@@ -1,4 +1,4 @@
-//! SSSS's tile classification on the GPU (`ssss_tiles.wgsl`, CPU reference `ssss::tiles`):
+//! SSSS's tile classification on the GPU (`tiles.wgsl`, CPU reference `ssss::tiles`):
 //!
 //! - the active tile list the GPU built equals the CPU classification of the GPU's own distance
 //!   map of the same frame, tile for tile;

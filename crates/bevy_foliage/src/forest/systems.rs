@@ -646,6 +646,9 @@ pub fn draw_forest_trees(
     let mut index: Option<HashMap<Entity, usize>> = None;
     let mut cursor = 0;
     let mut kept_cache: HashMap<Entity, (u32, u32, u32, u32)> = HashMap::default();
+    let show = impostor_settings
+        .as_ref()
+        .is_some_and(|i| i.show_representation);
     let (mut triangles, mut visible) = (0u64, 0u32);
     for (entity, tree, lod, visibility, tag, mesh, material) in &trees {
         let i = if state.entities.get(cursor) == Some(&entity) {
@@ -709,9 +712,6 @@ pub fn draw_forest_trees(
         if mesh.map(|m| m.0.id()) != Some(handle.id()) {
             e.insert((Mesh3d(handle), NoFrustumCulling));
         }
-        let show = impostor_settings
-            .as_ref()
-            .is_some_and(|i| i.show_representation);
         let wanted = if show {
             // The tree's own material tinted by the LoD band it draws (one copy per band).
             let band = geometry_band(s.stored_lod);

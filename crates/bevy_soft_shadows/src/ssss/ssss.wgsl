@@ -9,7 +9,7 @@
 //   keeps it (`ssss::tiles`).
 // - `blur_horizontal`, `blur_vertical`: the separable Gaussian with depth rejection and lazy
 //   shadowing, drawn as one 8×8 quad per active tile (`tile_vertex`, an indirect draw whose
-//   instance count the classification pass `ssss_tiles.wgsl` wrote).
+//   instance count the classification pass `tiles.wgsl` wrote).
 //
 // CPU references: `ssss::penumbra`, `ssss::kernel`, `ssss::blur`, `ssss::tiles`.
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
@@ -33,7 +33,7 @@
 @group(2) @binding(1) var<uniform> ssss: SsssUniform;
 @group(2) @binding(2) var distances: texture_2d<f32>;
 @group(2) @binding(3) var blur_in: texture_2d<f32>;
-// The active tiles, `x | y << 16` (`ssss_tiles.wgsl`).
+// The active tiles, `x | y << 16` (`tiles.wgsl`).
 @group(2) @binding(4) var<storage, read> active_tiles: array<u32>;
 
 // One quad per active tile: instance `i` covers tile `active_tiles[i]`, clipped to the screen.

@@ -35,7 +35,7 @@ pub const TILE: usize = 8;
 pub const DEPTH_RANGE_MARGIN: f32 = 0.99;
 
 /// What the classification needs to know of one tile (the reduction pass's output;
-/// `ssss_tiles.wgsl` mirrors it).
+/// `tiles.wgsl` mirrors it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TileStats {
     /// Smallest hard visibility in the tile.
