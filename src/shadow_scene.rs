@@ -46,9 +46,11 @@ pub struct ShadowDemo {
     pub light_size: f32,
     /// Light the scene with the lamp (a spot light) instead of the sun (key 4 toggles).
     pub spot: bool,
-    /// Which blockers stand on the ground: 0 the posts, panel and sphere ([`PoleScenePart`]),
-    /// 1 a canopy of three trees of small leaf quads ([`CanopyPart`]: many penumbra tiles, the
-    /// worst case of tiled soft shadows). Key 5 toggles.
+    /// Which blockers stand on the ground ([`SCENE_NAMES`]): 0 the posts, panel and sphere
+    /// ([`PoleScenePart`]), 1 a canopy of three trees of small leaf quads ([`CanopyPart`]: many
+    /// penumbra tiles, the worst case of tiled soft shadows), 2 a palm on a beach
+    /// ([`PalmPart`]: a thin trunk and fronds high over the sand, large penumbrae). Key 5
+    /// cycles.
     pub scene: u32,
     /// SSSS blurs every screen tile instead of the classified ones (same image, for comparing
     /// costs).
@@ -80,6 +82,12 @@ impl ShadowDemo {
     pub fn technique(&self) -> ShadowTechnique {
         ShadowTechnique::ALL[(self.technique as usize).min(2)]
     }
+
+    /// The sun's SSSS `max_occluder_distance` for the scene shown: 5 m covers the posts, the
+    /// panel and the canopy; the palm's fronds are up to ~9 m from the sand along the light.
+    pub fn sun_occluder_distance(&self) -> f32 {
+        if self.scene == 2 { 9.0 } else { 5.0 }
+    }
 }
 
 /// Bevy's spot PCSS `radius` per metre of lamp radius: its kernel is in units of a fixed texel
@@ -98,6 +106,18 @@ pub struct PoleScenePart;
 /// A part of the canopy scene ([`ShadowDemo::scene`] 1).
 #[derive(Component)]
 pub struct CanopyPart;
+
+/// A part of the palm-on-a-beach scene ([`ShadowDemo::scene`] 2).
+#[derive(Component, Clone, Copy)]
+pub struct PalmPart;
+
+/// The scenes [`ShadowDemo::scene`] picks from, by index.
+pub const SCENE_NAMES: [&str; 3] = ["poles", "canopy", "palm"];
+
+/// Where the palm of the beach scene stands.
+pub const PALM_BASE: Vec3 = Vec3::new(2.5, 0.0, 2.5);
+/// Height of the palm's crown over the sand (m).
+pub const PALM_HEIGHT: f32 = 6.0;
 
 /// Leaves per crown of the canopy scene.
 pub const CANOPY_LEAVES: usize = 1500;
@@ -147,6 +167,127 @@ pub fn crown_mesh(leaves: usize, radii: Vec3, leaf: f32, seed: u64) -> Mesh {
     .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
     .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
     .with_inserted_indices(bevy::mesh::Indices::U32(indices))
+}
+
+/// Centre of the palm trunk at height fraction `t` ∈ [0, 1] (relative to [`PALM_BASE`]): a
+/// trunk leaning away from the sun in a gentle curve, as beach palms grow.
+pub fn palm_trunk_centre(t: f32) -> Vec3 {
+    Vec3::new(-0.9 * t * t, PALM_HEIGHT * t, 0.35 * t * t)
+}
+
+/// A palm trunk around the origin: a tube of `sides` sides along [`palm_trunk_centre`], 0.16 m
+/// in radius at the foot narrowing to 0.11 m under the crown — thin against a large light, so its
+/// shadow is all penumbra a few metres from the foot.
+pub fn palm_trunk_mesh(sides: usize, rings: usize) -> Mesh {
+    let (mut positions, mut normals, mut indices) = (Vec::new(), Vec::new(), Vec::new());
+    for ring in 0..=rings {
+        let t = ring as f32 / rings as f32;
+        let centre = palm_trunk_centre(t);
+        let tangent = (palm_trunk_centre((t + 1e-3).min(1.0))
+            - palm_trunk_centre((t - 1e-3).max(0.0)))
+        .normalize();
+        let side = tangent.cross(Vec3::Z).normalize();
+        let other = side.cross(tangent);
+        let radius = 0.16 - 0.05 * t;
+        for k in 0..sides {
+            let a = k as f32 / sides as f32 * std::f32::consts::TAU;
+            let n = side * a.cos() + other * a.sin();
+            positions.push((centre + n * radius).to_array());
+            normals.push(n.to_array());
+        }
+    }
+    for ring in 0..rings {
+        for k in 0..sides {
+            let (a, b) = (ring * sides + k, ring * sides + (k + 1) % sides);
+            let (c, d) = (a + sides, b + sides);
+            indices.extend([a, c, b, b, c, d].map(|i| i as u32));
+        }
+    }
+    Mesh::new(
+        bevy::mesh::PrimitiveTopology::TriangleList,
+        bevy::asset::RenderAssetUsages::default(),
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+    .with_inserted_indices(bevy::mesh::Indices::U32(indices))
+}
+
+/// The palm's crown, relative to the top of its trunk: `fronds` arching fronds, each a rachis
+/// rising then drooping over 3 m with narrow leaflets (0.06 m wide) on both sides, longest at
+/// the middle of the frond — many thin blockers far above the sand.
+pub fn palm_fronds_mesh(fronds: usize) -> Mesh {
+    const LENGTH: f32 = 3.0;
+    const LEAFLET_WIDTH: f32 = 0.06;
+    let (mut positions, mut normals, mut indices) = (Vec::new(), Vec::new(), Vec::new());
+    let mut quad = |corners: [Vec3; 4]| {
+        let n = (corners[1] - corners[0])
+            .cross(corners[3] - corners[0])
+            .normalize_or(Vec3::Y);
+        let base = positions.len() as u32;
+        for c in corners {
+            positions.push(c.to_array());
+            normals.push(n.to_array());
+        }
+        indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+    };
+    for f in 0..fronds {
+        // Golden-angle azimuths: fronds spread evenly without lining up.
+        let azimuth = f as f32 * 2.399_963;
+        let out = Vec3::new(azimuth.cos(), 0.0, azimuth.sin());
+        let across = Vec3::Y.cross(out).normalize();
+        let rise = 0.45 - 0.25 * (f % 3) as f32;
+        let rachis = |s: f32| out * (s * LENGTH) + Vec3::Y * (LENGTH * (rise * s - 0.55 * s * s));
+        let steps = 24;
+        for i in 0..steps {
+            let (s0, s1) = (i as f32 / steps as f32, (i + 1) as f32 / steps as f32);
+            // The rachis itself, a 4 cm strip.
+            let (p0, p1) = (rachis(s0), rachis(s1));
+            let w = across * 0.02;
+            quad([p0 - w, p1 - w, p1 + w, p0 + w]);
+            if s0 < 0.08 {
+                continue;
+            }
+            let leaflet = 0.1 + 0.65 * (std::f32::consts::PI * s0).sin();
+            let along = (p1 - p0).normalize();
+            for side in [-1.0f32, 1.0] {
+                // Leaflets sweep forward and hang 35° below the frond's plane.
+                let dir = (across * side * 0.82 + along * 0.3 - Vec3::Y * 0.57).normalize();
+                let half = along * (0.5 * LEAFLET_WIDTH);
+                let tip = p0 + dir * leaflet;
+                quad([p0 - half, tip - half, tip + half, p0 + half]);
+            }
+        }
+    }
+    Mesh::new(
+        bevy::mesh::PrimitiveTopology::TriangleList,
+        bevy::asset::RenderAssetUsages::default(),
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+    .with_inserted_indices(bevy::mesh::Indices::U32(indices))
+}
+
+/// Spawns the palm of the beach scene at [`PALM_BASE`] with `parts` (visibility, markers)
+/// on each of its two meshes.
+pub fn spawn_palm(
+    commands: &mut Commands,
+    meshes: &mut Assets<Mesh>,
+    trunk: Handle<StandardMaterial>,
+    fronds: Handle<StandardMaterial>,
+    parts: impl Bundle + Clone,
+) {
+    commands.spawn((
+        parts.clone(),
+        Mesh3d(meshes.add(palm_trunk_mesh(12, 16))),
+        MeshMaterial3d(trunk),
+        Transform::from_translation(PALM_BASE),
+    ));
+    commands.spawn((
+        parts,
+        Mesh3d(meshes.add(palm_fronds_mesh(11))),
+        MeshMaterial3d(fronds),
+        Transform::from_translation(PALM_BASE + palm_trunk_centre(1.0)),
+    ));
 }
 
 /// The scene's lamp (a spot light), used instead of the sun when [`ShadowDemo::spot`] is on.
@@ -263,6 +404,14 @@ pub fn spawn_shadow_scene(
             Visibility::Hidden,
         ));
     }
+    // The beach: one palm over the sand.
+    spawn_palm(
+        &mut commands,
+        &mut meshes,
+        props.clone(),
+        leaves.clone(),
+        (PalmPart, Visibility::Hidden),
+    );
     commands.spawn((
         DemoSun,
         DirectionalLight {
@@ -326,9 +475,9 @@ pub fn apply_shadow_demo(
     mut sun: Query<(Entity, &mut DirectionalLight, &mut Visibility), With<DemoSun>>,
     mut lamp: Query<(Entity, &mut SpotLight, &mut Visibility), Without<DemoSun>>,
     mut parts: Query<
-        (&mut Visibility, Has<CanopyPart>),
+        (&mut Visibility, Has<CanopyPart>, Has<PalmPart>),
         (
-            Or<(With<PoleScenePart>, With<CanopyPart>)>,
+            Or<(With<PoleScenePart>, With<CanopyPart>, With<PalmPart>)>,
             Without<DemoSun>,
             Without<SpotLight>,
         ),
@@ -337,8 +486,15 @@ pub fn apply_shadow_demo(
     if !demo.is_changed() {
         return;
     }
-    for (mut visibility, canopy) in &mut parts {
-        let shown = canopy == (demo.scene == 1);
+    for (mut visibility, canopy, palm) in &mut parts {
+        let scene = if canopy {
+            1
+        } else if palm {
+            2
+        } else {
+            0
+        };
+        let shown = scene == demo.scene.min(2);
         let v = if shown {
             Visibility::Inherited
         } else {
@@ -360,7 +516,7 @@ pub fn apply_shadow_demo(
         if technique == ShadowTechnique::Ssss && !demo.spot {
             commands.entity(entity).insert(ssss_settings(
                 demo.light_size,
-                5.0,
+                demo.sun_occluder_distance(),
                 demo.ssss_all_tiles,
             ));
         } else {
@@ -393,14 +549,14 @@ pub fn apply_shadow_demo(
 }
 
 /// Keys 1, 2, 3 pick hard shadows, PCSS or SSSS; key 4 switches between the sun and the lamp,
-/// key 5 between the pole and the canopy scene.
+/// key 5 cycles through the pole, canopy and palm scenes.
 pub fn switch_with_keys(keys: Option<Res<ButtonInput<KeyCode>>>, mut demo: ResMut<ShadowDemo>) {
     let Some(keys) = keys else { return };
     if keys.just_pressed(KeyCode::Digit4) {
         demo.spot = !demo.spot;
     }
     if keys.just_pressed(KeyCode::Digit5) {
-        demo.scene = 1 - demo.scene.min(1);
+        demo.scene = (demo.scene.min(2) + 1) % 3;
     }
     for (key, technique) in [
         (KeyCode::Digit1, 0),

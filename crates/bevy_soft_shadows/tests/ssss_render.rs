@@ -447,11 +447,18 @@ fn ssss_follows_eq_6_1_in_a_second_cascade() {
 }
 
 /// A thin blocker under a large light: a 0.1 m pole 4 m tall under a 0.25 rad sun. Its shadow is
-/// narrower than the penumbra from a metre behind the pole on, so the area-light reference shows
-/// a faint line whose contrast falls with the distance. SSSS must keep that contrast, neither
-/// washing the line out nor leaving it hard. With the coarse map's blocker alone — the pole's
-/// top, nearest the light in the dilation window — it kept only 58–75 % of it within 2 m of the
-/// pole; the refined blocker (`distance::refined_gap`) keeps 83 % at 0.5 m and 92–97 % beyond.
+/// narrower than the penumbra from a metre behind the pole on, so the true shadow is a faint line
+/// whose contrast falls with the distance. SSSS must keep that contrast, neither washing the line
+/// out nor leaving it hard. Across the line the sun's disk is seen through a slit as wide as the
+/// pole, so at `s` metres behind it (gap `g = s·√2` along the light, disk radius
+/// `ρ = g·tan(θ/2)` there) the darkest point hides the central strip of the disk:
+/// `(2/π)(asin a + a√(1 − a²))`, `a = 0.05/ρ`. The jittered reference's 48 suns over- or
+/// under-state that by up to a third (its darkest row is one of 48 discrete steps), so it is
+/// printed beside but the test holds SSSS to the analytic value. With the coarse map's blocker
+/// alone — the pole's top, nearest the light in the dilation window — SSSS kept 58–75 % of the
+/// contrast within 2 m of the pole; the refined blocker (`distance::refined_gap`) keeps it within
+/// 12 % (93–111 %: the Gaussian standing in for the disk is a little darker at a thin line's
+/// middle).
 #[test]
 fn a_thin_blocker_keeps_its_contrast_under_a_large_light() {
     const THETA_LARGE: f32 = 0.25;
@@ -499,23 +506,121 @@ fn a_thin_blocker_keeps_its_contrast_under_a_large_light() {
     strip(&[&hard, &ssss, &reference])
         .save_png(dir.join("comparison.png"))
         .ok();
-    for s in [0.5f32, 1.0, 1.5, 2.0, 3.0, 4.0] {
+    // (Not at the pole's top, 4 m behind it, where the line ends and half the slit is open.)
+    for s in [0.5f32, 1.0, 1.5, 2.0, 3.0] {
         let (h, c, r) = (
             contrast(&hard, s),
             contrast(&ssss, s),
             contrast(&reference, s),
         );
-        println!("s = {s} m: contrast hard {h:.3}, SSSS {c:.3}, reference {r:.3}");
+        let rho = s * std::f32::consts::SQRT_2 * (0.5 * THETA_LARGE).tan();
+        let a = (0.05 / rho).min(1.0);
+        let expected = 2.0 / std::f32::consts::PI * (a.asin() + a * (1.0 - a * a).sqrt());
+        println!(
+            "s = {s} m: contrast hard {h:.3}, SSSS {c:.3}, analytic {expected:.3}, \
+             reference {r:.3}"
+        );
         assert!(h > 0.95, "s = {s}: the hard shadow is a dark line ({h})");
         assert!(
-            c >= 0.8 * r && c <= 1.2 * r,
-            "s = {s}: SSSS contrast {c} against the reference's {r}"
+            (c - expected).abs() <= 0.12 * expected,
+            "s = {s}: SSSS contrast {c} against the analytic {expected}"
         );
-        if s >= 1.0 {
-            assert!(
-                (c - r).abs() <= 0.1 * r,
-                "s = {s}: SSSS contrast {c} against the reference's {r}"
-            );
-        }
     }
+}
+
+/// A lattice of thin slats 2 m over the ground under a 0.25 rad sun: the slats' period (0.12 m)
+/// is a sixth of the penumbra's width, so the true shadow under the lattice's middle is a uniform
+/// grey (the disk average of the slats ripples by ~1 %). SSSS blurs the hard stripes (3.8 px
+/// apart here) with 5 taps a side (the thesis' 11×11 kernel), ~2.8 px apart at this penumbra:
+/// point taps alias the stripes into streaks (ripple 0.033 of the lit ground, the reference's
+/// 0.003–0.005); taps reading the mean of their cell (`kernel::tap_cell`) leave 0.004. The
+/// shadow's mean must match the area-light reference rendered in the same run.
+#[test]
+fn a_fine_lattice_under_a_large_light_casts_a_smooth_shadow() {
+    const THETA_LARGE: f32 = 0.25;
+    let Some(mut harness) = RenderHarness::for_test("ssss_lattice", SIZE, SIZE) else {
+        return;
+    };
+    harness.app_mut().add_plugins(SoftShadowsPlugin);
+    // The scene's own blocker, out of the way (outside the view and its shadows).
+    setup_scene(
+        &mut harness,
+        Cuboid::new(0.1, 0.1, 0.1),
+        Vec3::new(30.0, 0.05, 30.0),
+        sun_direction(),
+        CENTRE,
+    );
+    let world = harness.world_mut();
+    let slat = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(Cuboid::new(0.04, 0.02, 2.4));
+    let material = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial::default());
+    let lattice = world
+        .spawn((
+            Transform::from_xyz(0.0, 2.0, 0.0).with_rotation(Quat::from_rotation_y(0.5)),
+            Visibility::default(),
+        ))
+        .id();
+    for i in 0..20 {
+        world.spawn((
+            Mesh3d(slat.clone()),
+            MeshMaterial3d(material.clone()),
+            Transform::from_xyz(-1.14 + 0.12 * i as f32, 0.0, 0.0),
+            ChildOf(lattice),
+        ));
+    }
+    harness.wait_until_ready().unwrap();
+    let hard = to_linear(&harness.render().unwrap());
+    let sun = sun_entity(&mut harness);
+    harness
+        .world_mut()
+        .entity_mut(sun)
+        .insert(ScreenSpaceSoftShadows {
+            light_size: THETA_LARGE,
+            max_occluder_distance: 6.0,
+            max_kernel_px: 60.0,
+            taps_per_side: 5,
+            lazy_shadowing: false,
+            ..default()
+        });
+    let ssss = render_until(&mut harness, &hard, |img| rmse(img, &hard) > 0.001);
+    let reference =
+        area_light_reference_towards(&mut harness, sun_direction(), THETA_LARGE).linear();
+    let dir = artifacts_dir().join("ssss_lattice");
+    std::fs::create_dir_all(&dir).ok();
+    strip(&[&hard, &ssss, &reference])
+        .save_png(dir.join("comparison.png"))
+        .ok();
+    // The middle of the lattice's shadow: a disk of 0.45 m around (−2.3, 0), clear of its
+    // outline's penumbra (the shadow is a 2.4 m square centred on (−2, 0), turned 0.5 rad; the
+    // penumbra is 0.71 m wide) and of the slats themselves, seen from above from x = −1.63 on.
+    let (cx, cz) = pixel_of(-2.3, 0.0);
+    let radius_px = 0.45 * SIZE as f32 / VIEW_M;
+    let stats = |img: &[f32]| {
+        let l = lit(img);
+        let values: Vec<f32> = (0..SIZE * SIZE)
+            .filter(|&i| {
+                let (x, y) = ((i % SIZE) as f32, (i / SIZE) as f32);
+                (x - cx as f32).hypot(y - cz as f32) <= radius_px
+            })
+            .map(|i| img[(i * 4 + 1) as usize] / l)
+            .collect();
+        let mean = values.iter().sum::<f32>() / values.len() as f32;
+        let ripple =
+            (values.iter().map(|v| (v - mean).powi(2)).sum::<f32>() / values.len() as f32).sqrt();
+        (mean, ripple)
+    };
+    for (name, img) in [("hard", &hard), ("SSSS", &ssss), ("reference", &reference)] {
+        let (mean, ripple) = stats(img);
+        println!("{name}: mean visibility {mean:.4}, ripple (RMS) {ripple:.4}");
+    }
+    let (mean, ripple) = stats(&ssss);
+    let (reference_mean, _) = stats(&reference);
+    assert!(
+        (mean - reference_mean).abs() < 0.02,
+        "mean visibility {mean} against the reference's {reference_mean}"
+    );
+    assert!(ripple < 0.01, "ripple {ripple}");
 }

@@ -126,6 +126,7 @@ fn check_scene(
         &TileSettings {
             depth_rejection: settings.depth_rejection,
             lazy_shadowing: settings.lazy_shadowing,
+            taps_per_side: settings.taps_per_side,
         },
     );
     let blurred = buffers.sigma.iter().filter(|s| s[0] > 0.0).count();

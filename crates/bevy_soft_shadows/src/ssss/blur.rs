@@ -2,9 +2,39 @@
 //! horizontal then a vertical Gaussian pass, each pixel with its own kernel (eq. 6.2 scaled by the
 //! kernel axes of its normal), samples rejected across depth discontinuities — or, with lazy
 //! shadowing, replaced by a shadow-map test of the point the sample would be on the centre
-//! pixel's tangent plane. The WGSL passes compute exactly this; the render test compares them.
+//! pixel's tangent plane. Spread taps read the mean of their cell (`kernel::tap_cell`) from
+//! fixed-point prefix sums of the pass's input along the pass ([`line_sums`]). The WGSL passes
+//! compute exactly this; the render test compares them.
 
-use super::kernel::{gaussian, tap_offset, tap_offsets};
+use super::kernel::{cell_mean, gaussian, tap_cell, tap_offset, tap_offsets, to_fixed};
+
+/// Prefix sums of `input` (`width × height`, row-major) along rows (`horizontal`) or columns, in
+/// the layout of `box_sums.wgsl`'s targets: rows give `(width + 1) × height` sums, entry
+/// `y·(width + 1) + k` summing pixels `0..k` of row `y`; columns give `width × (height + 1)`,
+/// entry `k·width + x` summing pixels `0..k` of column `x`. Terms are [`to_fixed`].
+pub fn line_sums(input: &[f32], width: usize, height: usize, horizontal: bool) -> Vec<u32> {
+    if horizontal {
+        let mut sums = vec![0u32; (width + 1) * height];
+        for y in 0..height {
+            let mut s = 0u32;
+            for x in 0..width {
+                s = s.wrapping_add(to_fixed(input[y * width + x]));
+                sums[y * (width + 1) + x + 1] = s;
+            }
+        }
+        sums
+    } else {
+        let mut sums = vec![0u32; width * (height + 1)];
+        for x in 0..width {
+            let mut s = 0u32;
+            for y in 0..height {
+                s = s.wrapping_add(to_fixed(input[y * width + x]));
+                sums[(y + 1) * width + x] = s;
+            }
+        }
+        sums
+    }
+}
 
 /// The screen-space inputs of the blur, row-major, `width × height`.
 #[derive(Clone, Debug, Default)]
@@ -47,6 +77,15 @@ pub fn blur_pass(
 ) -> Vec<f32> {
     let (w, h) = (buffers.width, buffers.height);
     let mut out = input.to_vec();
+    let sums = line_sums(input, w, h, horizontal);
+    // The sum of pixels `first..=last` along the pass through `(x, y)`.
+    let cell_sum = |x: usize, y: usize, first: usize, last: usize| {
+        if horizontal {
+            sums[y * (w + 1) + last + 1].wrapping_sub(sums[y * (w + 1) + first])
+        } else {
+            sums[(last + 1) * w + x].wrapping_sub(sums[first * w + x])
+        }
+    };
     for y in 0..h {
         for x in 0..w {
             let centre = y * w + x;
@@ -68,14 +107,25 @@ pub fn blur_pass(
                     continue;
                 }
                 let sample = sy as usize * w + sx as usize;
+                // A spread tap stands for its cell, clamped to the line: it reads the cell's
+                // mean and weighs as many pixels. (Depth is tested at the tap itself.)
+                let (along, len) = if horizontal { (x, w) } else { (y, h) };
+                let (first, last) = tap_cell(i, step);
+                let first = (along as i32 + first).max(0) as usize;
+                let last = (along as i32 + last).min(len as i32 - 1) as usize;
+                let count = (last - first + 1) as u32;
                 let value = if accepts(z, buffers.depth[sample], settings.depth_rejection) {
-                    input[sample]
+                    if step > 1.0 {
+                        cell_mean(cell_sum(x, y, first, last), count)
+                    } else {
+                        input[sample]
+                    }
                 } else if let Some(v) = lazy(sample, centre) {
                     v
                 } else {
                     continue;
                 };
-                let weight = gaussian(offset as f32, sigma);
+                let weight = gaussian(offset as f32, sigma) * count as f32;
                 sum += weight * value;
                 weights += weight;
             }

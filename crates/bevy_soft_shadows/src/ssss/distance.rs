@@ -197,7 +197,11 @@ impl FineMap<'_> {
 /// blocker, `gap_max · tan(θ/2)`; a texel counts when its blocker hides part of the light's disk
 /// from the receiver — at gap `g` the disk spans `g · tan(θ/2)` around the receiver's light ray
 /// — and is not the receiver's own plane (rising by `tan` of its angle to the light per metre,
-/// plus one texel) nor within a texel of it (depth precision). The mean of their gaps is the blocker's; with none, `gap_max` stands.
+/// plus one texel) nor within a texel of it (depth precision). Their gaps are averaged weighted by
+/// the share of the light's disk each hides — a texel at gap `g` covers `texel² / (π (g·tan(θ/2))²)`
+/// of it, so the weight is `1/g²`: a thin blocker right over the receiver outweighs the farther
+/// parts of the same pole or the fronds high above, whose penumbra only grazes it. With none,
+/// `gap_max` stands.
 #[allow(clippy::too_many_arguments)]
 pub fn refined_gap(
     fine: &FineMap,
@@ -217,8 +221,9 @@ pub fn refined_gap(
         let gap = (depth - receiver_depth) / depth_per_metre.max(1e-8);
         let r = offset.length() * texel_size;
         if gap > texel_size && r <= gap * t && (cos_nl <= 0.0 || gap > (r + texel_size) * slope) {
-            sum += gap;
-            count += 1.0;
+            let share = 1.0 / (gap * gap);
+            sum += gap * share;
+            count += share;
         }
     }
     if count > 0.0 { sum / count } else { gap_max }
@@ -290,7 +295,8 @@ pub fn spot_penumbra_width(
 
 /// [`refined_gap`] for a spot light of diameter `light_size` (`refined_spot_blocker` in
 /// `ssss.wgsl`): the mean distance from the light of the fine-map blockers hiding part of the
-/// lamp's disk from the receiver, `d_receiver` from the light — seen from the receiver, the disk
+/// lamp's disk from the receiver, weighted as there by the share of the disk each hides (`1/g²`
+/// for a blocker `g` in front of the receiver), `d_receiver` from the light — seen from the receiver, the disk
 /// spans `light_size/2 · g / d_receiver` around its ray at a blocker `g` in front of it — over a
 /// grid spanning the reach of the coarse map's nearest blocker `d_nearest`; with none,
 /// `d_nearest` stands.
@@ -323,8 +329,9 @@ pub fn refined_spot_blocker(
             && lateral <= half * gap / d_receiver
             && (cos_nl <= 0.0 || gap > own)
         {
-            sum += d;
-            count += 1.0;
+            let share = 1.0 / (gap * gap);
+            sum += d * share;
+            count += share;
         }
     }
     if count > 0.0 { sum / count } else { d_nearest }
@@ -527,7 +534,7 @@ mod tests {
         let uv = Vec2::splat(32.5 / n as f32);
         assert_eq!(refined_gap(&fine, uv, 0.0, 3.7, texel, 1.0, 1.0, 0.2), 0.5);
         // A 3 m post 12 cm to the side hides part of the disk too (3·tan(0.1) = 30 cm): the
-        // mean of both.
+        // mean of both, each weighted by the share of the disk a texel hides there (1/g²).
         let mut post = plank.clone();
         let grid_step = (3.7 * 0.1f32.tan() / texel / 3.0).round_ties_even() as usize;
         post[32 * n + 32 + grid_step] = 3.0;
@@ -536,7 +543,8 @@ mod tests {
             ..fine
         };
         let refined = refined_gap(&with_post, uv, 0.0, 3.7, texel, 1.0, 1.0, 0.2);
-        assert!((refined - 1.75).abs() < 1e-5, "{refined}");
+        let expected = (0.5 / 0.25 + 3.0 / 9.0) / (1.0 / 0.25 + 1.0 / 9.0);
+        assert!((refined - expected).abs() < 1e-5, "{refined} vs {expected}");
         // Nothing but the receiver's plane nearby: the coarse gap stands.
         let flat = vec![0.0f32; n * n];
         let empty = FineMap {

@@ -11,6 +11,7 @@
 //!    depth rejection and lazy shadowing (§6.2.3, §6.3.2).
 
 pub mod blur;
+mod box_sums;
 pub mod dilation;
 pub mod distance;
 pub mod kernel;

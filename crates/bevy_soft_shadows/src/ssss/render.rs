@@ -4,6 +4,10 @@
 //! main pass, where the receivers read the result. GPU time is recorded as the `ssss` span
 //! (`render/ssss/elapsed_gpu` with `RenderDiagnosticsPlugin`).
 
+use super::box_sums::{
+    BoxSumsPipelines, LineSums, box_sums_ready, encode_line_sums, init_box_sums_pipelines,
+    line_sum_textures,
+};
 pub use super::dilation::SsssDilationFilter;
 use super::receiver::{SoftShadowCamera, SsssActive, SsssTextures};
 use crate::settings::ScreenSpaceSoftShadows;
@@ -120,6 +124,20 @@ struct SsssTileBuffers {
     row_stats: Option<Buffer>,
     list: Option<Buffer>,
     args: Option<Buffer>,
+}
+
+/// The blur's prefix sums for this frame's screen (`box_sums`).
+#[derive(Resource, Default)]
+struct SsssLineSums(Option<LineSums>);
+
+fn prepare_line_sums(
+    device: Res<RenderDevice>,
+    extracted: Res<ExtractedSsss>,
+    mut cache: ResMut<TextureCache>,
+    mut sums: ResMut<SsssLineSums>,
+) {
+    let size = extracted.textures.size.max(UVec2::ONE);
+    sums.0 = Some(line_sum_textures(&device, &mut cache, size));
 }
 
 fn prepare_tile_buffers(
@@ -344,6 +362,7 @@ fn init_pipelines(
                 texture_2d(unfiltered).visibility(ShaderStages::VERTEX_FRAGMENT),
                 texture_2d(unfiltered),
                 storage_buffer_read_only_sized(false, None).visibility(ShaderStages::VERTEX),
+                texture_2d(TextureSampleType::Uint),
             ),
         ),
     );
@@ -603,6 +622,8 @@ fn ssss(
     tile_readback: Option<ResMut<SsssTileReadback>>,
     tile_buffers: Res<SsssTileBuffers>,
     filter: Option<Res<SsssDilationFilter>>,
+    box_sums: Res<BoxSumsPipelines>,
+    line_sums: Res<SsssLineSums>,
     mut ctx: RenderContext,
 ) {
     let (mesh_view, shadows, lights_offset, ids, dilation) = view.into_inner();
@@ -636,6 +657,8 @@ fn ssss(
         Some(tile_row_stats),
         Some(tile_list),
         Some(tile_args),
+        Some(sums),
+        true,
     ) = (
         pipeline_cache.get_compute_pipeline(pipelines.dilate_reduce),
         pipeline_cache.get_compute_pipeline(pipelines.dilate_passes[0]),
@@ -657,6 +680,8 @@ fn ssss(
         tile_buffers.row_stats.as_ref(),
         tile_buffers.list.as_ref(),
         tile_buffers.args.as_ref(),
+        line_sums.0.as_ref(),
+        box_sums_ready(&box_sums, &pipeline_cache),
     )
     else {
         return;
@@ -708,7 +733,7 @@ fn ssss(
         ]
     };
     let screen_layout = pipeline_cache.get_bind_group_layout(&pipelines.screen_layout);
-    let screen_group = |distances: &TextureView, blur_in: &TextureView| {
+    let screen_group = |distances: &TextureView, blur_in: &TextureView, sums: &TextureView| {
         device.create_bind_group(
             "ssss_screen",
             &screen_layout,
@@ -718,6 +743,7 @@ fn ssss(
                 distances,
                 blur_in,
                 tile_list.as_entire_binding(),
+                sums,
             )),
         )
     };
@@ -730,9 +756,17 @@ fn ssss(
             dimension: Some(TextureViewDimension::D2),
             ..default()
         });
-    let distance_group = screen_group(&unused, &unused);
-    let blur_h_group = screen_group(&distance.texture_view, &distance.texture_view);
-    let blur_v_group = screen_group(&distance.texture_view, &horizontal.texture_view);
+    let distance_group = screen_group(&unused, &unused, &sums.rows.default_view);
+    let blur_h_group = screen_group(
+        &distance.texture_view,
+        &distance.texture_view,
+        &sums.rows.default_view,
+    );
+    let blur_v_group = screen_group(
+        &distance.texture_view,
+        &horizontal.texture_view,
+        &sums.columns.default_view,
+    );
     let tiles_group = device.create_bind_group(
         "ssss_tiles",
         &pipeline_cache.get_bind_group_layout(&pipelines.tiles_layout),
@@ -827,11 +861,37 @@ fn ssss(
         }
         span.end(&mut pass);
     }
-    // The blur passes: one quad per active tile, over what the distance pass wrote.
-    for (label, pipeline, group, target) in [
-        ("ssss_blur_h", blur_h_pipeline, &blur_h_group, horizontal),
-        ("ssss_blur_v", blur_v_pipeline, &blur_v_group, visibility),
+    // The blur passes: one quad per active tile, over what the distance pass wrote, each
+    // after the prefix sums of its input along its direction (its spread taps' cell means).
+    for (label, pipeline, group, target, source, sums, horizontal) in [
+        (
+            "ssss_blur_h",
+            blur_h_pipeline,
+            &blur_h_group,
+            horizontal,
+            distance,
+            &sums.rows,
+            true,
+        ),
+        (
+            "ssss_blur_v",
+            blur_v_pipeline,
+            &blur_v_group,
+            visibility,
+            horizontal,
+            &sums.columns,
+            false,
+        ),
     ] {
+        encode_line_sums(
+            ctx.command_encoder(),
+            &device,
+            &box_sums,
+            &pipeline_cache,
+            &source.texture_view,
+            sums,
+            horizontal,
+        );
         let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
             label: Some(label),
             color_attachments: &[attachment(&target.texture_view, LoadOp::Load)],
@@ -995,6 +1055,7 @@ pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "min_filter.wgsl");
     embedded_asset!(app, "ssss.wgsl");
     embedded_asset!(app, "tiles.wgsl");
+    embedded_asset!(app, "box_sums.wgsl");
     app.add_plugins(bevy::render::extract_component::ExtractComponentPlugin::<
         SoftShadowCamera,
     >::default())
@@ -1015,8 +1076,15 @@ pub(crate) fn build(app: &mut App) {
         .init_resource::<ExtractedSsss>()
         .init_resource::<SsssUniformBuffer>()
         .init_resource::<SsssTileBuffers>()
+        .init_resource::<SsssLineSums>()
         .init_resource::<SpecializedRenderPipelines<SsssPipelines>>()
-        .add_systems(RenderStartup, init_pipelines.after(MeshPipelineSystems))
+        .add_systems(
+            RenderStartup,
+            (
+                init_pipelines.after(MeshPipelineSystems),
+                init_box_sums_pipelines,
+            ),
+        )
         .add_systems(ExtractSchedule, extract_ssss)
         .add_systems(
             Render,
@@ -1026,6 +1094,7 @@ pub(crate) fn build(app: &mut App) {
                     prepare_uniform,
                     prepare_dilation,
                     prepare_tile_buffers,
+                    prepare_line_sums,
                     clear_visibility_when_off,
                 )
                     .in_set(RenderSystems::PrepareResources),

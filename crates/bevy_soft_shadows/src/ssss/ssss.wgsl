@@ -26,7 +26,7 @@
 #import bevy_render::maths::orthonormalize
 #import bevy_soft_shadows::ssss_types::{
     SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS, MAX_DILATION_TEXELS, DILATION_BLOCK, LIGHT_KIND_SPOT,
-    TILE, BLOCKER_GRID,
+    TILE, BLOCKER_GRID, tap_offset, tap_cell, tap_layout, SUM_SCALE,
 }
 
 @group(2) @binding(0) var dilated: texture_2d_array<f32>;
@@ -35,6 +35,9 @@
 @group(2) @binding(3) var blur_in: texture_2d<f32>;
 // The active tiles, `x | y << 16` (`tiles.wgsl`).
 @group(2) @binding(4) var<storage, read> active_tiles: array<u32>;
+// Prefix sums of `blur_in.r` along the pass (`box_sums.wgsl`): rows for the horizontal pass,
+// columns for the vertical one.
+@group(2) @binding(5) var line_sums: texture_2d<u32>;
 
 // One quad per active tile: instance `i` covers tile `active_tiles[i]`, clipped to the screen.
 @vertex
@@ -153,8 +156,9 @@ fn blocker_grid_offset(i: i32, j: i32, reach_texels: f32) -> vec2<i32> {
 // end, not the part in front of the light's centre: the penumbra comes out too wide and the thin
 // shadow too faint. Among the fine shadow-map texels on a 7×7 grid within the reach of that
 // farthest blocker, the blockers that hide part of the light's disk from the receiver (a blocker
-// at gap g covers texels within g·tan(θ/2) of the receiver's light ray) are averaged instead;
-// with none found the dilated map's gap stands.
+// at gap g covers texels within g·tan(θ/2) of the receiver's light ray) are averaged instead,
+// weighted by the share of the disk each hides (1/g²); with none found the dilated map's gap
+// stands.
 fn refined_gap(local: vec3<f32>, gap_max: f32, texel_size: f32, depth_per_metre: f32, cos_nl: f32, layer: i32) -> f32 {
     let size = vec2<i32>(textureDimensions(view_bindings::directional_shadow_textures).xy);
     let centre = blocker_grid_centre(local.xy, size);
@@ -178,8 +182,9 @@ fn refined_gap(local: vec3<f32>, gap_max: f32, texel_size: f32, depth_per_metre:
             // receiver's own texel holds its surface at the texel's centre), nor closer to it
             // than a texel (depth precision).
             if gap > texel_size && r <= gap * t && (cos_nl <= 0.0 || gap > (r + texel_size) * slope) {
-                sum += gap;
-                count += 1.0;
+                let share = 1.0 / (gap * gap);
+                sum += gap * share;
+                count += share;
             }
         }
     }
@@ -233,7 +238,8 @@ fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>) -> f32 {
 }
 
 // `refined_gap` for a spot light (`distance::refined_spot_blocker`): the distance from the light
-// of the blockers hiding part of the lamp's disk from the receiver, averaged. Seen from the
+// of the blockers hiding part of the lamp's disk from the receiver, averaged weighted by the share
+// of the disk each hides (1/g²). Seen from the
 // receiver `d_r` away, the disk of diameter `light_size` spans `light_size/2 · g / d_r` around
 // the receiver's ray at a blocker `g` in front of the receiver; a texel spans
 // `2 d tan_outer / size` metres at distance `d` from the light.
@@ -264,8 +270,9 @@ fn refined_spot_blocker(uv: vec2<f32>, d_r: f32, d_nearest: f32, near: f32, tan_
             let lateral = texels * d * texel_per_distance;
             let own = (texels * receiver_texel + receiver_texel) * slope;
             if gap > receiver_texel && lateral <= half * gap / d_r && (cos_nl <= 0.0 || gap > own) {
-                sum += d;
-                count += 1.0;
+                let share = 1.0 / (gap * gap);
+                sum += d * share;
+                count += share;
             }
         }
     }
@@ -328,11 +335,6 @@ fn distance_map(in: FullscreenVertexOutput) -> vec4<f32> {
     return vec4(hard, sigma * axes, eye_depth);
 }
 
-fn tap_offset(i: i32, step: f32) -> i32 {
-    let magnitude = i32(floor(f32(abs(i)) * step + 0.5));
-    return select(magnitude, -magnitude, i < 0);
-}
-
 // Lazy shadowing (§6.3.2): the hard shadow at the point where the sample pixel's view ray meets
 // the centre pixel's tangent plane; negative when there is no such point.
 fn lazy_shadow(sample_px: vec2<i32>, centre_world: vec3<f32>, normal: vec3<f32>, light: u32) -> f32 {
@@ -370,14 +372,12 @@ fn blur(in: FullscreenVertexOutput, direction: vec2<i32>, sigma_channel: u32, de
     }
     let size = vec2<i32>(textureDimensions(distances));
     // Tap layout (`kernel::tap_offsets`): one per pixel while the kernel fits, spread beyond.
-    let reach = ceil(KERNEL_REACH_SIGMAS * sigma);
-    let per_side = f32(ssss.taps_per_side);
-    var n = i32(reach);
-    var step = 1.0;
-    if reach > per_side {
-        n = i32(ssss.taps_per_side);
-        step = reach / per_side;
-    }
+    let taps = tap_layout(sigma, ssss.taps_per_side);
+    let n = i32(taps.x);
+    let step = taps.y;
+    // Along the pass: the centre's position and the line's length.
+    let along = dot(centre, direction);
+    let len = dot(size, direction);
     // The centre's surface, for lazy shadowing.
     let light = ssss_light();
     var centre_world = vec3(0.0);
@@ -398,9 +398,22 @@ fn blur(in: FullscreenVertexOutput, direction: vec2<i32>, sigma_channel: u32, de
         }
         let tap = textureLoad(blur_in, p, 0);
         let sample_depth = tap[depth_channel];
+        // A spread tap stands for its cell (`kernel::tap_cell`), clamped to the line: it reads
+        // the cell's mean and weighs as many pixels. Depth is tested at the tap itself.
+        let cell = tap_cell(i, step);
+        let first = max(along + cell.x, 0);
+        let last = min(along + cell.y, len - 1);
+        let count = last - first + 1;
         var value = 0.0;
         if sample_depth > 0.0 && abs(sample_depth - z) <= ssss.depth_rejection * z {
             value = tap.r;
+            if step > 1.0 {
+                // Texel k of a line's sums covers its pixels 0..k.
+                let before = centre * (vec2(1) - direction) + direction * first;
+                let through = centre * (vec2(1) - direction) + direction * (last + 1);
+                let sum = textureLoad(line_sums, through, 0).r - textureLoad(line_sums, before, 0).r;
+                value = f32(sum) / (SUM_SCALE * f32(count));
+            }
         } else if ssss.lazy_shadowing != 0u && light != NO_LIGHT {
             value = lazy_shadow(p, centre_world, normal, light);
             if value < 0.0 {
@@ -409,7 +422,7 @@ fn blur(in: FullscreenVertexOutput, direction: vec2<i32>, sigma_channel: u32, de
         } else {
             continue;
         }
-        let w = exp(-f32(offset * offset) / (2.0 * sigma * sigma));
+        let w = exp(-f32(offset * offset) / (2.0 * sigma * sigma)) * f32(count);
         sum += w * value;
         weights += w;
     }

@@ -10,7 +10,8 @@
 //! The test is exact, not a heuristic: a pixel's final value (vertical pass over horizontal
 //! pass) reads the hard shadow of the pixels at most its vertical reach above and below it, and
 //! from each of those at most that pixel's horizontal reach to the side ([`blur`](super::blur);
-//! a reach is the largest tap offset, `ceil(KERNEL_REACH_SIGMAS · σ)`). Bounding both by tile
+//! a reach is the farthest pixel a kernel reads, [`kernel_extent`](super::kernel::kernel_extent):
+//! its last tap `ceil(2.5·σ)`, or the end of that tap's cell once taps spread). Bounding both by tile
 //! maxima gives a region of tiles around each tile. The blur of a tile leaves every pixel as it
 //! is when either
 //!
@@ -19,13 +20,13 @@
 //! - the hard shadow is uniform over the region and no sample there can be replaced by lazy
 //!   shadowing (§6.3.2): lazy shadowing is off, or the region has no background and its depth
 //!   range is within the depth-rejection threshold, so every sample is accepted; a Gaussian
-//!   mean of equal values is that value.
+//!   mean of equal values (each tap a pixel, or the exact fixed-point mean of its cell) is that
+//!   value.
 //!
 //! Every other tile is active. So the tiled result equals the full-screen one (up to the last
 //! bit of a weighted mean), which the render tests check.
 
 use super::blur::ScreenBuffers;
-use super::kernel::KERNEL_REACH_SIGMAS;
 
 /// Side of a screen tile in pixels (one 8×8 workgroup of the reduction, as in FidelityFX).
 pub const TILE: usize = 8;
@@ -59,16 +60,14 @@ pub struct TileSettings {
     pub depth_rejection: f32,
     /// Lazy shadowing on: rejected samples are replaced, not dropped.
     pub lazy_shadowing: bool,
+    /// The blur's taps a side at most ([`kernel_reach`] depends on it once taps spread).
+    pub taps_per_side: u32,
 }
 
-/// The largest tap offset of a kernel of standard deviation `sigma` px: `ceil(2.5 σ)` (the last
-/// tap of [`kernel::tap_offsets`](super::kernel::tap_offsets) lands exactly there).
-pub fn kernel_reach(sigma: f32) -> u32 {
-    if sigma > 0.0 {
-        (KERNEL_REACH_SIGMAS * sigma).ceil() as u32
-    } else {
-        0
-    }
+/// The farthest pixel a kernel of standard deviation `sigma` px reads
+/// ([`kernel_extent`](super::kernel::kernel_extent): its last tap, or the end of that tap's cell).
+pub fn kernel_reach(sigma: f32, taps_per_side: u32) -> u32 {
+    super::kernel::kernel_extent(sigma, taps_per_side)
 }
 
 /// Tiles across and down a `width × height` screen.
@@ -77,7 +76,7 @@ pub fn tile_grid(width: usize, height: usize) -> (usize, usize) {
 }
 
 /// The statistics of every tile, row-major.
-pub fn tile_stats(buffers: &ScreenBuffers) -> Vec<TileStats> {
+pub fn tile_stats(buffers: &ScreenBuffers, taps_per_side: u32) -> Vec<TileStats> {
     let (w, h) = (buffers.width, buffers.height);
     let (tx, ty) = tile_grid(w, h);
     let mut stats = vec![
@@ -105,7 +104,8 @@ pub fn tile_stats(buffers: &ScreenBuffers) -> Vec<TileStats> {
                 s.background = true;
             }
             for axis in 0..2 {
-                s.reach[axis] = s.reach[axis].max(kernel_reach(buffers.sigma[i][axis]));
+                s.reach[axis] =
+                    s.reach[axis].max(kernel_reach(buffers.sigma[i][axis], taps_per_side));
             }
         }
     }
@@ -159,7 +159,7 @@ pub fn is_active(
 /// The active tiles `(x, y)` of a frame, in row-major order.
 pub fn active_tiles(buffers: &ScreenBuffers, settings: &TileSettings) -> Vec<[u32; 2]> {
     let tiles = tile_grid(buffers.width, buffers.height);
-    let stats = tile_stats(buffers);
+    let stats = tile_stats(buffers, settings.taps_per_side);
     let mut active = Vec::new();
     for y in 0..tiles.1 {
         for x in 0..tiles.0 {
@@ -181,7 +181,7 @@ pub fn tiled_soft_shadow(
 ) -> Vec<f32> {
     let full = super::blur::soft_shadow(buffers, blur, lazy);
     let tiles = tile_grid(buffers.width, buffers.height);
-    let stats = tile_stats(buffers);
+    let stats = tile_stats(buffers, settings.taps_per_side);
     let mut out = buffers.hard.clone();
     for y in 0..buffers.height {
         for x in 0..buffers.width {
@@ -223,17 +223,20 @@ mod tests {
     };
 
     #[test]
-    fn kernel_reach_is_the_last_tap() {
-        use crate::ssss::kernel::{tap_offset, tap_offsets};
+    fn kernel_reach_is_the_last_pixel_read() {
+        use crate::ssss::kernel::{tap_cell, tap_offset, tap_offsets};
         for sigma in [0.01f32, 0.4, 1.0, 2.3, 7.9, 25.0] {
             let (n, step) = tap_offsets(sigma, 6);
-            assert_eq!(
-                tap_offset(n as i32, step) as u32,
-                kernel_reach(sigma),
-                "σ {sigma}"
-            );
+            let last = if step == 1.0 {
+                tap_offset(n as i32, step)
+            } else {
+                tap_cell(n as i32, step).1
+            };
+            assert_eq!(last as u32, kernel_reach(sigma, 6), "σ {sigma}");
         }
-        assert_eq!(kernel_reach(0.0), 0);
+        assert_eq!(kernel_reach(0.0, 6), 0);
+        // Spread taps read past the last tap: to the end of its cell.
+        assert!(kernel_reach(25.0, 6) > (2.5f32 * 25.0).ceil() as u32);
     }
 
     #[test]
@@ -242,6 +245,7 @@ mod tests {
         let settings = TileSettings {
             depth_rejection: 0.05,
             lazy_shadowing: true,
+            taps_per_side: BLUR.taps_per_side,
         };
         let active = active_tiles(&b, &settings);
         // Reach ceil(5.0) = 5 px: the edge at x = 20 (tile 2) reaches pixels 15..=24, tiles 1–3.
@@ -265,6 +269,7 @@ mod tests {
         let lazy = TileSettings {
             depth_rejection: 0.05,
             lazy_shadowing: true,
+            taps_per_side: BLUR.taps_per_side,
         };
         let plain = TileSettings {
             lazy_shadowing: false,
@@ -277,7 +282,7 @@ mod tests {
     #[test]
     fn the_tiled_blur_equals_the_full_screen_blur() {
         // Edges, depth steps, background and kernels of every size: the tiled result is the
-        // full one, while a good part of the screen is skipped.
+        // full one, while a part of the screen is skipped.
         let mut b = screen(
             17,
             |x, y| {
@@ -291,7 +296,8 @@ mod tests {
         );
         for (i, s) in b.sigma.iter_mut().enumerate() {
             let (x, y) = (i % 48, i / 48);
-            let sigma = ((x * 7 + y * 3) % 11) as f32 * 0.2;
+            // Up to σ 3 px: reach 8 against 6 taps a side, so the widest kernels read cells.
+            let sigma = ((x * 7 + y * 3) % 11) as f32 * 0.3;
             *s = [sigma, 0.6 * sigma];
             if y > 30 {
                 b.hard[i] = 0.5;
@@ -303,6 +309,7 @@ mod tests {
             let settings = TileSettings {
                 depth_rejection: BLUR.depth_rejection,
                 lazy_shadowing,
+                taps_per_side: BLUR.taps_per_side,
             };
             let lazy: &dyn Fn(usize, usize) -> Option<f32> = if lazy_shadowing {
                 &lazy_value
@@ -344,6 +351,7 @@ mod tests {
         let settings = TileSettings {
             depth_rejection: 0.05,
             lazy_shadowing: false,
+            taps_per_side: BLUR.taps_per_side,
         };
         let active = active_tiles(&b, &settings);
         assert!(active.contains(&[3, 1]), "{active:?}");

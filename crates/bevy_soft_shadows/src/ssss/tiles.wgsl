@@ -9,7 +9,7 @@
 //   vertical reach covers — the region the two blur passes read, in two 1-D walks instead of one
 //   2-D one — and appends the tile to the active list (the instance count of an indirect draw)
 //   unless the blur cannot change any of its pixels.
-#import bevy_soft_shadows::ssss_types::{SsssUniform, TILE, KERNEL_REACH_SIGMAS, DEPTH_RANGE_MARGIN}
+#import bevy_soft_shadows::ssss_types::{SsssUniform, TILE, DEPTH_RANGE_MARGIN, kernel_extent}
 
 // Mirrors `ssss::tiles::TileStats`.
 struct TileStats {
@@ -44,12 +44,9 @@ fn tile_grid() -> vec2<u32> {
     return (textureDimensions(distances) + vec2(TILE - 1u)) / TILE;
 }
 
-// `tiles::kernel_reach`: the largest tap offset of a kernel of σ px.
+// `tiles::kernel_reach`: the farthest pixel a kernel of σ px reads.
 fn kernel_reach(sigma: f32) -> u32 {
-    if sigma > 0.0 {
-        return u32(ceil(KERNEL_REACH_SIGMAS * sigma));
-    }
-    return 0u;
+    return kernel_extent(sigma, ssss.taps_per_side);
 }
 
 // One invocation per tile walks its 64 pixels: no shared memory or barrier, and a tile's
