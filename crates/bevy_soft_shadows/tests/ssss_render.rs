@@ -262,38 +262,49 @@ fn ssss_is_no_worse_than_bevys_pcss_against_the_area_light_reference() {
 /// (`min_filter::coarse_dilate`) run on the same frame's shadow map, read back together — with
 /// every form of the min filter — and the distance pass against its CPU reference
 /// (`ssss::distance`) on that map, pixel by pixel.
-#[test]
-fn the_dilation_and_distance_passes_match_their_cpu_references() {
+/// Renders the pole scene with `s` on the sun and checks the GPU's coarse dilated map against
+/// `min_filter::coarse_dilate` (at the block the frame picked and the radius the cascade
+/// gives) and the distance pass against `distance::directional_penumbra_width`. Returns the
+/// GPU's coarse map and the block.
+fn dilation_and_distance_match(
+    harness: &mut RenderHarness,
+    s: ScreenSpaceSoftShadows,
+) -> (Vec<f32>, usize) {
     use bevy::light::Cascades;
     use bevy::render::RenderApp;
+    use bevy_soft_shadows::ssss::dilation::SsssDilationRadius;
     use bevy_soft_shadows::ssss::distance::{
         CoarseMap, DirectionalCascade, FineMap, directional_penumbra_width,
     };
     use bevy_soft_shadows::ssss::min_filter::{DepthConvention, coarse_dilate, coarse_radius};
-    use bevy_soft_shadows::ssss::render::{SsssDilationFilter, SsssDilationReadback};
-    let Some(mut harness) = pole_harness("ssss_dilation") else {
-        return;
-    };
-    let sun = sun_entity(&mut harness);
-    harness.world_mut().entity_mut(sun).insert(settings());
+    use bevy_soft_shadows::ssss::render::SsssDilationReadback;
+    let sun = sun_entity(harness);
+    harness.world_mut().entity_mut(sun).insert(s.clone());
     harness
         .app_mut()
         .sub_app_mut(RenderApp)
         .init_resource::<SsssDilationReadback>();
     harness.wait_until_ready().unwrap();
     harness.run_frames(3).unwrap();
-    let (fine, fine_size) = read_dilation(&mut harness, false);
-    let (gpu, coarse_size) = read_dilation(&mut harness, true);
+    let (fine, fine_size) = read_dilation(harness, false);
+    let (gpu, coarse_size) = read_dilation(harness, true);
     let (w, h) = (fine_size.x as usize, fine_size.y as usize);
     assert!(
         fine.iter().any(|&d| d > 0.0),
         "the shadow map holds the scene"
     );
+    // The block this frame's reach asked for.
+    let block = harness.world_mut().resource::<SsssDilationRadius>().block;
+    println!("dilation block {block}");
+    assert_eq!(
+        (coarse_size.x as usize, coarse_size.y as usize),
+        (w.div_ceil(block), h.div_ceil(block))
+    );
     // The cascade's texel size is Bevy's; find the radius whose CPU map matches exactly and
     // check it is the one the settings ask for at some texel size in the cascade's range.
     let matching: Vec<usize> = (0..=16)
         .filter(|&r| {
-            let (cpu, cw, ch) = coarse_dilate(&fine, w, h, r, DepthConvention::ReverseZ);
+            let (cpu, cw, ch) = coarse_dilate(&fine, w, h, r, block, DepthConvention::ReverseZ);
             (cw as u32, ch as u32) == (coarse_size.x, coarse_size.y) && cpu == gpu
         })
         .collect();
@@ -302,14 +313,13 @@ fn the_dilation_and_distance_passes_match_their_cpu_references() {
         !matching.is_empty(),
         "the GPU dilation equals the CPU reference"
     );
-    let s = settings();
     // 14 m cascade: its texel is between 14/2048 and 2·14·√3/2048 m.
-    let r_max = coarse_radius(s.max_occluder_distance, s.light_size, 14.0 / 2048.0, 64.0);
+    let r_max = coarse_radius(s.max_occluder_distance, s.light_size, 14.0 / 2048.0, block);
     let r_min = coarse_radius(
         s.max_occluder_distance,
         s.light_size,
         2.0 * 14.0 * 3f32.sqrt() / 2048.0,
-        64.0,
+        block,
     );
     assert!(
         matching.iter().any(|r| (r_min..=r_max).contains(r)),
@@ -335,7 +345,7 @@ fn the_dilation_and_distance_passes_match_their_cpu_references() {
         s.max_occluder_distance,
         s.light_size,
         cascade.texel_size,
-        64.0,
+        block,
     );
     assert_eq!(
         matching,
@@ -348,13 +358,14 @@ fn the_dilation_and_distance_passes_match_their_cpu_references() {
         height: coarse_size.y as usize,
         map_size: fine_size.x as f32,
         radius,
+        block,
     };
     let fine_map = FineMap {
         depth: &fine,
         width: w,
         height: h,
     };
-    assert_distance_pass_matches(&mut harness, &s, |world| {
+    assert_distance_pass_matches(harness, &s, |world| {
         directional_penumbra_width(
             &cascade,
             &coarse,
@@ -365,7 +376,18 @@ fn the_dilation_and_distance_passes_match_their_cpu_references() {
             s.light_size,
         )
     });
+    (gpu, block)
+}
 
+#[test]
+fn the_dilation_and_distance_passes_match_their_cpu_references() {
+    use bevy::render::RenderApp;
+    use bevy_soft_shadows::ssss::render::{SsssDilationFilter, SsssDilationReadback};
+    let Some(mut harness) = pole_harness("ssss_dilation") else {
+        return;
+    };
+    let (gpu, block) = dilation_and_distance_match(&mut harness, settings());
+    assert_eq!(block, 4, "a reach within 64 texels keeps the finest block");
     // Both forms of the filter give the same map (Auto picked one of them above).
     let ran = |harness: &mut RenderHarness| {
         harness
@@ -384,6 +406,26 @@ fn the_dilation_and_distance_passes_match_their_cpu_references() {
         let (map, _) = read_dilation(&mut harness, true);
         assert!(map == gpu, "the {filter:?} filter gives another map");
     }
+}
+
+/// A large sun over tall blockers (0.25 rad, blockers up to 6 m from the ground): the reach
+/// passes the finest block's 64 texels, so the frame picks a coarser block rather than cutting
+/// the window short — no cap, and the GPU's map still equals its CPU reference.
+#[test]
+fn a_wide_reach_picks_a_coarser_block_that_still_matches_the_cpu_reference() {
+    use bevy_soft_shadows::ssss::dilation::SsssDilationRadius;
+    let Some(mut harness) = pole_harness("ssss_dilation_wide") else {
+        return;
+    };
+    let wide = ScreenSpaceSoftShadows {
+        light_size: 0.25,
+        ..settings()
+    };
+    let (_, block) = dilation_and_distance_match(&mut harness, wide);
+    let dilation = *harness.world_mut().resource::<SsssDilationRadius>();
+    println!("wide reach: {dilation:?}");
+    assert!(block > 4, "block {block}");
+    assert!(!dilation.capped);
 }
 
 /// Cascades: the pole scene with two cascades split at 5 m from the camera, so the ground (10 m

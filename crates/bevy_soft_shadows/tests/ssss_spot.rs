@@ -3,7 +3,7 @@
 //! spot lights spread over the lamp's disk and averaged in linear light).
 //!
 //! - The spot light's coarse dilated map on the GPU equals its CPU reference at the radius
-//!   `min_filter::spot_coarse_radius` gives.
+//!   `min_filter::spot_fine_reach` gives (at the block `min_filter::dilation_block` picks).
 //! - The distance pass's σ equals its CPU reference (`ssss::distance`) on the ground's pixels.
 //! - The penumbra in the final image follows eq. 6.1 for a local light,
 //!   `w = light_size · (d_r − d_b) / d_b`, at three distances behind the pole.
@@ -21,7 +21,7 @@ use bevy_soft_shadows::reference::{
 };
 use bevy_soft_shadows::ssss::distance::{CoarseMap, FineMap, SpotProjection, spot_penumbra_width};
 use bevy_soft_shadows::ssss::min_filter::{
-    DepthConvention, MAX_DILATION_TEXELS, coarse_dilate, spot_coarse_radius,
+    DepthConvention, coarse_dilate, coarse_radius_of, dilation_block, spot_fine_reach,
 };
 use bevy_soft_shadows::ssss::receiver::SsssTextures;
 use bevy_soft_shadows::ssss::render::SsssDilationReadback;
@@ -253,18 +253,15 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
     //    against the CPU reference at exactly the radius the settings give.
     let (fine, fine_size) = read_dilation(&mut harness, false);
     let (gpu, coarse_size) = read_dilation(&mut harness, true);
-    let radius = spot_coarse_radius(
-        DIAMETER,
-        MAX_OCCLUDER,
-        OUTER.tan(),
-        fine_size.x as f32,
-        MAX_DILATION_TEXELS as f32,
-    );
+    let reach = spot_fine_reach(DIAMETER, MAX_OCCLUDER, OUTER.tan(), fine_size.x as f32);
+    let block = dilation_block(reach);
+    let radius = coarse_radius_of(reach, block);
     let (cpu, cw, ch) = coarse_dilate(
         &fine,
         fine_size.x as usize,
         fine_size.y as usize,
         radius,
+        block,
         DepthConvention::ReverseZ,
     );
     assert!(
@@ -304,6 +301,7 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
         height: ch,
         map_size: fine_size.x as f32,
         radius,
+        block,
     };
     let fine_map = FineMap {
         depth: &fine,

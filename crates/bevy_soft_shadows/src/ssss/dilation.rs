@@ -3,7 +3,10 @@
 //! min filter), Bevy diagnostics publish it (`ssss/dilation_radius`, `ssss/segment_filter`), and
 //! a window the cap cuts short gets a warning.
 
-use super::min_filter::{DILATION_BLOCK, MAX_DILATION_TEXELS, coarse_radius, spot_coarse_radius};
+use super::min_filter::{
+    DILATION_BLOCK, MAX_COARSE_RADIUS, MAX_DILATION_TEXELS, coarse_radius, coarse_radius_of,
+    dilation_block, fine_reach, spot_fine_reach,
+};
 use crate::settings::ScreenSpaceSoftShadows;
 use bevy::diagnostic::{Diagnostic, DiagnosticPath, Diagnostics, RegisterDiagnostic};
 use bevy::light::{Cascades, DirectionalLightShadowMap, SimulationLightSystems};
@@ -42,13 +45,26 @@ pub const DILATION_RADIUS: DiagnosticPath = DiagnosticPath::const_new("ssss/dila
 pub const SEGMENT_FILTER: DiagnosticPath = DiagnosticPath::const_new("ssss/segment_filter");
 
 /// The SSSS light's dilation, as this frame's settings and shadow maps give it.
-#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Resource, Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SsssDilationRadius {
     /// The largest coarse radius over the light's shadow maps (its cascades, or the spot's map).
     pub radius: usize,
+    /// Shadow-map texels a side per coarse texel ([`dilation_block`]: the finest that holds the
+    /// widest reach within [`MAX_COARSE_RADIUS`]).
+    pub block: usize,
     /// Whether `max_occluder_distance` asked for more than [`MAX_DILATION_TEXELS`] fine texels
     /// somewhere, so the window stops short of the farthest blockers asked for.
     pub capped: bool,
+}
+
+impl Default for SsssDilationRadius {
+    fn default() -> Self {
+        Self {
+            radius: 0,
+            block: DILATION_BLOCK,
+            capped: false,
+        }
+    }
 }
 
 /// The radius for the light the render world shades: the first directional light with SSSS
@@ -58,11 +74,7 @@ pub fn dilation_radius(
     spot: Option<(&ScreenSpaceSoftShadows, &SpotLight)>,
     shadow_map_size: f32,
 ) -> SsssDilationRadius {
-    let cap = MAX_DILATION_TEXELS as f32;
-    let both = |f: &dyn Fn(f32) -> usize| SsssDilationRadius {
-        radius: f(cap),
-        capped: f(f32::INFINITY) > f(cap),
-    };
+    let capped = |reach: f32| reach > MAX_DILATION_TEXELS as f32;
     if let Some((settings, cascades)) = directional {
         let s = settings.sanitized().0;
         let texels: Vec<f32> = cascades
@@ -72,17 +84,25 @@ pub fn dilation_radius(
             .collect();
         if texels.is_empty() {
             return SsssDilationRadius {
-                radius: MAX_DILATION_TEXELS / DILATION_BLOCK,
+                radius: MAX_COARSE_RADIUS,
+                block: DILATION_BLOCK,
                 capped: false,
             };
         }
-        return both(&|max| {
-            texels
+        let reach = texels
+            .iter()
+            .map(|&t| fine_reach(s.max_occluder_distance, s.light_size, t))
+            .fold(0.0f32, f32::max);
+        let block = dilation_block(reach);
+        return SsssDilationRadius {
+            radius: texels
                 .iter()
-                .map(|&t| coarse_radius(s.max_occluder_distance, s.light_size, t, max))
+                .map(|&t| coarse_radius(s.max_occluder_distance, s.light_size, t, block))
                 .max()
-                .unwrap_or(0)
-        });
+                .unwrap_or(0),
+            block,
+            capped: capped(reach),
+        };
     }
     if let Some((settings, spot)) = spot {
         let s = settings.sanitized().0;
@@ -91,15 +111,18 @@ pub fn dilation_radius(
             .outer_angle
             .min(std::f32::consts::FRAC_PI_2 - 1e-4)
             .tan();
-        return both(&|max| {
-            spot_coarse_radius(
-                s.light_size,
-                s.max_occluder_distance,
-                tan_outer,
-                shadow_map_size,
-                max,
-            )
-        });
+        let reach = spot_fine_reach(
+            s.light_size,
+            s.max_occluder_distance,
+            tan_outer,
+            shadow_map_size,
+        );
+        let block = dilation_block(reach);
+        return SsssDilationRadius {
+            radius: coarse_radius_of(reach, block),
+            block,
+            capped: capped(reach),
+        };
     }
     SsssDilationRadius::default()
 }
@@ -167,10 +190,11 @@ mod tests {
             r,
             SsssDilationRadius {
                 radius: 14,
+                block: 4,
                 capped: false
             }
         );
-        // A 1.76 m lamp asks for ~139 texels: capped at 64 (R = 16), and said so.
+        // A 1.76 m lamp asks for ~139 texels: blocks of 16, R = 9, not capped.
         let wide = ScreenSpaceSoftShadows {
             light_size: 1.76,
             ..settings.clone()
@@ -179,10 +203,20 @@ mod tests {
         assert_eq!(
             r,
             SsssDilationRadius {
-                radius: 16,
-                capped: true
+                radius: 9,
+                block: 16,
+                capped: false
             }
         );
+        // Past the coarsest block's 1024 texels the window is capped, and said so.
+        let absurd = ScreenSpaceSoftShadows {
+            light_size: 10.0,
+            max_occluder_distance: 0.5,
+            ..settings.clone()
+        };
+        let r = dilation_radius(None, Some((&absurd, &lamp)), 4096.0);
+        assert!(r.capped);
+        assert_eq!(r.radius, MAX_COARSE_RADIUS);
         // A directional light wins; before its cascades exist it assumes the widest window.
         let sun = ScreenSpaceSoftShadows {
             light_size: 0.1,
@@ -190,7 +224,7 @@ mod tests {
             ..default()
         };
         let r = dilation_radius(Some((&sun, None)), Some((&settings, &lamp)), 2048.0);
-        assert_eq!(r.radius, MAX_DILATION_TEXELS / DILATION_BLOCK);
+        assert_eq!(r.radius, MAX_COARSE_RADIUS);
         assert_eq!(
             dilation_radius(None, None, 2048.0),
             SsssDilationRadius::default()

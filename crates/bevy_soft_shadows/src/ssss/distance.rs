@@ -11,7 +11,6 @@
 //! a light at infinity.
 
 use super::kernel::KERNEL_REACH_SIGMAS;
-use super::min_filter::DILATION_BLOCK;
 use super::penumbra::{own_surface_gap, penumbra_sigma, penumbra_width, screen_penumbra_px};
 use bevy::math::{Mat3, Mat4, Vec2, Vec3};
 
@@ -129,7 +128,7 @@ pub fn directional_penumbra_width(
     };
     let depth_per_metre = cascade.depth_per_metre();
     let gap = (coarse.at(uv) - depth) / depth_per_metre.max(1e-8);
-    let reach = ((coarse.radius + 1) * DILATION_BLOCK) as f32 * cascade.texel_size;
+    let reach = ((coarse.radius + 1) * coarse.block) as f32 * cascade.texel_size;
     let cos_nl = normal.dot(direction_to_light);
     if cos_nl > 0.0 && gap <= own_surface_gap(reach, cos_nl) {
         return 0.0;
@@ -246,6 +245,8 @@ pub struct CoarseMap<'a> {
     pub map_size: f32,
     /// The dilation's coarse radius `R`.
     pub radius: usize,
+    /// Shadow-map texels a side per coarse texel.
+    pub block: usize,
 }
 
 impl CoarseMap<'_> {
@@ -281,7 +282,7 @@ pub fn spot_penumbra_width(
     }
     let d_blocker = projection.distance(blocker);
     let gap = d_receiver - d_blocker;
-    let reach = ((coarse.radius + 1) * DILATION_BLOCK) as f32
+    let reach = ((coarse.radius + 1) * coarse.block) as f32
         * projection.texel_size(d_receiver, coarse.map_size);
     let cos_nl = normal.dot((projection.position - world).normalize());
     if cos_nl > 0.0 && gap <= own_surface_gap(reach, cos_nl) {
@@ -418,6 +419,7 @@ mod tests {
             height: 1,
             map_size: 2048.0,
             radius: 2,
+            block: crate::ssss::min_filter::DILATION_BLOCK,
         };
         assert_eq!(coarse.at(uv), depth[0]);
         // Facing the light: no own-surface gap to discount. The fine map holds only the
@@ -488,6 +490,7 @@ mod tests {
             height: 1,
             map_size: 2048.0,
             radius: 2,
+            block: crate::ssss::min_filter::DILATION_BLOCK,
         };
         // The fine map: nothing but the receiver's own plane, so the coarse map's blocker stands.
         let plane = vec![0.5f32; 64 * 64];

@@ -1,30 +1,68 @@
 //! The "coarse", dilated shadow map of §6.2.1: each coarse texel keeps the depth nearest the
-//! light over a block of [`DILATION_BLOCK`]² shadow-map texels, then a separable filter keeps the
-//! nearest over a square of `2R + 1` coarse texels, so pixels in the outer penumbra (lit in the
-//! hard shadow map) still find the blocker whose penumbra covers them. It is only used for the
-//! blocker distance, never for the shadow itself. The blocks make it cheap — the full-resolution
-//! filter cost ~180 ms a frame on a software rasteriser for a 2048² map, the coarse one a
-//! fraction (see the issue note) — and widen the reach by less than one block, which only makes
-//! the search a little more generous.
+//! light over a block of `B²` shadow-map texels, then a separable filter keeps the nearest over a
+//! square of `2R + 1` coarse texels, so pixels in the outer penumbra (lit in the hard shadow map)
+//! still find the blocker whose penumbra covers them. It is only used for the blocker distance,
+//! never for the shadow itself. The blocks make it cheap — the full-resolution filter cost
+//! ~180 ms a frame on a software rasteriser for a 2048² map, the coarse one a fraction — and
+//! widen the reach by less than one block, which only makes the search a little more generous.
+//!
+//! The block is chosen per frame ([`dilation_block`]): [`DILATION_BLOCK`] while the widest reach
+//! fits in [`MAX_COARSE_RADIUS`] coarse texels, doubled until it does beyond (the segment filter
+//! keeps a segment of `2R + 1` texels in registers). A large light over tall blockers — a palm's
+//! fronds 9 m above the sand under a 0.25 rad sun — gets a coarser map of the same cost instead
+//! of a window cut short; only reaches past [`MAX_DILATION_TEXELS`] are capped.
 //!
 //! Bevy's shadow maps use reverse Z (1 at the light's near plane, 0 at the far one), so "nearest
 //! the light" is the *largest* stored value: [`DepthConvention`] says which.
 
-/// Side of the shadow-map blocks one texel of the coarse map stands for.
+/// Side of the shadow-map blocks one texel of the coarse map stands for, at the finest.
 pub const DILATION_BLOCK: usize = 4;
 
-/// The coarse radius `R = ⌈r / block⌉` for a fine reach of
-/// `r = ⌈max_occluder_distance · tan(θ/2) / texel⌉` texels (capped at `max_texels`): half the
-/// penumbra of the farthest blocker searched for.
+/// The widest coarse radius `R` the filter runs at (`MAX_SEGMENT` in `min_filter.wgsl`).
+pub const MAX_COARSE_RADIUS: usize = 16;
+
+/// The coarsest block [`dilation_block`] picks.
+pub const MAX_DILATION_BLOCK: usize = 64;
+
+/// The widest fine reach the dilation searches, in shadow-map texels: [`MAX_COARSE_RADIUS`]
+/// coarse texels of the coarsest block.
+pub const MAX_DILATION_TEXELS: usize = MAX_COARSE_RADIUS * MAX_DILATION_BLOCK;
+
+/// The fine reach `r = ⌈max_occluder_distance · tan(θ/2) / texel⌉` (texels) of a directional
+/// light: half the penumbra of the farthest blocker searched for.
+pub fn fine_reach(max_occluder_distance: f32, angular_diameter: f32, texel: f32) -> f32 {
+    let half_width = max_occluder_distance * (0.5 * angular_diameter).tan();
+    (half_width / texel.max(1e-6)).ceil().max(0.0)
+}
+
+/// The block for a widest fine reach of `reach` texels: the finest of [`DILATION_BLOCK`]·2ᵏ
+/// (at most [`MAX_DILATION_BLOCK`]) that covers it within [`MAX_COARSE_RADIUS`] coarse texels.
+pub fn dilation_block(reach: f32) -> usize {
+    let mut block = DILATION_BLOCK;
+    while block < MAX_DILATION_BLOCK && reach > (MAX_COARSE_RADIUS * block) as f32 {
+        block *= 2;
+    }
+    block
+}
+
+/// The coarse radius `R = ⌈r / block⌉` of a fine reach `r` (capped at
+/// [`MAX_COARSE_RADIUS`]).
+pub fn coarse_radius_of(reach: f32, block: usize) -> usize {
+    ((reach.max(0.0) / block as f32).ceil() as usize).min(MAX_COARSE_RADIUS)
+}
+
+/// The coarse radius of a directional light's cascade of texel size `texel` at `block`
+/// ([`fine_reach`], [`coarse_radius_of`]).
 pub fn coarse_radius(
     max_occluder_distance: f32,
     angular_diameter: f32,
     texel: f32,
-    max_texels: f32,
+    block: usize,
 ) -> usize {
-    let half_width = max_occluder_distance * (0.5 * angular_diameter).tan();
-    let r = (half_width / texel.max(1e-6)).ceil().clamp(0.0, max_texels);
-    (r / DILATION_BLOCK as f32).ceil() as usize
+    coarse_radius_of(
+        fine_reach(max_occluder_distance, angular_diameter, texel),
+        block,
+    )
 }
 
 /// From this coarse radius on, [`SsssDilationFilter::Auto`](super::dilation::SsssDilationFilter)
@@ -37,10 +75,7 @@ pub fn coarse_radius(
 /// segments near R = 10–12.
 pub const SEGMENT_FILTER_FROM_RADIUS: usize = 12;
 
-/// The widest fine reach the dilation searches, in shadow-map texels (`ssss_types.wgsl`).
-pub const MAX_DILATION_TEXELS: usize = 64;
-
-/// The coarse radius for a spot light of diameter `light_size` (m) whose shadow map of
+/// The fine reach (texels) for a spot light of diameter `light_size` (m) whose shadow map of
 /// `map_size` texels spans `±tan_outer` (Bevy's perspective spot shadow projection).
 ///
 /// From the light, a receiver at distance `d_r` sees its blockers at `d_b` within the light's
@@ -50,18 +85,16 @@ pub const MAX_DILATION_TEXELS: usize = 64;
 /// receiver: the largest such angle, at `d_b = Δ`, `d_r = 2Δ`, is `light_size / (4Δ)` — the
 /// thesis' "fixed safe distance" set by hand, with the same meaning as for a directional light.
 /// In texels at the map's centre that angle is `tan(angle) / (2·tan_outer) · map_size`.
-pub fn spot_coarse_radius(
+pub fn spot_fine_reach(
     light_size: f32,
     max_occluder_distance: f32,
     tan_outer: f32,
     map_size: f32,
-    max_texels: f32,
-) -> usize {
+) -> f32 {
     // (An angle past ~86° is capped anyway; keep its tangent positive.)
     let angle = (light_size / (4.0 * max_occluder_distance.max(1e-3))).min(1.5);
     let texels = angle.tan() / (2.0 * tan_outer.max(1e-4)) * map_size;
-    let r = texels.ceil().clamp(0.0, max_texels);
-    (r / DILATION_BLOCK as f32).ceil() as usize
+    texels.ceil().max(0.0)
 }
 
 /// Which stored depth is nearer the light.
@@ -186,16 +219,17 @@ pub fn reduce_blocks(
     (out, cw, ch)
 }
 
-/// What the GPU computes: [`reduce_blocks`] by [`DILATION_BLOCK`], then [`dilate`] by the
-/// coarse radius. Returns the coarse map and its size.
+/// What the GPU computes: [`reduce_blocks`] by `block`, then [`dilate`] by the coarse radius.
+/// Returns the coarse map and its size.
 pub fn coarse_dilate(
     depth: &[f32],
     width: usize,
     height: usize,
     coarse_radius: usize,
+    block: usize,
     convention: DepthConvention,
 ) -> (Vec<f32>, usize, usize) {
-    let (blocks, cw, ch) = reduce_blocks(depth, width, height, DILATION_BLOCK, convention);
+    let (blocks, cw, ch) = reduce_blocks(depth, width, height, block, convention);
     (dilate(&blocks, cw, ch, coarse_radius, convention), cw, ch)
 }
 
@@ -209,7 +243,7 @@ mod tests {
         // front of the receiver, on the axis: the light disk seen from the receiver, projected
         // on the blocker's plane, must fall inside the window R·BLOCK texels around it.
         let (w, delta, tan_outer, size) = (0.3f32, 3.0f32, 1.0f32, 1024.0f32);
-        let r = spot_coarse_radius(w, delta, tan_outer, size, 1e6);
+        let r = coarse_radius_of(spot_fine_reach(w, delta, tan_outer, size), DILATION_BLOCK);
         let window = (r * DILATION_BLOCK) as f32;
         let texels_of = |lateral: f32, d: f32| lateral / d / (2.0 * tan_outer) * size;
         let mut widest = 0.0f32;
@@ -231,10 +265,32 @@ mod tests {
         // A blocker nearer the light than Δ needs more than the window (documented limit).
         let lateral = 0.5 * w * delta / (1.5 * delta);
         assert!(texels_of(lateral, 0.5 * delta) > window);
-        // Capped like the directional reach.
+    }
+
+    #[test]
+    fn the_block_grows_with_the_reach_so_the_window_is_never_cut_short() {
+        assert_eq!(dilation_block(0.0), DILATION_BLOCK);
+        assert_eq!(dilation_block(64.0), 4);
+        assert_eq!(dilation_block(65.0), 8);
+        assert_eq!(dilation_block(139.0), 16);
+        assert_eq!(dilation_block(1e9), MAX_DILATION_BLOCK);
+        for reach in [1.0f32, 30.0, 64.0, 65.0, 139.0, 500.0, 1024.0] {
+            let block = dilation_block(reach);
+            let r = coarse_radius_of(reach, block);
+            assert!(r <= MAX_COARSE_RADIUS);
+            assert!(
+                (r * block) as f32 >= reach,
+                "reach {reach}: R {r} × {block}"
+            );
+            // The finest block that does: half of it would need more than the widest radius.
+            if block > DILATION_BLOCK {
+                assert!(reach > (MAX_COARSE_RADIUS * block / 2) as f32);
+            }
+        }
+        // Past the coarsest block's reach, capped.
         assert_eq!(
-            spot_coarse_radius(10.0, 0.01, 0.1, 4096.0, MAX_DILATION_TEXELS as f32),
-            MAX_DILATION_TEXELS / DILATION_BLOCK
+            coarse_radius_of(5000.0, MAX_DILATION_BLOCK),
+            MAX_COARSE_RADIUS
         );
     }
 
@@ -295,7 +351,7 @@ mod tests {
         let conv = DepthConvention::ReverseZ;
         for r in [0usize, 3, 4, 9] {
             let big_r = r.div_ceil(DILATION_BLOCK);
-            let (coarse, cw, ch) = coarse_dilate(&depth, w, h, big_r, conv);
+            let (coarse, cw, ch) = coarse_dilate(&depth, w, h, big_r, DILATION_BLOCK, conv);
             let fine = dilate(&depth, w, h, r, conv);
             for y in 0..h {
                 for x in 0..w {
@@ -317,8 +373,11 @@ mod tests {
                 }
             }
         }
-        assert_eq!(coarse_radius(5.0, 0.1, 0.03, 64.0), 3); // r = ⌈8.34⌉ = 9 → R = 3
-        assert_eq!(coarse_radius(5.0, 0.1, 1e-9, 64.0), 16);
+        assert_eq!(coarse_radius(5.0, 0.1, 0.03, DILATION_BLOCK), 3); // r = ⌈8.34⌉ = 9 → R = 3
+        assert_eq!(
+            coarse_radius(5.0, 0.1, 1e-9, DILATION_BLOCK),
+            MAX_COARSE_RADIUS
+        );
     }
 
     #[test]

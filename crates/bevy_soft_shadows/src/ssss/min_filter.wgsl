@@ -8,7 +8,7 @@
 // (`ssss::min_filter::spot_coarse_radius`). CPU reference: `ssss::min_filter::coarse_dilate`.
 #import bevy_pbr::mesh_view_types::{Lights, DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT}
 #import bevy_soft_shadows::ssss_types::{
-    SsssUniform, MAX_DILATION_TEXELS, NO_LIGHT, DILATION_BLOCK, LIGHT_KIND_SPOT,
+    SsssUniform, MAX_COARSE_RADIUS, NO_LIGHT, LIGHT_KIND_SPOT,
 }
 
 @group(0) @binding(0) var shadow_depth: texture_depth_2d_array;
@@ -46,8 +46,8 @@ fn radius_of_layer(layer: u32) -> i32 {
     }
     let texel = (*light).cascades[layer - base].texel_size;
     let half_width = ssss.max_occluder_distance * tan(0.5 * ssss.light_size);
-    let r = clamp(ceil(half_width / max(texel, 1e-6)), 0.0, f32(MAX_DILATION_TEXELS));
-    return i32(ceil(r / f32(DILATION_BLOCK)));
+    let r = ceil(max(half_width / max(texel, 1e-6), 0.0));
+    return i32(min(ceil(r / f32(ssss.dilation_block)), f32(MAX_COARSE_RADIUS)));
 }
 
 // The nearest depth of each BLOCK × BLOCK block of the shadow map.
@@ -58,10 +58,11 @@ fn reduce(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let fine = vec2<i32>(textureDimensions(shadow_depth)) - 1;
-    let origin = vec2<i32>(id.xy) * i32(DILATION_BLOCK);
+    let block = i32(ssss.dilation_block);
+    let origin = vec2<i32>(id.xy) * block;
     var nearest = 0.0;
-    for (var y = 0; y < i32(DILATION_BLOCK); y += 1) {
-        for (var x = 0; x < i32(DILATION_BLOCK); x += 1) {
+    for (var y = 0; y < block; y += 1) {
+        for (var x = 0; x < block; x += 1) {
             let p = min(origin + vec2(x, y), fine);
             nearest = max(nearest, textureLoad(shadow_depth, p, id.z, 0));
         }
@@ -77,8 +78,8 @@ fn reduce(@builtin(global_invocation_id) id: vec3<u32>) {
 // segment and the start of the next: its nearest depth is max(h[p − R], g[p + R]) (`combine_*`).
 // Max is exact, so the result is bit-identical to the direct filter (`nearest_filter_1d`).
 
-// k for R ≤ MAX_DILATION_TEXELS / DILATION_BLOCK.
-const MAX_SEGMENT: u32 = 2u * (MAX_DILATION_TEXELS / DILATION_BLOCK) + 1u;
+// k for R ≤ MAX_COARSE_RADIUS.
+const MAX_SEGMENT: u32 = 2u * MAX_COARSE_RADIUS + 1u;
 
 // Texel `i` along the filtered axis of line `line`.
 fn texel_on(horizontal: bool, line: i32, i: i32) -> vec2<i32> {

@@ -57,10 +57,14 @@ pub struct SsssUniform {
     /// For a spot light, its index in Bevy's clustered light array (its shadow map is layer
     /// `index + spot_light_shadowmap_offset` of the shadow texture array).
     pub light_index: u32,
-    /// For a spot light, the coarse dilation radius `R` (`min_filter::spot_coarse_radius`).
+    /// For a spot light, the coarse dilation radius `R` (`min_filter::spot_fine_reach`,
+    /// `min_filter::coarse_radius_of`).
     pub spot_radius: u32,
     /// 1: blur every screen tile; 0: only the active ones ([`super::tiles`]).
     pub all_tiles: u32,
+    /// Shadow-map texels a side per texel of the coarse dilated map
+    /// ([`min_filter::dilation_block`](super::min_filter::dilation_block)).
+    pub dilation_block: u32,
 }
 
 /// [`SsssUniform::light_kind`] of a directional light (`ssss_types.wgsl`).
@@ -84,6 +88,7 @@ impl SsssUniform {
             light_index: 0,
             spot_radius: 0,
             all_tiles: (!s.tile_classification) as u32,
+            dilation_block: super::min_filter::DILATION_BLOCK as u32,
         }
     }
 }
@@ -184,6 +189,8 @@ struct ExtractedSsss {
     /// The largest coarse dilation radius over the light's shadow maps (for
     /// [`SsssDilationFilter::Auto`]).
     max_radius: usize,
+    /// The dilation's block (sizes the coarse map).
+    block: usize,
 }
 
 /// The light SSSS shades: the first directional light with [`ScreenSpaceSoftShadows`], else the
@@ -203,13 +210,18 @@ fn extract_ssss(
     extracted.spot = None;
     extracted.uniform = SsssUniform::default();
     extracted.max_radius = 0;
+    extracted.block = super::min_filter::DILATION_BLOCK;
     if !active.0 {
         return;
     }
     extracted.max_radius = dilation.radius;
+    extracted.block = dilation.block;
     if let Some(settings) = directional.iter().next() {
         let settings = settings.sanitized().0;
-        extracted.uniform = SsssUniform::new(&settings);
+        extracted.uniform = SsssUniform {
+            dilation_block: dilation.block as u32,
+            ..SsssUniform::new(&settings)
+        };
         return;
     }
     let Some((entity, settings, spot, render_entity)) = spots.iter().next() else {
@@ -231,6 +243,7 @@ fn extract_ssss(
     extracted.uniform = SsssUniform {
         light_kind: LIGHT_KIND_SPOT,
         spot_radius: extracted.max_radius as u32,
+        dilation_block: extracted.block as u32,
         ..SsssUniform::new(&settings)
     };
 }
@@ -547,11 +560,12 @@ fn prepare_dilation(
     mut commands: Commands,
     device: Res<RenderDevice>,
     mut cache: ResMut<TextureCache>,
+    extracted: Res<ExtractedSsss>,
     views: Query<(Entity, &ViewShadowBindings), With<SoftShadowCamera>>,
 ) {
     for (entity, shadows) in &views {
         let texture = &shadows.directional_light_depth_texture;
-        let block = super::min_filter::DILATION_BLOCK as u32;
+        let block = extracted.block.max(1) as u32;
         let size = Extent3d {
             width: texture.width().div_ceil(block),
             height: texture.height().div_ceil(block),
@@ -1030,7 +1044,8 @@ fn copy_for_readback(
 mod tests {
     use super::SsssDilationFilter;
     use crate::ssss::min_filter::{
-        DILATION_BLOCK, MAX_DILATION_TEXELS, SEGMENT_FILTER_FROM_RADIUS, spot_coarse_radius,
+        DILATION_BLOCK, MAX_COARSE_RADIUS, SEGMENT_FILTER_FROM_RADIUS, coarse_radius_of,
+        dilation_block, spot_fine_reach,
     };
 
     #[test]
@@ -1042,10 +1057,12 @@ mod tests {
         assert!(!SsssDilationFilter::Direct.uses_segments(16));
         // The soft_shadows example's medium lamp (0.70 m, Δ 3.5 m, outer 0.75 rad, 2048²)
         // has R = 14: Auto runs the segments there.
-        let r = spot_coarse_radius(0.70, 3.5, 0.75f32.tan(), 2048.0, MAX_DILATION_TEXELS as f32);
+        let reach = spot_fine_reach(0.70, 3.5, 0.75f32.tan(), 2048.0);
+        assert_eq!(dilation_block(reach), DILATION_BLOCK);
+        let r = coarse_radius_of(reach, DILATION_BLOCK);
         assert_eq!(r, 14);
         assert!(auto.uses_segments(r));
-        const { assert!(MAX_DILATION_TEXELS / DILATION_BLOCK >= SEGMENT_FILTER_FROM_RADIUS) };
+        const { assert!(MAX_COARSE_RADIUS >= SEGMENT_FILTER_FROM_RADIUS) };
     }
 }
 

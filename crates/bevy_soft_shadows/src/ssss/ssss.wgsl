@@ -25,7 +25,7 @@
 }
 #import bevy_render::maths::orthonormalize
 #import bevy_soft_shadows::ssss_types::{
-    SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS, MAX_DILATION_TEXELS, DILATION_BLOCK, LIGHT_KIND_SPOT,
+    SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS, MAX_COARSE_RADIUS, LIGHT_KIND_SPOT,
     TILE, BLOCKER_GRID, tap_offset, tap_cell, tap_layout, SUM_SCALE,
 }
 
@@ -131,8 +131,10 @@ fn directional_penumbra(i: u32, world: vec3<f32>, normal: vec3<f32>, view_z: f32
     let gap = (blocker - local.z) / max(depth_per_metre, 1e-8);
     let texel_size = (*light).cascades[cascade].texel_size;
     let half_width = ssss.max_occluder_distance * tan(0.5 * ssss.light_size);
-    let r = clamp(ceil(half_width / max(texel_size, 1e-6)), 0.0, f32(MAX_DILATION_TEXELS));
-    let reach = (ceil(r / f32(DILATION_BLOCK)) + 1.0) * f32(DILATION_BLOCK) * texel_size;
+    // The coarse radius of this cascade (`min_filter::coarse_radius`), one block more.
+    let block = f32(ssss.dilation_block);
+    let r = ceil(max(half_width / max(texel_size, 1e-6), 0.0));
+    let reach = (min(ceil(r / block), f32(MAX_COARSE_RADIUS)) + 1.0) * block * texel_size;
     let cos_nl = dot(normal, (*light).direction_to_light.xyz);
     if is_own_surface(gap, reach, cos_nl) {
         return 0.0;
@@ -228,7 +230,7 @@ fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>) -> f32 {
     // A shadow-map texel spans 2·d·tan_outer / size metres at distance d.
     let fine = f32(textureDimensions(view_bindings::directional_shadow_textures).x);
     let texel_size = 2.0 * d_r * tan_outer / fine;
-    let reach = (f32(ssss.spot_radius) + 1.0) * f32(DILATION_BLOCK) * texel_size;
+    let reach = (f32(ssss.spot_radius) + 1.0) * f32(ssss.dilation_block) * texel_size;
     let cos_nl = dot(normal, normalize(to_light));
     if is_own_surface(gap, reach, cos_nl) {
         return 0.0;

@@ -16,19 +16,19 @@ struct SsssUniform {
     light_kind: u32,
     // A spot light's index in the clustered light array.
     light_index: u32,
-    // A spot light's coarse dilation radius (`ssss::min_filter::spot_coarse_radius`).
+    // A spot light's coarse dilation radius (`ssss::min_filter::coarse_radius_of`).
     spot_radius: u32,
     // 1: blur every screen tile; 0: only the active ones (`ssss::tiles`).
     all_tiles: u32,
+    // Shadow-map texels a side per coarse texel (`ssss::min_filter::dilation_block`).
+    dilation_block: u32,
 }
 
 const LIGHT_KIND_DIRECTIONAL: u32 = 0u;
 const LIGHT_KIND_SPOT: u32 = 1u;
 
-const MAX_DILATION_TEXELS: u32 = 64u;
-// Side of the shadow-map blocks one coarse texel of the dilated map stands for
-// (`ssss::min_filter::DILATION_BLOCK`).
-const DILATION_BLOCK: u32 = 4u;
+// The widest coarse dilation radius (`ssss::min_filter::MAX_COARSE_RADIUS`).
+const MAX_COARSE_RADIUS: u32 = 16u;
 const NO_LIGHT: u32 = 0xffffffffu;
 // Kernel reach in standard deviations (`ssss::kernel::KERNEL_REACH_SIGMAS`).
 const KERNEL_REACH_SIGMAS: f32 = 2.5;
