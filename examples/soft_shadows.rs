@@ -6,18 +6,20 @@
 //! ```text
 //! cargo run --release --example soft_shadows                 # windowed, egui panel
 //! cargo run --example soft_shadows -- --headless --frames 30 --stats ssss.json
-//! cargo run --example soft_shadows -- --bench [--frames N] [--stats FILE]  # cost and error table
+//! cargo run --example soft_shadows -- --bench [--frames N] [--stats FILE] [--scenes poles,palm]
 //! cargo run --example soft_shadows -- --bench --spot          # the same under a lamp
 //! ```
 //!
 //! Key 4 (or `spot` in the panel) switches from the sun to a lamp (a spot light) above the scene,
-//! key 5 (`scene`) from the posts to a canopy of three trees.
+//! key 5 (`scene`) cycles from the posts to a canopy of three trees and to a palm on a beach (a
+//! thin trunk and fronds high over the sand: large penumbrae over thin blockers).
 //!
-//! `--bench` measures, in one process and for small / medium / large light sizes, on the pole
-//! scene and on the canopy scene (640×360 unless `--size`), each technique's GPU cost over hard
+//! `--bench` measures, in one process and for small / medium / large light sizes, on the pole,
+//! canopy and palm scenes (640×360 unless `--size`), each technique's GPU cost over hard
 //! shadows and its image's RMSE against an area-light reference rendered in the same run (48
 //! hard-shadowed suns jittered over the light's disk, averaged in linear light — or with
-//! `--spot`, 48 lamps spread over the lamp's disk). GPU time is the whole frame from timestamp
+//! `--spot`, 48 lamps spread over the lamp's disk), all rendered without tonemapping so the
+//! average is one of radiance (a tonemapper's curve would bend it). GPU time is the whole frame from timestamp
 //! queries written before and after everything the frame submits (shadow maps, prepasses, main
 //! pass, TAA, the SSSS passes: `bevy_nature_harness::frame_timer`), so a technique's cost
 //! includes everything it turns on; the GPU is warmed up before anything is timed; without timestamp queries the bench says so
@@ -28,12 +30,14 @@
 //! `--stats FILE` writes the rows as JSON (`"timing": "timestamps"`).
 
 use bevy::anti_alias::taa::TemporalAntiAliasing;
+use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::light::ShadowFilteringMethod;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy_nature::shadow_scene::{
-    DemoLamp, DemoSun, LAMP_AIM, LAMP_POSITION, PCSS_SIZE_PER_RADIAN, ShadowDemo, ShadowTechnique,
-    add_shadow_demo, lamp_diameter, lamp_transform, spawn_shadow_scene, sun_direction,
+    DemoLamp, DemoSun, LAMP_AIM, LAMP_POSITION, PCSS_SIZE_PER_RADIAN, SCENE_NAMES, ShadowDemo,
+    ShadowTechnique, add_shadow_demo, lamp_diameter, lamp_transform, spawn_shadow_scene,
+    sun_direction,
 };
 use bevy_nature::soft_shadows::ScreenSpaceSoftShadows;
 use bevy_nature::soft_shadows::reference::{
@@ -48,12 +52,29 @@ fn main() -> AppExit {
     let bench = rest.iter().any(|a| a == "--bench");
     let spot = rest.iter().any(|a| a == "--spot");
     rest.retain(|a| a != "--bench" && a != "--spot");
+    // `--scenes poles,palm`: the bench's scenes (all by default).
+    let mut scenes: Vec<String> = SCENE_NAMES.iter().map(|s| s.to_string()).collect();
+    if let Some(i) = rest.iter().position(|a| a == "--scenes") {
+        let Some(list) = rest.get(i + 1).cloned() else {
+            eprintln!("--scenes needs a list, e.g. --scenes poles,palm");
+            std::process::exit(2)
+        };
+        scenes = list.split(',').map(str::to_string).collect();
+        if let Some(bad) = scenes.iter().find(|s| !SCENE_NAMES.contains(&s.as_str())) {
+            eprintln!(
+                "--scenes: unknown scene '{bad}' (scenes: {})",
+                SCENE_NAMES.join(", ")
+            );
+            std::process::exit(2)
+        }
+        rest.drain(i..=i + 1);
+    }
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
-        eprintln!("{e} [--bench] [--spot]");
+        eprintln!("{e} [--bench] [--spot] [--scenes poles,canopy,palm]");
         std::process::exit(2)
     });
     if bench {
-        return run_bench(&args, spot);
+        return run_bench(&args, spot, &scenes);
     }
     ExampleRunner::with_args("soft_shadows", args)
         .inspect_resource::<ShadowDemo>()
@@ -206,6 +227,14 @@ fn scene_harness(scene: u32, size: UVec2, spot: bool) -> Result<RenderHarness, S
         demo.scene = scene;
     }
     harness.wait_until_ready().map_err(|e| e.to_string())?;
+    // Linear output for every row: the reference averages radiance, and each technique's image
+    // is compared with it as rendered (the interactive example keeps Bevy's tonemapping).
+    let camera = scene_camera(&mut harness);
+    harness
+        .world_mut()
+        .entity_mut(camera)
+        .insert((Tonemapping::None, DebandDither::Disabled));
+    harness.wait_until_ready().map_err(|e| e.to_string())?;
     // A real GPU raises its clocks under load: warm it up before anything is timed.
     harness.run_frames(60).map_err(|e| e.to_string())?;
     Ok(harness)
@@ -220,7 +249,7 @@ fn bench_scene(
     spot: bool,
     rows: &mut Vec<Row>,
 ) -> Result<(), String> {
-    let scene_name = if scene == 0 { "poles" } else { "canopy" };
+    let scene_name = SCENE_NAMES[scene.min(2) as usize];
     let mut harness = scene_harness(scene, size, spot)?;
     let light_name = |label: &str| format!("{}{label}", if spot { "spot " } else { "" });
     let mut references = Vec::new();
@@ -333,6 +362,30 @@ fn bench_scene(
         .world_mut()
         .resource_mut::<ShadowDemo>()
         .pcss_size_per_radian = PCSS_SIZE_PER_RADIAN;
+    // Where SSSS's cost goes: hard shadows with the depth and normal prepasses SSSS turns on
+    // (its receivers need them before the main pass), nothing else of SSSS. The SSSS rows below
+    // run with the same prepasses.
+    {
+        let camera = scene_camera(&mut harness);
+        harness.world_mut().entity_mut(camera).insert((
+            bevy::core_pipeline::prepass::DepthPrepass,
+            bevy::core_pipeline::prepass::NormalPrepass,
+        ));
+        harness.wait_until_ready().map_err(|e| e.to_string())?;
+        for (light, reference) in LIGHTS.iter().zip(&references) {
+            set_technique(&mut harness, ShadowTechnique::Hard, light.1);
+            let m = measure(&mut harness, frames, 8, reference)?;
+            push(
+                rows,
+                row(
+                    "hard_with_prepasses",
+                    *light,
+                    "depth + normal prepass".into(),
+                    m,
+                ),
+            );
+        }
+    }
     // SSSS: classified tiles (the default), then every tile blurred (the same image).
     harness
         .app_mut()
@@ -354,7 +407,7 @@ fn bench_scene(
             let mut r = row(
                 if all_tiles { "ssss_all_tiles" } else { "ssss" },
                 *light,
-                "taps_per_side 11, max_kernel_px 40".into(),
+                "taps_per_side 11, max_kernel_px 96".into(),
                 m,
             );
             r.tiles = Some((active as f64 / total as f64, active, blur));
@@ -368,7 +421,7 @@ fn bench_scene(
     Ok(())
 }
 
-fn run_bench(args: &ExampleArgs, spot: bool) -> AppExit {
+fn run_bench(args: &ExampleArgs, spot: bool, scenes: &[String]) -> AppExit {
     let Some(adapter) = require_adapter("soft_shadows") else {
         return AppExit::error();
     };
@@ -383,7 +436,10 @@ fn run_bench(args: &ExampleArgs, spot: bool) -> AppExit {
     let frames = args.frames.unwrap_or(12);
     let size = args.size.unwrap_or(UVec2::new(640, 360));
     let mut rows = Vec::new();
-    for scene in [0, 1] {
+    for scene in 0..SCENE_NAMES.len() as u32 {
+        if !scenes.iter().any(|s| s == SCENE_NAMES[scene as usize]) {
+            continue;
+        }
         if let Err(e) = bench_scene(scene, size, frames, spot, &mut rows) {
             eprintln!("soft_shadows --bench: {e}");
             return AppExit::error();
