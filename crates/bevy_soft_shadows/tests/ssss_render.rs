@@ -52,7 +52,7 @@ fn ssss_matches_its_cpu_reference_and_follows_eq_6_2() {
     assert_eq!(textures.size, UVec2::splat(SIZE));
 
     // 1. The blur passes against the CPU reference on the GPU's own distance map.
-    let (visibility, buffers) = read_ssss_screen(&mut harness);
+    let (visibility, buffers, _) = read_ssss_screen(&mut harness);
     let n = (SIZE * SIZE) as usize;
     let s = settings();
     let cpu = soft_shadow(
@@ -365,17 +365,23 @@ fn dilation_and_distance_match(
         width: w,
         height: h,
     };
-    assert_distance_pass_matches(harness, &s, |world| {
+    let width_at = |fine: Option<&FineMap>, world: Vec3| {
         directional_penumbra_width(
             &cascade,
             &coarse,
-            &fine_map,
+            fine,
             world,
             Vec3::Y,
             sun_direction(),
             s.light_size,
         )
-    });
+    };
+    assert_distance_pass_matches(
+        harness,
+        &s,
+        |world| width_at(None, world),
+        |world| width_at(Some(&fine_map), world),
+    );
     (gpu, block)
 }
 

@@ -309,16 +309,15 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
         height: fine_size.y as usize,
     };
     let s = settings();
-    assert_distance_pass_matches(&mut harness, &s, |world| {
-        spot_penumbra_width(
-            &projection,
-            &coarse,
-            &fine_map,
-            world,
-            Vec3::Y,
-            s.light_size,
-        )
-    });
+    let cpu_width_at = |fine: Option<&FineMap>, world: Vec3| {
+        spot_penumbra_width(&projection, &coarse, fine, world, Vec3::Y, s.light_size)
+    };
+    assert_distance_pass_matches(
+        &mut harness,
+        &s,
+        |world| cpu_width_at(None, world),
+        |world| cpu_width_at(Some(&fine_map), world),
+    );
 
     // 3. Penumbra widths (10–90 %) across the side edge, in visibility (over the unshadowed
     //    render), against eq. 6.1.

@@ -13,6 +13,7 @@ use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy_nature_harness::RenderHarness;
 use bevy_soft_shadows::ScreenSpaceSoftShadows;
+use bevy_soft_shadows::ssss::blur::ScreenBuffers;
 use bevy_soft_shadows::ssss::receiver::SsssTextures;
 use bevy_soft_shadows::ssss::render::SsssTileReadback;
 use bevy_soft_shadows::ssss::tiles::{TileSettings, active_tiles};
@@ -119,10 +120,15 @@ fn check_scene(
         frames += 1;
         assert!(frames < 100, "{scene}: the receivers were never drawn");
     }
-    let (tiled, buffers) = read_ssss_screen(harness);
+    let (tiled, buffers, bounds) = read_ssss_screen(harness);
     let (gpu_tiles, total) = read_tiles(harness);
+    // The classification runs on the distance pass's σ bounds.
+    let classified = ScreenBuffers {
+        sigma: bounds,
+        ..buffers.clone()
+    };
     let cpu_tiles = active_tiles(
-        &buffers,
+        &classified,
         &TileSettings {
             depth_rejection: settings.depth_rejection,
             lazy_shadowing: settings.lazy_shadowing,
@@ -156,7 +162,7 @@ fn check_scene(
         });
     harness.render().unwrap();
     harness.render().unwrap();
-    let (full, _) = read_ssss_screen(harness);
+    let (full, _, _) = read_ssss_screen(harness);
     let (all_tiles, _) = read_tiles(harness);
     assert_eq!(all_tiles.len(), total, "{scene}: every tile blurred");
     let worst = tiled

@@ -111,13 +111,15 @@ impl DirectionalCascade {
 /// Eq. 6.1 for a light at infinity (angular diameter `angular_diameter`): the world width of the
 /// penumbra at receiver `world` (unit `normal`; `direction_to_light` unit) behind the blocker
 /// found for it, the gap measured along the light from the cascade's linear depth: the coarse
-/// map's blocker at its texel, refined on the fine map ([`refined_gap`]). Zero outside the
-/// cascade, with no blocker nearer the light, or when the "blocker" is the receiver's own
-/// surface across the dilation footprint ([`own_surface_gap`]).
+/// map's blocker at its texel, refined on the fine map ([`refined_gap`]) when `fine` is given —
+/// the `refine` pass on the active tiles; without, the distance pass's upper bound, which the
+/// tile classification runs on. Zero outside the cascade, with no blocker nearer the light, or
+/// when the "blocker" is the receiver's own surface across the dilation footprint
+/// ([`own_surface_gap`]).
 pub fn directional_penumbra_width(
     cascade: &DirectionalCascade,
     coarse: &CoarseMap,
-    fine: &FineMap,
+    fine: Option<&FineMap>,
     world: Vec3,
     normal: Vec3,
     direction_to_light: Vec3,
@@ -133,16 +135,19 @@ pub fn directional_penumbra_width(
     if cos_nl > 0.0 && gap <= own_surface_gap(reach, cos_nl) {
         return 0.0;
     }
-    let gap = refined_gap(
-        fine,
-        uv,
-        depth,
-        gap,
-        cascade.texel_size,
-        depth_per_metre,
-        cos_nl,
-        angular_diameter,
-    );
+    let gap = match fine {
+        Some(fine) => refined_gap(
+            fine,
+            uv,
+            depth,
+            gap,
+            cascade.texel_size,
+            depth_per_metre,
+            cos_nl,
+            angular_diameter,
+        ),
+        None => gap,
+    };
     directional_penumbra_width_of_gap(gap, angular_diameter)
 }
 
@@ -225,7 +230,12 @@ pub fn refined_gap(
             count += share;
         }
     }
-    if count > 0.0 { sum / count } else { gap_max }
+    // Never past the coarse map's blocker, so the unrefined width stays an upper bound.
+    if count > 0.0 {
+        (sum / count).min(gap_max)
+    } else {
+        gap_max
+    }
 }
 
 fn directional_penumbra_width_of_gap(gap: f32, angular_diameter: f32) -> f32 {
@@ -259,13 +269,14 @@ impl CoarseMap<'_> {
 }
 
 /// Eq. 6.1 for a spot light of diameter `light_size`: the world width of the penumbra at
-/// receiver `world` (unit `normal`), behind the blocker the coarse map holds at its texel. Zero
-/// outside the map, with no blocker nearer the light, or when the "blocker" is only the
+/// receiver `world` (unit `normal`), behind the blocker the coarse map holds at its texel,
+/// refined on `fine` when given ([`refined_spot_blocker`]; see [`directional_penumbra_width`]).
+/// Zero outside the map, with no blocker nearer the light, or when the "blocker" is only the
 /// receiver's own surface across the dilation footprint ([`own_surface_gap`]).
 pub fn spot_penumbra_width(
     projection: &SpotProjection,
     coarse: &CoarseMap,
-    fine: &FineMap,
+    fine: Option<&FineMap>,
     world: Vec3,
     normal: Vec3,
     light_size: f32,
@@ -288,9 +299,12 @@ pub fn spot_penumbra_width(
     if cos_nl > 0.0 && gap <= own_surface_gap(reach, cos_nl) {
         return 0.0;
     }
-    let d_blocker = refined_spot_blocker(
-        projection, fine, uv, d_receiver, d_blocker, cos_nl, light_size,
-    );
+    let d_blocker = match fine {
+        Some(fine) => refined_spot_blocker(
+            projection, fine, uv, d_receiver, d_blocker, cos_nl, light_size,
+        ),
+        None => d_blocker,
+    };
     penumbra_width(d_receiver, d_blocker, light_size)
 }
 
@@ -335,7 +349,11 @@ pub fn refined_spot_blocker(
             count += share;
         }
     }
-    if count > 0.0 { sum / count } else { d_nearest }
+    if count > 0.0 {
+        (sum / count).max(d_nearest)
+    } else {
+        d_nearest
+    }
 }
 
 /// The kernel's σ (pixels) for a penumbra `width_px` wide on screen: σ = width/4, zero when the
@@ -431,7 +449,7 @@ mod tests {
             width: 64,
             height: 64,
         };
-        let w = spot_penumbra_width(&p, &coarse, &fine, receiver, normal, 0.5);
+        let w = spot_penumbra_width(&p, &coarse, Some(&fine), receiver, normal, 0.5);
         assert!((w - 0.5).abs() < 1e-4, "{w}");
         // A fine map holding a plank at 6 m over everything: the plank hides the lamp's disk
         // around the receiver's ray, and eq. 6.1 takes it instead of the coarse 4 m blocker.
@@ -440,8 +458,11 @@ mod tests {
             depth: &plank,
             ..fine
         };
-        let w = spot_penumbra_width(&p, &coarse, &planked, receiver, normal, 0.5);
+        let w = spot_penumbra_width(&p, &coarse, Some(&planked), receiver, normal, 0.5);
         assert!((w - penumbra_width(8.0, 6.0, 0.5)).abs() < 1e-4, "{w}");
+        // Unrefined, the coarse blocker's width: an upper bound of the refined one.
+        let bound = spot_penumbra_width(&p, &coarse, None, receiver, normal, 0.5);
+        assert!((bound - penumbra_width(8.0, 4.0, 0.5)).abs() < 1e-4 && bound >= w);
         // The blocker behind the receiver casts nothing; nor does a gap within the receiver's
         // own slope across the footprint, at grazing light.
         let behind = [p.depth(9.0)];
@@ -450,7 +471,7 @@ mod tests {
             ..coarse
         };
         assert_eq!(
-            spot_penumbra_width(&p, &coarse_behind, &fine, receiver, normal, 0.5),
+            spot_penumbra_width(&p, &coarse_behind, Some(&fine), receiver, normal, 0.5),
             0.0
         );
         let near = [p.depth(7.99)];
@@ -460,10 +481,10 @@ mod tests {
             ..coarse
         };
         assert_eq!(
-            spot_penumbra_width(&p, &coarse_near, &fine, receiver, grazing, 0.5),
+            spot_penumbra_width(&p, &coarse_near, Some(&fine), receiver, grazing, 0.5),
             0.0
         );
-        assert!(spot_penumbra_width(&p, &coarse_near, &fine, receiver, normal, 0.5) > 0.0);
+        assert!(spot_penumbra_width(&p, &coarse_near, Some(&fine), receiver, normal, 0.5) > 0.0);
     }
 
     #[test]
@@ -499,8 +520,15 @@ mod tests {
             width: 64,
             height: 64,
         };
-        let w =
-            directional_penumbra_width(&cascade, &coarse, &fine, Vec3::ZERO, Vec3::Y, Vec3::Y, 0.1);
+        let w = directional_penumbra_width(
+            &cascade,
+            &coarse,
+            Some(&fine),
+            Vec3::ZERO,
+            Vec3::Y,
+            Vec3::Y,
+            0.1,
+        );
         assert!((w - 2.0 * 0.05f32.tan()).abs() < 1e-4, "{w}");
         // No blocker above: nothing.
         let none = [0.5];
@@ -511,7 +539,7 @@ mod tests {
         let w = directional_penumbra_width(
             &cascade,
             &coarse_none,
-            &fine,
+            Some(&fine),
             Vec3::ZERO,
             Vec3::Y,
             Vec3::Y,

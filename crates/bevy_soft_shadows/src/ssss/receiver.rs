@@ -49,8 +49,12 @@ pub struct NoSoftShadowReceiver;
 /// The screen-sized textures of the SSSS passes, sized to the scene camera's target. Readable for tests and debugging views.
 #[derive(Resource, Clone, Debug, Default)]
 pub struct SsssTextures {
-    /// Per pixel (hard shadow, σx, σy, eye depth) — the distance map of §6.2.2 (Rgba32Float).
+    /// Per pixel (hard shadow, σx, σy, eye depth) — the distance map of §6.2.2 (Rgba32Float),
+    /// its σ the upper bound the tile classification runs on (the dilated map's blocker).
     pub distance: Handle<Image>,
+    /// The same on the active tiles with the refined blocker's σ, which the blur uses; −1
+    /// elsewhere (Rgba32Float).
+    pub refined: Handle<Image>,
     /// The hard shadow after the horizontal pass, with the eye depth (Rg32Float).
     pub horizontal: Handle<Image>,
     /// The soft visibility after the vertical pass and the light it is for (Rg32Float), read by
@@ -185,6 +189,7 @@ fn prepare_cameras_and_textures(
         }
     };
     put(&mut textures.distance, TextureFormat::Rgba32Float);
+    put(&mut textures.refined, TextureFormat::Rgba32Float);
     put(&mut textures.horizontal, TextureFormat::Rg32Float);
     put(&mut textures.visibility, TextureFormat::Rg32Float);
 }

@@ -318,6 +318,7 @@ fn clear_visibility_when_off(
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 enum SsssPass {
     Distance,
+    Refine,
     BlurHorizontal,
     BlurVertical,
 }
@@ -483,6 +484,12 @@ impl SpecializedRenderPipeline for SsssPipelines {
                 ],
                 "ssss_distance",
             ),
+            SsssPass::Refine => (
+                "refine",
+                tile_quads.clone(),
+                vec![target(TextureFormat::Rgba32Float)],
+                "ssss_refine",
+            ),
             SsssPass::BlurHorizontal => (
                 "blur_horizontal",
                 tile_quads,
@@ -518,6 +525,7 @@ impl SpecializedRenderPipeline for SsssPipelines {
 #[derive(Component)]
 struct SsssViewPipelines {
     distance: CachedRenderPipelineId,
+    refine: CachedRenderPipelineId,
     blur_horizontal: CachedRenderPipelineId,
     blur_vertical: CachedRenderPipelineId,
 }
@@ -537,6 +545,7 @@ fn prepare_pipelines(
         let mut get = |pass| specialized.specialize(&pipeline_cache, &pipelines, (*key, pass));
         let ids = SsssViewPipelines {
             distance: get(SsssPass::Distance),
+            refine: get(SsssPass::Refine),
             blur_horizontal: get(SsssPass::BlurHorizontal),
             blur_vertical: get(SsssPass::BlurVertical),
         };
@@ -657,11 +666,13 @@ fn ssss(
         Some(scan_v),
         Some(combine_v),
         Some(distance_pipeline),
+        Some(refine_pipeline),
         Some(blur_h_pipeline),
         Some(blur_v_pipeline),
         Some(uniform_binding),
         Some(lights_binding),
         Some(distance),
+        Some(refined),
         Some(horizontal),
         Some(visibility),
         Some(tile_reduce),
@@ -680,11 +691,13 @@ fn ssss(
         pipeline_cache.get_compute_pipeline(pipelines.dilate_passes[2]),
         pipeline_cache.get_compute_pipeline(pipelines.dilate_passes[3]),
         pipeline_cache.get_render_pipeline(ids.distance),
+        pipeline_cache.get_render_pipeline(ids.refine),
         pipeline_cache.get_render_pipeline(ids.blur_horizontal),
         pipeline_cache.get_render_pipeline(ids.blur_vertical),
         uniform.0.binding(),
         light_meta.view_gpu_lights.binding(),
         images.get(&extracted.textures.distance),
+        images.get(&extracted.textures.refined),
         images.get(&extracted.textures.horizontal),
         images.get(&extracted.textures.visibility),
         pipeline_cache.get_compute_pipeline(pipelines.tile_reduce),
@@ -771,13 +784,17 @@ fn ssss(
             ..default()
         });
     let distance_group = screen_group(&unused, &unused, &sums.rows.default_view);
+    // The refine pass reads the screen size from the distance map (its tile quads).
+    let refine_group = screen_group(&distance.texture_view, &unused, &sums.rows.default_view);
+    // The blurs take each centre's σ from the refined map (valid on the active tiles they
+    // draw), the values and depths they blur from the distance map and the horizontal result.
     let blur_h_group = screen_group(
-        &distance.texture_view,
+        &refined.texture_view,
         &distance.texture_view,
         &sums.rows.default_view,
     );
     let blur_v_group = screen_group(
-        &distance.texture_view,
+        &refined.texture_view,
         &horizontal.texture_view,
         &sums.columns.default_view,
     );
@@ -873,6 +890,27 @@ fn ssss(
             pass.set_pipeline(pipeline);
             pass.dispatch_workgroups((grid.x * grid.y).div_ceil(64), 1, 1);
         }
+        span.end(&mut pass);
+    }
+    // The refined distance map on the active tiles (−1 elsewhere: never read).
+    {
+        let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+            label: Some("ssss_refine"),
+            color_attachments: &[attachment(
+                &refined.texture_view,
+                LoadOp::Clear(LinearRgba::new(-1.0, -1.0, -1.0, -1.0).into()),
+            )],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        let span = diagnostics.pass_span(&mut pass, "ssss_refine");
+        pass.set_render_pipeline(refine_pipeline);
+        pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
+        pass.set_bind_group(1, &mesh_view.binding_array, &[]);
+        pass.set_bind_group(2, &refine_group, &[]);
+        pass.draw_indirect(tile_args, 0);
         span.end(&mut pass);
     }
     // The blur passes: one quad per active tile, over what the distance pass wrote, each

@@ -3,13 +3,16 @@
 //
 // - `distance`: per pixel the hard shadow (Bevy's own lookup), the blocker found in the dilated
 //   shadow map, the penumbra width by eq. 6.1 (a spot light, or its limit for a light at
-//   infinity) and eq. 6.2 (in pixels), and
-//   the kernel's σ along x and y from the surface normal; written as (hard, σx, σy, eye depth).
+//   infinity) and eq. 6.2 (in pixels), and the kernel's σ along x and y from the surface
+//   normal; written as (hard, σx, σy, eye depth). Its blocker is the dilated map's, the farthest
+//   in the window, so its σ is an upper bound: the tile classification (`tiles.wgsl`) runs on it.
 //   It also writes the hard visibility into both blur targets: a tile the blur cannot change
 //   keeps it (`ssss::tiles`).
+// - `refine`: the same on the active tiles only, with the refined blocker search (49 shadow-map
+//   reads a pixel, the pass's dearest part): the σ the blur uses.
 // - `blur_horizontal`, `blur_vertical`: the separable Gaussian with depth rejection and lazy
-//   shadowing, drawn as one 8×8 quad per active tile (`tile_vertex`, an indirect draw whose
-//   instance count the classification pass `tiles.wgsl` wrote).
+//   shadowing. `refine` and the blurs draw one 8×8 quad per active tile (`tile_vertex`, an
+//   indirect draw whose instance count the classification wrote).
 //
 // CPU references: `ssss::penumbra`, `ssss::kernel`, `ssss::blur`, `ssss::tiles`.
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
@@ -111,7 +114,7 @@ fn is_own_surface(gap: f32, reach: f32, cos_nl: f32) -> bool {
 
 // Eq. 6.1 for a light at infinity: the penumbra's world width behind the blocker found in the
 // dilated map at the receiver's texel (reverse Z: larger is nearer the light).
-fn directional_penumbra(i: u32, world: vec3<f32>, normal: vec3<f32>, view_z: f32) -> f32 {
+fn directional_penumbra(i: u32, world: vec3<f32>, normal: vec3<f32>, view_z: f32, refine: bool) -> f32 {
     let light = &view_bindings::lights.directional_lights[i];
     let cascade = get_cascade_index(i, view_z);
     if cascade >= (*light).num_cascades {
@@ -139,8 +142,11 @@ fn directional_penumbra(i: u32, world: vec3<f32>, normal: vec3<f32>, view_z: f32
     if is_own_surface(gap, reach, cos_nl) {
         return 0.0;
     }
-    let refined = refined_gap(local.xyz, gap, texel_size, depth_per_metre, cos_nl, layer);
-    return max(refined, 0.0) * 2.0 * tan(0.5 * ssss.light_size);
+    var blocker_gap = gap;
+    if refine {
+        blocker_gap = refined_gap(local.xyz, gap, texel_size, depth_per_metre, cos_nl, layer);
+    }
+    return max(blocker_gap, 0.0) * 2.0 * tan(0.5 * ssss.light_size);
 }
 
 // The refined blocker search's grid (`distance::FineMap::blocker_grid`): the receiver's texel of
@@ -190,8 +196,9 @@ fn refined_gap(local: vec3<f32>, gap_max: f32, texel_size: f32, depth_per_metre:
             }
         }
     }
+    // Never past the dilated map's blocker: the distance pass's bound stays an upper bound.
     if count > 0.0 {
-        return sum / count;
+        return min(sum / count, gap_max);
     }
     return gap_max;
 }
@@ -199,7 +206,7 @@ fn refined_gap(local: vec3<f32>, gap_max: f32, texel_size: f32, depth_per_metre:
 // Eq. 6.1 for a spot light of diameter `light_size`: w = light_size · (d_r − d_b) / d_b, with
 // the distances along the spot's axis. Bevy's spot shadow map is an infinite reverse-Z
 // perspective projection, so a stored depth is near / d (as in `fetch_spot_shadow`).
-fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>) -> f32 {
+fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>, refine: bool) -> f32 {
     let light = &view_bindings::clustered_lights.data[id];
     let to_light = (*light).position_radius.xyz - world;
     var spot_dir = vec3((*light).light_custom_data.x, 0.0, (*light).light_custom_data.y);
@@ -235,8 +242,11 @@ fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>) -> f32 {
     if is_own_surface(gap, reach, cos_nl) {
         return 0.0;
     }
-    let refined = refined_spot_blocker(uv, d_r, d_b, near, tan_outer, cos_nl, layer);
-    return (d_r - refined) * ssss.light_size / refined;
+    var d_blocker = d_b;
+    if refine {
+        d_blocker = refined_spot_blocker(uv, d_r, d_b, near, tan_outer, cos_nl, layer);
+    }
+    return (d_r - d_blocker) * ssss.light_size / d_blocker;
 }
 
 // `refined_gap` for a spot light (`distance::refined_spot_blocker`): the distance from the light
@@ -279,14 +289,14 @@ fn refined_spot_blocker(uv: vec2<f32>, d_r: f32, d_nearest: f32, near: f32, tan_
         }
     }
     if count > 0.0 {
-        return sum / count;
+        return max(sum / count, d_nearest);
     }
     return d_nearest;
 }
 
 @fragment
 fn distance(in: FullscreenVertexOutput) -> DistanceOutput {
-    let d = distance_map(in);
+    let d = distance_map(in, false);
     // The blur passes' results where they leave the pixel as it is.
     let hard = select(d.x, -1.0, ssss.enabled == 0u);
     var out: DistanceOutput;
@@ -296,7 +306,16 @@ fn distance(in: FullscreenVertexOutput) -> DistanceOutput {
     return out;
 }
 
-fn distance_map(in: FullscreenVertexOutput) -> vec4<f32> {
+// The refined distance map on the active tiles (`tile_vertex` quads): the same as `distance`
+// with the refined blocker search, whose σ the blur passes use. Its σ never exceeds the
+// distance pass's bound, so the tiles classified on the bound still hold every pixel the blur
+// changes (`ssss::tiles`).
+@fragment
+fn refine(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    return distance_map(in, true);
+}
+
+fn distance_map(in: FullscreenVertexOutput, refine: bool) -> vec4<f32> {
     let frag = vec4(in.position.xy, 0.0, 1.0);
     let depth = prepass_depth(frag, 0u);
     let i = ssss_light();
@@ -311,9 +330,9 @@ fn distance_map(in: FullscreenVertexOutput) -> vec4<f32> {
     let hard = hard_shadow(i, world, normal, in.position.xy);
     var world_width = 0.0;
     if ssss.light_kind == LIGHT_KIND_SPOT {
-        world_width = spot_penumbra(i, world, normal);
+        world_width = spot_penumbra(i, world, normal, refine);
     } else {
-        world_width = directional_penumbra(i, world, normal, view_z);
+        world_width = directional_penumbra(i, world, normal, view_z, refine);
     }
     // Eq. 6.2: in pixels, divided by the eye distance for a perspective view.
     var px = world_width * pixels_per_unit();

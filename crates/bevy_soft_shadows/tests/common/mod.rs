@@ -309,15 +309,15 @@ pub fn read_dilation(harness: &mut RenderHarness, coarse: bool) -> (Vec<f32>, UV
     (texels, size)
 }
 
-/// The distance pass (GPU, `SsssTextures::distance`) against its CPU reference on every ground
-/// pixel of the top-down view: `width_at` gives the CPU's penumbra width at a ground point, and
-/// σ follows by `ssss::distance::pixel_sigma` (orthographic, both kernel axes equal on the
-/// ground). Asserts that ≥ 99.5 % agree (a uv on a coarse texel's border may round to its
-/// neighbour) and that there is a penumbra to compare; returns (agree, ground, in penumbra).
+/// The distance pass (its σ bound, on every ground pixel) and the refine pass (its σ, on the
+/// ground pixels of the active tiles) against their CPU references: `bound_at` and `refined_at`
+/// give the penumbra's world width at a ground point without and with the refined blocker. The
+/// refined σ never exceeds the bound. Returns (agreeing, ground, penumbra) pixels of the bound.
 pub fn assert_distance_pass_matches(
     harness: &mut RenderHarness,
     settings: &bevy_soft_shadows::ScreenSpaceSoftShadows,
-    width_at: impl Fn(Vec3) -> f32,
+    bound_at: impl Fn(Vec3) -> f32,
+    refined_at: impl Fn(Vec3) -> f32,
 ) -> (u32, u32, u32) {
     use bevy_soft_shadows::ssss::distance::pixel_sigma;
     use bevy_soft_shadows::ssss::receiver::SsssTextures;
@@ -327,8 +327,23 @@ pub fn assert_distance_pass_matches(
             .read_image(textures.distance.clone(), SIZE, SIZE, 16)
             .unwrap(),
     );
+    let refined = floats(
+        &harness
+            .read_image(textures.refined.clone(), SIZE, SIZE, 16)
+            .unwrap(),
+    );
     let m_per_px = VIEW_M / SIZE as f32;
+    let sigma_of = |width: f32| {
+        pixel_sigma(
+            width,
+            SIZE as f32 / VIEW_M,
+            None,
+            settings.min_kernel_px,
+            settings.max_kernel_px,
+        )
+    };
     let (mut ground, mut agree, mut penumbra, mut worst) = (0u32, 0u32, 0u32, 0.0f32);
+    let (mut refined_px, mut refined_agree, mut refined_worst) = (0u32, 0u32, 0.0f32);
     for row in 0..SIZE {
         for col in 0..SIZE {
             let i = (row * SIZE + col) as usize * 4;
@@ -342,47 +357,74 @@ pub fn assert_distance_pass_matches(
                 0.0,
                 CENTRE.z - VIEW_M / 2.0 + (row as f32 + 0.5) * m_per_px,
             );
-            let sigma = pixel_sigma(
-                width_at(world),
-                SIZE as f32 / VIEW_M,
-                None,
-                settings.min_kernel_px,
-                settings.max_kernel_px,
-            );
+            let sigma = sigma_of(bound_at(world));
             let error = (distance[i + 1] - sigma)
                 .abs()
                 .max((distance[i + 2] - sigma).abs());
             agree += (error <= 1e-3 * (1.0 + sigma)) as u32;
             worst = worst.max(error);
             penumbra += (sigma > 0.0) as u32;
+            // Refined where the refine pass ran (−1 elsewhere).
+            if refined[i + 3] >= 0.0 {
+                refined_px += 1;
+                let sigma = sigma_of(refined_at(world));
+                let error = (refined[i + 1] - sigma)
+                    .abs()
+                    .max((refined[i + 2] - sigma).abs());
+                refined_agree += (error <= 1e-3 * (1.0 + sigma)) as u32;
+                refined_worst = refined_worst.max(error);
+                assert!(
+                    refined[i + 1] <= distance[i + 1] + 1e-4,
+                    "refined σ {} over the bound {} at ({col}, {row})",
+                    refined[i + 1],
+                    distance[i + 1]
+                );
+            }
         }
     }
     println!(
         "distance pass vs CPU: {agree} of {ground} ground pixels agree ({penumbra} in penumbra), \
-         worst σ difference {worst:.3} px"
+         worst σ difference {worst:.3} px; refine pass: {refined_agree} of {refined_px} agree, \
+         worst {refined_worst:.3} px"
     );
     assert!(
-        ground > SIZE * SIZE / 2 && penumbra > 500,
-        "{ground} / {penumbra}"
+        ground > SIZE * SIZE / 2 && penumbra > 500 && refined_px > 200,
+        "{ground} / {penumbra} / {refined_px}"
     );
     assert!(
         agree as f32 >= 0.995 * ground as f32,
         "the distance pass differs from its CPU reference at {} pixels",
         ground - agree
     );
+    assert!(
+        refined_agree as f32 >= 0.995 * refined_px as f32,
+        "the refine pass differs from its CPU reference at {} pixels",
+        refined_px - refined_agree
+    );
     (agree, ground, penumbra)
 }
 
-/// The last frame's SSSS soft visibility (per pixel) and its distance map as the CPU references
-/// take it (hard shadow, σ, eye depth), read back from `SsssTextures`.
+/// The last frame's SSSS soft visibility (per pixel), its distance map as the CPU blur takes
+/// it (hard shadow, the σ the blur used — the refined one on the active tiles, the distance
+/// pass's bound elsewhere, where the blur leaves the hard shadow either way —, eye depth), and
+/// the distance pass's σ bounds the classification ran on; read back from `SsssTextures`.
 pub fn read_ssss_screen(
     harness: &mut RenderHarness,
-) -> (Vec<f32>, bevy_soft_shadows::ssss::blur::ScreenBuffers) {
+) -> (
+    Vec<f32>,
+    bevy_soft_shadows::ssss::blur::ScreenBuffers,
+    Vec<[f32; 2]>,
+) {
     use bevy_soft_shadows::ssss::receiver::SsssTextures;
     let textures = harness.world_mut().resource::<SsssTextures>().clone();
     let distance = floats(
         &harness
             .read_image(textures.distance.clone(), SIZE, SIZE, 16)
+            .unwrap(),
+    );
+    let refined = floats(
+        &harness
+            .read_image(textures.refined.clone(), SIZE, SIZE, 16)
             .unwrap(),
     );
     // (visibility, light) per pixel: keep the visibility.
@@ -395,14 +437,23 @@ pub fn read_ssss_screen(
     .step_by(2)
     .collect();
     let n = (SIZE * SIZE) as usize;
+    let bounds: Vec<[f32; 2]> = (0..n)
+        .map(|i| [distance[4 * i + 1], distance[4 * i + 2]])
+        .collect();
     let buffers = bevy_soft_shadows::ssss::blur::ScreenBuffers {
         width: SIZE as usize,
         height: SIZE as usize,
         hard: (0..n).map(|i| distance[4 * i]).collect(),
         sigma: (0..n)
-            .map(|i| [distance[4 * i + 1], distance[4 * i + 2]])
+            .map(|i| {
+                if refined[4 * i + 3] >= 0.0 {
+                    [refined[4 * i + 1], refined[4 * i + 2]]
+                } else {
+                    bounds[i]
+                }
+            })
             .collect(),
         depth: (0..n).map(|i| distance[4 * i + 3]).collect(),
     };
-    (visibility, buffers)
+    (visibility, buffers, bounds)
 }
