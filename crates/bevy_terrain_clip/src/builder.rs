@@ -110,6 +110,9 @@ pub struct BuildSettings {
     pub origin_m: [f64; 2],
     /// Size of one image texel (m).
     pub metres_per_texel: f64,
+    /// For a 16-bit height pyramid: what its stored values mean in metres (the manifest's
+    /// `height_offset_m` and `height_scale_m`).
+    pub heights: crate::dem::HeightScale,
 }
 
 impl Default for BuildSettings {
@@ -119,6 +122,7 @@ impl Default for BuildSettings {
             scheme: TileScheme::Xyz,
             origin_m: [0.0, 0.0],
             metres_per_texel: 1.0,
+            heights: Default::default(),
         }
     }
 }
@@ -291,6 +295,8 @@ pub fn build_pyramid<P: PyramidTexel>(
         metres_per_texel: settings.metres_per_texel,
         partial_levels: Vec::new(),
         texel: P::FORMAT,
+        height_offset_m: settings.heights.offset_m,
+        height_scale_m: settings.heights.scale_m,
     };
     let problems = manifest.problems();
     if !problems.is_empty() {
@@ -364,6 +370,8 @@ mod tests {
         // 200 × 150 in 64² tiles: a 256² square, levels of 1, 2² and 4² tiles.
         assert_eq!((report.levels, report.tiles, report.written), (3, 21, 21));
         let source = DiskTileSource::open(&dir).unwrap();
+        // Imagery is not heights.
+        assert!(crate::source::DiskHeightSource::open(&dir).is_err());
         let load = |z, x, y| {
             bevy::tasks::block_on(source.load(TileKey { z, x, y }))
                 .unwrap()
@@ -401,8 +409,13 @@ mod tests {
         let heights = ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(130, 100, |x, y| {
             image::Luma([(x * 503 + y * 97 + (x * y) % 13) as u16])
         });
+        let scale = crate::dem::HeightScale {
+            offset_m: -100.0,
+            scale_m: 0.5,
+        };
         let settings = BuildSettings {
             tile_size: 32,
+            heights: scale,
             ..Default::default()
         };
         let report = build_pyramid(&heights, &dir, &settings, &|_, _| {}, None).unwrap();
@@ -447,6 +460,20 @@ mod tests {
         );
         let again = build_pyramid(&heights, &dir, &settings, &|_, _| {}, None).unwrap();
         assert_eq!((again.written, again.reused), (0, 85));
+        // Read as heights, in metres by the manifest's scale; refused as imagery.
+        assert_eq!(
+            (manifest.height_offset_m, manifest.height_scale_m),
+            (-100.0, 0.5)
+        );
+        let source = crate::source::DiskHeightSource::open(&dir).unwrap();
+        let tile = source
+            .load_heights(TileKey { z: 3, x: 2, y: 1 })
+            .unwrap()
+            .unwrap();
+        let stored = heights.get_pixel(69, 39).0[0] as f32;
+        assert_eq!(tile.at(5, 7), -100.0 + 0.5 * stored);
+        let refused = DiskTileSource::open(&dir).unwrap_err().to_string();
+        assert!(refused.contains("height16"), "{refused}");
         std::fs::remove_dir_all(&dir).ok();
     }
 

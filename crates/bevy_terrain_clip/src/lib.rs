@@ -20,6 +20,7 @@ use bevy::prelude::*;
 pub mod builder;
 pub mod cache;
 pub mod clip;
+pub mod dem;
 pub mod flight;
 pub mod material;
 pub mod pyramid;

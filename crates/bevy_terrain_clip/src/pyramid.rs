@@ -58,8 +58,47 @@ pub enum TexelFormat {
     /// 8-bit RGBA imagery (what the clip stack streams).
     #[default]
     Rgba8,
-    /// 16-bit single-channel heights (16-bit grayscale PNG tiles), for terrain geometry.
+    /// 16-bit single-channel heights (16-bit grayscale PNG tiles), metres by the manifest's
+    /// `height_offset_m` and `height_scale_m`.
     Height16,
+    /// Terrarium-encoded heights (8-bit RGB: `R·256 + G + B/256 − 32768` m).
+    Terrarium,
+    /// Mapbox Terrain-RGB heights (8-bit RGB: `−10000 + (R·65536 + G·256 + B)·0.1` m).
+    Mapbox,
+}
+
+impl TexelFormat {
+    /// Whether the texels are heights (any encoding).
+    pub fn is_height(self) -> bool {
+        !matches!(self, Self::Rgba8)
+    }
+
+    /// The manifest's name and what it means, for messages.
+    pub fn describe(self) -> String {
+        match self {
+            Self::Rgba8 => "rgba8 (imagery)",
+            Self::Height16 => "height16 (16-bit grayscale heights)",
+            Self::Terrarium => "terrarium (RGB-encoded heights)",
+            Self::Mapbox => "mapbox (RGB-encoded heights)",
+        }
+        .to_string()
+    }
+}
+
+fn zero() -> f64 {
+    0.0
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+fn is_one(v: &f64) -> bool {
+    *v == 1.0
 }
 
 /// A pyramid's manifest.
@@ -85,6 +124,12 @@ pub struct PyramidManifest {
     /// Texel format (`rgba8` when absent).
     #[serde(default)]
     pub texel: TexelFormat,
+    /// `height16`: the height of stored value 0 (m).
+    #[serde(default = "zero", skip_serializing_if = "is_zero")]
+    pub height_offset_m: f64,
+    /// `height16`: metres per stored unit.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub height_scale_m: f64,
 }
 
 /// Why a manifest was rejected.
@@ -130,6 +175,15 @@ impl PyramidManifest {
             p.push(format!(
                 "metres_per_texel {} must be positive",
                 self.metres_per_texel
+            ));
+        }
+        if !(self.height_offset_m.is_finite()
+            && self.height_scale_m.is_finite()
+            && self.height_scale_m > 0.0)
+        {
+            p.push(format!(
+                "height_offset_m {} and height_scale_m {} must be finite, the scale positive",
+                self.height_offset_m, self.height_scale_m
             ));
         }
         if !self.origin_m.iter().all(|v| v.is_finite()) {
@@ -233,6 +287,8 @@ mod tests {
                 max: [12, 16],
             }],
             texel: TexelFormat::Rgba8,
+            height_offset_m: 0.0,
+            height_scale_m: 1.0,
         }
     }
 

@@ -23,6 +23,26 @@ pub struct TileData {
 }
 
 impl TileData {
+    /// Checks that tile `key` is `tile_size` square and holds its `tile_size² · 4` bytes: a
+    /// custom [`TileSource`] may return anything, and a wrong size would be sliced out of
+    /// bounds when subtiles are cut from it.
+    pub fn check(&self, key: TileKey, tile_size: u32) -> Result<(), TileError> {
+        let bytes = tile_size as usize * tile_size as usize * 4;
+        if self.size == tile_size && self.rgba.len() == bytes {
+            return Ok(());
+        }
+        let side = ((self.rgba.len() / 4) as f64).sqrt() as u32;
+        Err(TileError::WrongSize {
+            path: PathBuf::from(format!("tile {}/{}/{} of the source", key.z, key.x, key.y)),
+            found: if self.rgba.len() == (self.size * self.size * 4) as usize {
+                [self.size, self.size]
+            } else {
+                [side, side]
+            },
+            expected: tile_size,
+        })
+    }
+
     /// The texel at column `x`, row `y`.
     pub fn texel(&self, x: u32, y: u32) -> [u8; 4] {
         let i = ((y * self.size + x) * 4) as usize;
@@ -42,6 +62,16 @@ pub enum TileError {
     Io(PathBuf, std::io::Error),
     /// The file is not a decodable image.
     Decode(PathBuf, String),
+    /// The image's pixels are not what the manifest says (an RGB tile in a 16-bit height
+    /// pyramid, imagery read as heights).
+    WrongKind {
+        /// The file.
+        path: PathBuf,
+        /// What the manifest says.
+        expected: String,
+        /// What the image holds.
+        found: String,
+    },
     /// The image is not `tile_size` square.
     WrongSize {
         /// The file.
@@ -58,6 +88,15 @@ impl std::fmt::Display for TileError {
         match self {
             Self::Io(p, e) => write!(f, "{}: {e}", p.display()),
             Self::Decode(p, e) => write!(f, "{}: corrupt tile image: {e}", p.display()),
+            Self::WrongKind {
+                path,
+                expected,
+                found,
+            } => write!(
+                f,
+                "{}: the tile's pixels are {found}, the manifest says {expected} (not converted)",
+                path.display()
+            ),
             Self::WrongSize {
                 path,
                 found,
@@ -97,14 +136,73 @@ pub struct DiskTileSource {
 }
 
 impl DiskTileSource {
-    /// Opens a pyramid directory (reads and checks its manifest).
+    /// Opens an imagery pyramid directory (reads and checks its manifest). A pyramid of heights
+    /// is an error: streamed as imagery its heights would show as colours
+    /// ([`DiskHeightSource`] reads them).
     pub fn open(dir: impl AsRef<Path>) -> Result<Self, ManifestError> {
         let dir = dir.as_ref().to_path_buf();
         let manifest = PyramidManifest::load(&dir)?;
+        if manifest.texel.is_height() {
+            return Err(ManifestError::Invalid(
+                dir.join(crate::pyramid::MANIFEST),
+                format!(
+                    "the pyramid holds {}, not imagery: open it as heights (DiskHeightSource)",
+                    manifest.texel.describe()
+                ),
+            ));
+        }
         Ok(Self {
             dir,
             manifest: Arc::new(manifest),
         })
+    }
+}
+
+/// Heights read from an XYZ/TMS directory of elevation tiles (`height16`, `terrarium` or
+/// `mapbox`, per its manifest), in metres ([`crate::dem`]).
+#[derive(Clone, Debug)]
+pub struct DiskHeightSource {
+    /// The pyramid directory.
+    pub dir: PathBuf,
+    /// Its manifest.
+    pub manifest: Arc<PyramidManifest>,
+    scale: crate::dem::HeightScale,
+}
+
+impl DiskHeightSource {
+    /// Opens an elevation pyramid directory. An imagery pyramid is an error.
+    pub fn open(dir: impl AsRef<Path>) -> Result<Self, ManifestError> {
+        let dir = dir.as_ref().to_path_buf();
+        let manifest = PyramidManifest::load(&dir)?;
+        let scale = crate::dem::height_scale_of(&manifest)
+            .map_err(|e| ManifestError::Invalid(dir.join(crate::pyramid::MANIFEST), e))?;
+        Ok(Self {
+            dir,
+            manifest: Arc::new(manifest),
+            scale,
+        })
+    }
+
+    /// The heights of tile `key`: `Ok(None)` when it does not exist, an error naming the file
+    /// when it is corrupt, wrongly sized or not the manifest's encoding.
+    pub fn load_heights(&self, key: TileKey) -> Result<Option<crate::dem::HeightTile>, TileError> {
+        if !self.manifest.may_exist(key) {
+            return Ok(None);
+        }
+        let path = self.manifest.tile_path(&self.dir, key);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(TileError::Io(path, e)),
+        };
+        crate::dem::decode_height_tile(
+            &bytes,
+            &path,
+            self.manifest.tile_size,
+            self.manifest.texel,
+            self.scale,
+        )
+        .map(Some)
     }
 }
 
@@ -330,6 +428,8 @@ mod tests {
             metres_per_texel: 1.0,
             partial_levels: Vec::new(),
             texel: Default::default(),
+            height_offset_m: 0.0,
+            height_scale_m: 1.0,
         };
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(

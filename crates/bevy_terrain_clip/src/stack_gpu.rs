@@ -181,6 +181,17 @@ impl ClipStackTexture {
         mips: u32,
         images: &mut Assets<Image>,
     ) -> Self {
+        // A subtile is cut from one tile: no larger than the source's tiles (`pyramid_build
+        // --tile 64` under the default 128-texel subtiles).
+        let subtile_size = if subtile_size > source.tile_size() {
+            warn!(
+                "ClipmapSettings: subtile_size {subtile_size} -> {} (the source's tiles are {0} texels)",
+                source.tile_size()
+            );
+            source.tile_size()
+        } else {
+            subtile_size
+        };
         let mips = mips.clamp(1, subtile_size.trailing_zeros() + 1);
         let levels = source.levels() + source.tile_size().trailing_zeros();
         let stack = ClipStack::new(levels, clip_size, subtile_size, center_uv);
@@ -303,21 +314,29 @@ fn repeat_sampler(linear: bool) -> bevy::image::ImageSampler {
 }
 
 /// The base level `l_b = log2 c` as a `c × c` image with its full mip chain (box-filtered), read
-/// from `source` now (blocking: `(c / tile)²` tiles, or one coarser tile downsampled). Missing
-/// or failed tiles are left transparent and logged.
+/// from `source` now (blocking: `(c / tile)²` tiles, or one coarser tile downsampled). A pyramid
+/// whose finest level is narrower than `c` texels gives its finest level, magnified (nearest) to
+/// `c`: the same ground, blurrier, rather than a level that does not exist. Missing or failed
+/// tiles are left transparent and logged.
 pub fn base_level_image(source: &dyn TileSource, clip_size: u32) -> Image {
     let t = source.tile_size();
     let base_level = clip_size.trailing_zeros();
     let tile_bits = t.trailing_zeros();
     // Pyramid level whose tiles cover the base level (or the coarsest if the base is smaller
-    // than a tile).
-    let z = base_level.saturating_sub(tile_bits);
+    // than a tile, the finest if the pyramid is smaller than the base).
+    let z = base_level
+        .saturating_sub(tile_bits)
+        .min(source.levels().saturating_sub(1));
     let side = (1u32 << z) * t;
     let mut texels = vec![0u8; (side * side * 4) as usize];
     for ty in 0..(1u32 << z) {
         for tx in 0..(1u32 << z) {
             let key = TileKey { z, x: tx, y: ty };
-            match bevy::tasks::block_on(source.load(key)) {
+            let loaded = bevy::tasks::block_on(source.load(key)).and_then(|tile| match tile {
+                Some(tile) => tile.check(key, t).map(|()| Some(tile)),
+                None => Ok(None),
+            });
+            match loaded {
                 Ok(Some(tile)) => {
                     for row in 0..t {
                         let src = (row * t * 4) as usize;
@@ -332,6 +351,18 @@ pub fn base_level_image(source: &dyn TileSource, clip_size: u32) -> Image {
         }
     }
     let (mut level, mut size) = (texels, side);
+    if size < clip_size {
+        let factor = clip_size / size;
+        let mut magnified = vec![0u8; (clip_size * clip_size * 4) as usize];
+        for y in 0..clip_size {
+            for x in 0..clip_size {
+                let src = (((y / factor) * size + x / factor) * 4) as usize;
+                let dst = ((y * clip_size + x) * 4) as usize;
+                magnified[dst..dst + 4].copy_from_slice(&level[src..src + 4]);
+            }
+        }
+        (level, size) = (magnified, clip_size);
+    }
     while size > clip_size {
         level = halve(&level, size);
         size /= 2;
@@ -706,4 +737,38 @@ pub(crate) fn build(app: &mut App) {
                 .in_set(RenderSystems::PrepareAssets)
                 .after(prepare_assets::<GpuImage>),
         );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::source::ProceduralTileSource;
+
+    #[test]
+    fn a_pyramid_narrower_than_the_clip_fills_the_base_level() {
+        // Two levels of 16-texel tiles: 32 texels across, under a 128-texel clip.
+        let texel = |level: u32, x: u64, y: u64| [level as u8 * 40, x as u8, y as u8, 255];
+        let source = ProceduralTileSource::new(16, 2, texel);
+        let image = base_level_image(&source, 128);
+        let data = image.data.unwrap();
+        assert_eq!(image.texture_descriptor.size.width, 128);
+        // Mip 0: the finest level (virtual level 5), each texel magnified 4×.
+        for (x, y) in [(0u32, 0u32), (13, 7), (127, 127), (64, 100)] {
+            let i = ((y * 128 + x) * 4) as usize;
+            assert_eq!(
+                data[i..i + 4],
+                texel(5, (x / 4) as u64, (y / 4) as u64),
+                "({x}, {y})"
+            );
+        }
+    }
+
+    #[test]
+    fn subtiles_larger_than_the_sources_tiles_are_clamped_to_them() {
+        let source = Arc::new(ProceduralTileSource::new(64, 4, |_, _, _| [0, 0, 0, 255]));
+        let mut images = Assets::<Image>::default();
+        let clip = ClipStackTexture::new(source, 256, 128, 16, [0.5, 0.5], &mut images);
+        assert_eq!(clip.stack.subtile_size, 64);
+        assert_eq!(clip.stack.clip_size % clip.stack.subtile_size, 0);
+    }
 }

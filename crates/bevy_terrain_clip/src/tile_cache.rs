@@ -127,7 +127,13 @@ impl TileCache {
                 }
                 None => true,
             });
+        let tile_size = self.source().tile_size();
         for (key, result) in finished {
+            // A wrongly sized tile from a custom source is a failure, not a slice out of bounds.
+            let result = result.and_then(|tile| match tile {
+                Some(t) => t.check(key, tile_size).map(|()| Some(t)),
+                None => Ok(None),
+            });
             match result {
                 Ok(Some(tile)) => {
                     if self.tiles.insert(key, Arc::new(tile)).is_some() {
@@ -282,6 +288,46 @@ mod tests {
         assert_eq!(loads.iter().filter(|k| **k == key(3, 2, 2)).count(), 1);
         assert_eq!(loads.iter().filter(|k| **k == key(4, 1, 1)).count(), 2);
         assert!(cache.stats.latency_max_ms >= cache.stats.latency_avg_ms);
+    }
+
+    /// A source whose tiles are half the size it claims.
+    struct Shrunk;
+
+    impl TileSource for Shrunk {
+        fn tile_size(&self) -> u32 {
+            16
+        }
+        fn levels(&self) -> u32 {
+            3
+        }
+        fn may_exist(&self, _: TileKey) -> bool {
+            true
+        }
+        fn load(&self, _: TileKey) -> BoxedFuture<'static, Result<Option<TileData>, TileError>> {
+            Box::pin(async {
+                Ok(Some(TileData {
+                    size: 8,
+                    rgba: vec![0; 8 * 8 * 4],
+                }))
+            })
+        }
+    }
+
+    #[test]
+    fn a_wrongly_sized_tile_from_a_source_fails_instead_of_panicking() {
+        let mut cache = TileCache::new(Arc::new(Shrunk), 4);
+        assert!(cache.get(key(1, 0, 1)).is_none());
+        settle(&mut cache);
+        assert_eq!((cache.stats.loaded, cache.stats.failed), (0, 1));
+        assert!(!cache.contains(key(1, 0, 1)));
+        let error = TileData {
+            size: 8,
+            rgba: vec![0; 256],
+        }
+        .check(key(1, 0, 1), 16)
+        .unwrap_err()
+        .to_string();
+        assert!(error.contains("1/0/1") && error.contains("8×8"), "{error}");
     }
 
     #[test]

@@ -3,18 +3,23 @@
 //!
 //! ```text
 //! cargo run --release -p bevy_terrain_clip --bin pyramid_build -- IMAGE.png OUT_DIR
-//!     [--tile 512] [--scheme xyz|tms] [--origin X,Z] [--metres-per-texel F] [--height]
+//!     [--tile 512] [--scheme xyz|tms] [--origin X,Z] [--metres-per-texel F]
+//!     [--height | --dem terrarium|mapbox]
 //! ```
-//! A 16-bit grayscale image (or any image with `--height`) builds a 16-bit heightmap pyramid;
-//! anything else builds 8-bit RGBA imagery.
+//! A 16-bit grayscale image (or a grayscale one with `--height`) builds a 16-bit heightmap
+//! pyramid of its values (`height_scale_m` 1); `--dem` decodes an RGB-encoded elevation image
+//! (Terrarium or Mapbox Terrain-RGB) to metres and stores them in 16 bits over their range (the
+//! manifest's `height_offset_m` and `height_scale_m`). `--height` on a colour image is an error,
+//! not a conversion to luminance. Anything else builds 8-bit RGBA imagery.
 
 use bevy_terrain_clip::builder::{BuildSettings, build_pyramid};
-use bevy_terrain_clip::pyramid::TileScheme;
+use bevy_terrain_clip::dem::{HeightScale, mapbox_height, terrarium_height};
+use bevy_terrain_clip::pyramid::{TexelFormat, TileScheme};
 use std::io::Write;
 
 fn usage(message: &str) -> ! {
     eprintln!(
-        "{message}\nusage: pyramid_build IMAGE OUT_DIR [--tile N] [--scheme xyz|tms] [--origin X,Z] [--metres-per-texel F] [--height]"
+        "{message}\nusage: pyramid_build IMAGE OUT_DIR [--tile N] [--scheme xyz|tms] [--origin X,Z] [--metres-per-texel F] [--height | --dem terrarium|mapbox]"
     );
     std::process::exit(2)
 }
@@ -23,6 +28,7 @@ fn main() {
     let mut positional = Vec::new();
     let mut settings = BuildSettings::default();
     let mut force_height = false;
+    let mut dem: Option<TexelFormat> = None;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         let mut value = || {
@@ -56,6 +62,13 @@ fn main() {
                     .unwrap_or_else(|_| usage("--metres-per-texel takes a number"))
             }
             "--height" => force_height = true,
+            "--dem" => {
+                dem = Some(match value().as_str() {
+                    "terrarium" => TexelFormat::Terrarium,
+                    "mapbox" => TexelFormat::Mapbox,
+                    other => usage(&format!("--dem takes terrarium or mapbox, not '{other}'")),
+                })
+            }
             _ if arg.starts_with("--") => usage(&format!("unknown flag {arg}")),
             _ => positional.push(arg),
         }
@@ -63,14 +76,51 @@ fn main() {
     let [image_path, out_dir] = positional.as_slice() else {
         usage("expected IMAGE and OUT_DIR");
     };
-    let image = match image::open(image_path) {
+    let mut image = match image::open(image_path) {
         Ok(i) => i,
         Err(e) => {
             eprintln!("{image_path}: {e}");
             std::process::exit(1)
         }
     };
-    let height = force_height || matches!(image, image::DynamicImage::ImageLuma16(_));
+    let gray = matches!(
+        image,
+        image::DynamicImage::ImageLuma8(_) | image::DynamicImage::ImageLuma16(_)
+    );
+    if force_height && !gray {
+        // Heights encoded in colour would turn into meaningless luminance.
+        eprintln!(
+            "{image_path}: --height needs a grayscale heightmap, this image is {:?}; for \
+             RGB-encoded elevation pass --dem terrarium or --dem mapbox",
+            image.color()
+        );
+        std::process::exit(1)
+    }
+    let height =
+        force_height || dem.is_some() || matches!(image, image::DynamicImage::ImageLuma16(_));
+    if let Some(encoding) = dem {
+        // Decode to metres, then store 16 bits over the data's range (the manifest's scale).
+        let rgb = image.to_rgb8();
+        let decode = match encoding {
+            TexelFormat::Mapbox => mapbox_height,
+            _ => terrarium_height,
+        };
+        let metres: Vec<f32> = rgb.pixels().map(|p| decode([p[0], p[1], p[2]])).collect();
+        let (lo, hi) = metres
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(lo, hi), &h| (lo.min(h), hi.max(h)));
+        settings.heights = HeightScale::covering(lo, hi);
+        eprintln!(
+            "{image_path}: {encoding:?} heights {lo:.2}..{hi:.2} m, stored in steps of {:.3} m",
+            settings.heights.scale_m
+        );
+        let (scale, width) = (settings.heights, rgb.width());
+        image = image::DynamicImage::ImageLuma16(image::ImageBuffer::from_fn(
+            width,
+            rgb.height(),
+            |x, y| image::Luma([scale.value(metres[(y * width + x) as usize])]),
+        ));
+    }
     eprintln!(
         "{image_path}: {}×{}, tiles of {}, {}",
         image.width(),

@@ -183,13 +183,15 @@ pub fn center_subtile(uv: [f64; 2], level: u32, subtile_size: u32) -> Subtile {
     ]
 }
 
-/// The tile holding `upload`'s subtile (subtiles are no larger than tiles).
+/// The tile holding `upload`'s subtile. The stacks keep subtiles no larger than tiles
+/// (`ClipStackTexture` clamps them); a larger one is given the tile of its first texel rather
+/// than dividing by zero.
 pub fn tile_of(upload: &SubtileUpload, tile_size: u32, subtile_size: u32) -> crate::cache::TileKey {
-    let per_tile = (tile_size / subtile_size) as i64;
+    let tile = |subtile: i64| (subtile * subtile_size as i64).div_euclid(tile_size.max(1) as i64);
     crate::cache::TileKey {
         z: upload.level - tile_size.trailing_zeros(),
-        x: upload.subtile[0].div_euclid(per_tile) as u32,
-        y: upload.subtile[1].div_euclid(per_tile) as u32,
+        x: tile(upload.subtile[0]) as u32,
+        y: tile(upload.subtile[1]) as u32,
     }
 }
 
@@ -228,6 +230,22 @@ mod tests {
     fn stack() -> ClipStack {
         // 16 levels, clip 1024 (base level 10), subtile 128: layers for levels 11..=15.
         ClipStack::new(16, 1024, 128, [0.3, 0.7])
+    }
+
+    #[test]
+    fn a_subtile_maps_to_its_tile_whatever_their_sizes() {
+        let upload = |subtile: [i64; 2]| SubtileUpload {
+            layer: 1,
+            level: 12,
+            subtile,
+        };
+        // 128-texel subtiles in 512-texel tiles: four per tile.
+        let key = tile_of(&upload([9, 3]), 512, 128);
+        assert_eq!((key.z, key.x, key.y), (3, 2, 0));
+        // A subtile larger than the tiles (128 over 64): the tile of its first texel, no
+        // division by zero.
+        let key = tile_of(&upload([5, 1]), 64, 128);
+        assert_eq!((key.z, key.x, key.y), (6, 10, 2));
     }
 
     #[test]

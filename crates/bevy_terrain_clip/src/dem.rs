@@ -1,0 +1,290 @@
+//! Elevation tiles: heights in metres from the encodings real DEM pyramids use (spec T1/T2).
+//!
+//! - `height16`: 16-bit grayscale PNG, `h = offset + scale · v` with the manifest's
+//!   `height_offset_m` and `height_scale_m` (what `pyramid_build` writes);
+//! - `terrarium` (Mapzen / AWS terrain tiles): 8-bit RGB, `h = R·256 + G + B/256 − 32768`;
+//! - `mapbox` (Mapbox Terrain-RGB, MapTiler): 8-bit RGB, `h = −10000 + (R·65536 + G·256 + B)·0.1`.
+//!
+//! A tile whose pixels are not what its manifest says — an RGB tile in a `height16` pyramid, an
+//! 8-bit grayscale tile in a `terrarium` one, any tile of an imagery pyramid read as heights — is
+//! an error naming the file and both kinds, never a silent conversion (turning a terrarium tile
+//! into luminance gives heights that are meaningless yet look plausible).
+
+use crate::pyramid::{PyramidManifest, TexelFormat};
+use crate::source::TileError;
+use std::path::Path;
+
+/// Height of a Terrarium texel (m).
+pub fn terrarium_height([r, g, b]: [u8; 3]) -> f32 {
+    r as f32 * 256.0 + g as f32 + b as f32 / 256.0 - 32768.0
+}
+
+/// Height of a Mapbox Terrain-RGB texel (m).
+pub fn mapbox_height([r, g, b]: [u8; 3]) -> f32 {
+    // The 24-bit integer is exact in f64; 0.1 m steps from −10 km.
+    (-10000.0 + (r as f64 * 65536.0 + g as f64 * 256.0 + b as f64) * 0.1) as f32
+}
+
+/// The linear map from stored 16-bit values to metres of a `height16` pyramid.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeightScale {
+    /// Height of value 0 (m).
+    pub offset_m: f64,
+    /// Metres per unit.
+    pub scale_m: f64,
+}
+
+impl Default for HeightScale {
+    fn default() -> Self {
+        Self {
+            offset_m: 0.0,
+            scale_m: 1.0,
+        }
+    }
+}
+
+impl HeightScale {
+    /// The finest scale (at least 1 cm per unit) covering `[min, max]` metres in 16 bits, offset
+    /// at `min` rounded down to the centimetre.
+    pub fn covering(min: f32, max: f32) -> Self {
+        let offset_m = (min as f64 * 100.0).floor() / 100.0;
+        let range = (max as f64 - offset_m).max(0.0);
+        Self {
+            offset_m,
+            scale_m: (range / 65535.0).max(0.01),
+        }
+    }
+
+    /// Metres of a stored value.
+    pub fn metres(&self, value: u16) -> f32 {
+        (self.offset_m + self.scale_m * value as f64) as f32
+    }
+
+    /// The stored value nearest `metres` (clamped to 16 bits).
+    pub fn value(&self, metres: f32) -> u16 {
+        ((metres as f64 - self.offset_m) / self.scale_m)
+            .round()
+            .clamp(0.0, 65535.0) as u16
+    }
+}
+
+/// One tile of heights, rows top (north) first.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeightTile {
+    /// Side in texels.
+    pub size: u32,
+    /// `size²` heights (m).
+    pub metres: Vec<f32>,
+}
+
+impl HeightTile {
+    /// The height at column `x`, row `y`.
+    pub fn at(&self, x: u32, y: u32) -> f32 {
+        self.metres[(y * self.size + x) as usize]
+    }
+}
+
+/// What the pixels of a decoded image are, in words (for errors).
+fn describe(image: &image::DynamicImage) -> String {
+    format!("{:?}", image.color()).to_lowercase()
+}
+
+/// Decodes an elevation tile of a pyramid whose texels are `texel` into metres, checking its
+/// size and that its pixels are that encoding.
+pub fn decode_height_tile(
+    bytes: &[u8],
+    path: &Path,
+    tile_size: u32,
+    texel: TexelFormat,
+    scale: HeightScale,
+) -> Result<HeightTile, TileError> {
+    let image = image::load_from_memory(bytes)
+        .map_err(|e| TileError::Decode(path.to_path_buf(), e.to_string()))?;
+    if image.width() != tile_size || image.height() != tile_size {
+        return Err(TileError::WrongSize {
+            path: path.to_path_buf(),
+            found: [image.width(), image.height()],
+            expected: tile_size,
+        });
+    }
+    let wrong_kind = |image: &image::DynamicImage| TileError::WrongKind {
+        path: path.to_path_buf(),
+        expected: texel.describe(),
+        found: describe(image),
+    };
+    let rgb = |decode: fn([u8; 3]) -> f32, image: &image::DynamicImage| {
+        let metres: Vec<f32> = match image {
+            image::DynamicImage::ImageRgb8(tile) => {
+                tile.pixels().map(|p| decode([p[0], p[1], p[2]])).collect()
+            }
+            image::DynamicImage::ImageRgba8(tile) => {
+                tile.pixels().map(|p| decode([p[0], p[1], p[2]])).collect()
+            }
+            other => return Err(wrong_kind(other)),
+        };
+        Ok(metres)
+    };
+    let metres = match texel {
+        TexelFormat::Height16 => match &image {
+            image::DynamicImage::ImageLuma16(tile) => {
+                tile.pixels().map(|p| scale.metres(p[0])).collect()
+            }
+            other => return Err(wrong_kind(other)),
+        },
+        TexelFormat::Terrarium => rgb(terrarium_height, &image)?,
+        TexelFormat::Mapbox => rgb(mapbox_height, &image)?,
+        TexelFormat::Rgba8 => return Err(wrong_kind(&image)),
+    };
+    Ok(HeightTile {
+        size: tile_size,
+        metres,
+    })
+}
+
+/// The heights of a manifest's pyramid: its 16-bit scale, or an error when it holds imagery.
+pub fn height_scale_of(manifest: &PyramidManifest) -> Result<HeightScale, String> {
+    if !manifest.texel.is_height() {
+        return Err(format!(
+            "the pyramid holds {}, not heights",
+            manifest.texel.describe()
+        ));
+    }
+    Ok(HeightScale {
+        offset_m: manifest.height_offset_m,
+        scale_m: manifest.height_scale_m,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn png(image: image::DynamicImage) -> Vec<u8> {
+        let mut bytes = Vec::new();
+        image
+            .write_to(
+                &mut std::io::Cursor::new(&mut bytes),
+                image::ImageFormat::Png,
+            )
+            .unwrap();
+        bytes
+    }
+
+    /// A Terrarium texel for height `h` (m), as the tile servers encode it.
+    fn terrarium_texel(h: f32) -> [u8; 3] {
+        let v = h + 32768.0;
+        let r = (v / 256.0).floor();
+        let g = (v - r * 256.0).floor();
+        let b = ((v - r * 256.0 - g) * 256.0).round();
+        [r as u8, g as u8, b as u8]
+    }
+
+    /// A Mapbox texel for height `h` (m).
+    fn mapbox_texel(h: f32) -> [u8; 3] {
+        let v = ((h as f64 + 10000.0) * 10.0).round() as u32;
+        [(v >> 16) as u8, (v >> 8) as u8, v as u8]
+    }
+
+    #[test]
+    fn the_published_formulas_give_known_heights() {
+        // Terrarium: sea level is (128, 0, 0); Mont Blanc's 4808 m is 128 + 18.78 · 256.
+        assert_eq!(terrarium_height([128, 0, 0]), 0.0);
+        assert_eq!(terrarium_height([146, 200, 128]), 4808.5);
+        assert_eq!(terrarium_height([127, 255, 0]), -1.0);
+        // Mapbox: (1, 134, 160) is 0 m; 0.1 m steps.
+        assert!(mapbox_height([1, 134, 160]).abs() < 1e-3);
+        assert!((mapbox_height([1, 134, 161]) - 0.1).abs() < 1e-3);
+        assert_eq!(mapbox_height([0, 0, 0]), -10000.0);
+        for h in [-420.3f32, 0.0, 2475.0, 8848.9] {
+            assert!((terrarium_height(terrarium_texel(h)) - h).abs() < 1.0 / 256.0 + 1e-3);
+            assert!((mapbox_height(mapbox_texel(h)) - h).abs() < 0.051);
+        }
+    }
+
+    #[test]
+    fn hand_made_tiles_decode_to_their_heights() {
+        let size = 4;
+        let heights: Vec<f32> = (0..size * size)
+            .map(|i| -50.0 + 731.25 * i as f32)
+            .collect();
+        let path = Path::new("z/x/y.png");
+        for (texel, encode) in [
+            (
+                TexelFormat::Terrarium,
+                terrarium_texel as fn(f32) -> [u8; 3],
+            ),
+            (TexelFormat::Mapbox, mapbox_texel),
+        ] {
+            let image = image::RgbImage::from_fn(size, size, |x, y| {
+                image::Rgb(encode(heights[(y * size + x) as usize]))
+            });
+            let tile = decode_height_tile(
+                &png(image.into()),
+                path,
+                size,
+                texel,
+                HeightScale::default(),
+            )
+            .unwrap();
+            for (got, want) in tile.metres.iter().zip(&heights) {
+                assert!((got - want).abs() < 0.051, "{texel:?}: {got} vs {want}");
+            }
+        }
+        // 16-bit heights with the manifest's scale: 2,475 m survives (an 8-bit read gives 9).
+        let scale = HeightScale::covering(-100.0, 5000.0);
+        let image = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(size, size, |x, y| {
+            image::Luma([scale.value(heights[(y * size + x) as usize].min(2475.0))])
+        });
+        let tile = decode_height_tile(
+            &png(image::DynamicImage::ImageLuma16(image)),
+            path,
+            size,
+            TexelFormat::Height16,
+            scale,
+        )
+        .unwrap();
+        assert!((tile.at(3, 3) - 2475.0).abs() <= scale.scale_m as f32);
+        assert!((tile.at(0, 0) - -50.0).abs() <= scale.scale_m as f32);
+    }
+
+    #[test]
+    fn a_tile_of_another_kind_is_an_error_not_a_conversion() {
+        let path = Path::new("9/1/2.png");
+        let rgb = png(image::RgbImage::from_pixel(4, 4, image::Rgb([128, 0, 0])).into());
+        let gray8 = png(image::GrayImage::from_pixel(4, 4, image::Luma([9])).into());
+        let scale = HeightScale::default();
+        // An RGB (terrarium) tile in a 16-bit height pyramid.
+        let e = decode_height_tile(&rgb, path, 4, TexelFormat::Height16, scale).unwrap_err();
+        assert!(
+            matches!(e, TileError::WrongKind { .. }) && e.to_string().contains("9/1/2.png"),
+            "{e}"
+        );
+        assert!(e.to_string().contains("rgb8"), "{e}");
+        // An 8-bit grayscale tile in a terrarium pyramid, and imagery read as heights.
+        assert!(decode_height_tile(&gray8, path, 4, TexelFormat::Terrarium, scale).is_err());
+        assert!(decode_height_tile(&rgb, path, 4, TexelFormat::Rgba8, scale).is_err());
+        // Wrong size and corrupt bytes.
+        assert!(matches!(
+            decode_height_tile(&rgb, path, 8, TexelFormat::Terrarium, scale),
+            Err(TileError::WrongSize { .. })
+        ));
+        assert!(matches!(
+            decode_height_tile(&rgb[..20], path, 4, TexelFormat::Terrarium, scale),
+            Err(TileError::Decode(..))
+        ));
+    }
+
+    #[test]
+    fn a_height_scale_covers_its_range_in_16_bits() {
+        let s = HeightScale::covering(-432.17, 8848.86);
+        assert_eq!(s.offset_m, -432.18);
+        assert!(s.scale_m > 0.14 && s.scale_m < 0.15);
+        for h in [-432.17f32, 0.0, 1234.5, 8848.86] {
+            assert!((s.metres(s.value(h)) - h).abs() <= 0.5 * s.scale_m as f32 + 1e-3);
+        }
+        // A small range keeps centimetres.
+        assert_eq!(HeightScale::covering(10.0, 20.0).scale_m, 0.01);
+        assert_eq!(s.value(1e9), 65535);
+        assert_eq!(s.value(-1e9), 0);
+    }
+}
