@@ -371,7 +371,7 @@ mod tests {
         assert_eq!((report.levels, report.tiles, report.written), (3, 21, 21));
         let source = DiskTileSource::open(&dir).unwrap();
         // Imagery is not heights.
-        assert!(crate::source::DiskHeightSource::open(&dir).is_err());
+        assert!(crate::dem::DiskHeightSource::open(&dir).is_err());
         let load = |z, x, y| {
             bevy::tasks::block_on(source.load(TileKey { z, x, y }))
                 .unwrap()
@@ -465,7 +465,7 @@ mod tests {
             (manifest.height_offset_m, manifest.height_scale_m),
             (-100.0, 0.5)
         );
-        let source = crate::source::DiskHeightSource::open(&dir).unwrap();
+        let source = crate::dem::DiskHeightSource::open(&dir).unwrap();
         let tile = source
             .load_heights(TileKey { z: 3, x: 2, y: 1 })
             .unwrap()

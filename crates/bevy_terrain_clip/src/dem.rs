@@ -10,9 +10,11 @@
 //! an error naming the file and both kinds, never a silent conversion (turning a terrarium tile
 //! into luminance gives heights that are meaningless yet look plausible).
 
-use crate::pyramid::{PyramidManifest, TexelFormat};
+use crate::cache::TileKey;
+use crate::pyramid::{ManifestError, PyramidManifest, TexelFormat};
 use crate::source::TileError;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Height of a Terrarium texel (m).
 pub fn terrarium_height([r, g, b]: [u8; 3]) -> f32 {
@@ -153,6 +155,54 @@ pub fn height_scale_of(manifest: &PyramidManifest) -> Result<HeightScale, String
         offset_m: manifest.height_offset_m,
         scale_m: manifest.height_scale_m,
     })
+}
+
+/// Heights read from an XYZ/TMS directory of elevation tiles (`height16`, `terrarium` or
+/// `mapbox`, per its manifest), in metres ([`crate::dem`]).
+#[derive(Clone, Debug)]
+pub struct DiskHeightSource {
+    /// The pyramid directory.
+    pub dir: PathBuf,
+    /// Its manifest.
+    pub manifest: Arc<PyramidManifest>,
+    scale: HeightScale,
+}
+
+impl DiskHeightSource {
+    /// Opens an elevation pyramid directory. An imagery pyramid is an error.
+    pub fn open(dir: impl AsRef<Path>) -> Result<Self, ManifestError> {
+        let dir = dir.as_ref().to_path_buf();
+        let manifest = PyramidManifest::load(&dir)?;
+        let scale = height_scale_of(&manifest)
+            .map_err(|e| ManifestError::Invalid(dir.join(crate::pyramid::MANIFEST), e))?;
+        Ok(Self {
+            dir,
+            manifest: Arc::new(manifest),
+            scale,
+        })
+    }
+
+    /// The heights of tile `key`: `Ok(None)` when it does not exist, an error naming the file
+    /// when it is corrupt, wrongly sized or not the manifest's encoding.
+    pub fn load_heights(&self, key: TileKey) -> Result<Option<HeightTile>, TileError> {
+        if !self.manifest.may_exist(key) {
+            return Ok(None);
+        }
+        let path = self.manifest.tile_path(&self.dir, key);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(TileError::Io(path, e)),
+        };
+        decode_height_tile(
+            &bytes,
+            &path,
+            self.manifest.tile_size,
+            self.manifest.texel,
+            self.scale,
+        )
+        .map(Some)
+    }
 }
 
 #[cfg(test)]

@@ -138,7 +138,7 @@ pub struct DiskTileSource {
 impl DiskTileSource {
     /// Opens an imagery pyramid directory (reads and checks its manifest). A pyramid of heights
     /// is an error: streamed as imagery its heights would show as colours
-    /// ([`DiskHeightSource`] reads them).
+    /// ([`DiskHeightSource`](crate::dem::DiskHeightSource) reads them).
     pub fn open(dir: impl AsRef<Path>) -> Result<Self, ManifestError> {
         let dir = dir.as_ref().to_path_buf();
         let manifest = PyramidManifest::load(&dir)?;
@@ -146,7 +146,7 @@ impl DiskTileSource {
             return Err(ManifestError::Invalid(
                 dir.join(crate::pyramid::MANIFEST),
                 format!(
-                    "the pyramid holds {}, not imagery: open it as heights (DiskHeightSource)",
+                    "the pyramid holds {}, not imagery: open it as heights (dem::DiskHeightSource)",
                     manifest.texel.describe()
                 ),
             ));
@@ -155,54 +155,6 @@ impl DiskTileSource {
             dir,
             manifest: Arc::new(manifest),
         })
-    }
-}
-
-/// Heights read from an XYZ/TMS directory of elevation tiles (`height16`, `terrarium` or
-/// `mapbox`, per its manifest), in metres ([`crate::dem`]).
-#[derive(Clone, Debug)]
-pub struct DiskHeightSource {
-    /// The pyramid directory.
-    pub dir: PathBuf,
-    /// Its manifest.
-    pub manifest: Arc<PyramidManifest>,
-    scale: crate::dem::HeightScale,
-}
-
-impl DiskHeightSource {
-    /// Opens an elevation pyramid directory. An imagery pyramid is an error.
-    pub fn open(dir: impl AsRef<Path>) -> Result<Self, ManifestError> {
-        let dir = dir.as_ref().to_path_buf();
-        let manifest = PyramidManifest::load(&dir)?;
-        let scale = crate::dem::height_scale_of(&manifest)
-            .map_err(|e| ManifestError::Invalid(dir.join(crate::pyramid::MANIFEST), e))?;
-        Ok(Self {
-            dir,
-            manifest: Arc::new(manifest),
-            scale,
-        })
-    }
-
-    /// The heights of tile `key`: `Ok(None)` when it does not exist, an error naming the file
-    /// when it is corrupt, wrongly sized or not the manifest's encoding.
-    pub fn load_heights(&self, key: TileKey) -> Result<Option<crate::dem::HeightTile>, TileError> {
-        if !self.manifest.may_exist(key) {
-            return Ok(None);
-        }
-        let path = self.manifest.tile_path(&self.dir, key);
-        let bytes = match std::fs::read(&path) {
-            Ok(b) => b,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-            Err(e) => return Err(TileError::Io(path, e)),
-        };
-        crate::dem::decode_height_tile(
-            &bytes,
-            &path,
-            self.manifest.tile_size,
-            self.manifest.texel,
-            self.scale,
-        )
-        .map(Some)
     }
 }
 

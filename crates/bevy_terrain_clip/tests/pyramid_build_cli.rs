@@ -3,8 +3,8 @@
 //! decoded to metres by `--dem terrarium`, whose pyramid reads back the known heights.
 
 use bevy_terrain_clip::cache::TileKey;
+use bevy_terrain_clip::dem::DiskHeightSource;
 use bevy_terrain_clip::pyramid::{PyramidManifest, TexelFormat};
-use bevy_terrain_clip::source::DiskHeightSource;
 use std::process::Command;
 
 /// A Terrarium texel for height `h` (m).
