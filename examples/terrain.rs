@@ -1,7 +1,9 @@
 //! A flight at 250 m/s over a 262 km × 262 km terrain textured from a clip stack: a virtual
 //! texture of 20 levels (2^19 texels of 0.5 m), procedural aerial imagery generated tile by tile
 //! on the IO task pool, or a tile pyramid on disk (`--pyramid DIR`, built with
-//! `cargo run -p bevy_terrain_clip --bin pyramid_build`).
+//! `cargo run -p bevy_terrain_clip --bin pyramid_build`). The flight starts over the data
+//! wherever the pyramid lies (its manifest's origin), lower and slower over small pyramids;
+//! beyond the data the ground shows `ClipmapSettings::no_data_color`.
 //!
 //! ```text
 //! cargo run --release --example terrain            # windowed: the panel shows terrain/* counters
@@ -101,8 +103,16 @@ fn main() -> AppExit {
         })
 }
 
-fn start() -> DVec2 {
-    DVec2::new(0.25, 0.3) * 0.5 * 2f64.powi(19)
+/// Where the flight starts: a quarter into the data, wherever the pyramid lies in the world.
+fn start(mapping: &TextureMapping) -> DVec2 {
+    mapping.origin_m + DVec2::new(0.25, 0.3) * mapping.size_m
+}
+
+/// Height (m) and speed (m/s) of the flight: 300 m at 250 m/s over the large textures, lower
+/// and slower over small pyramids so the data fills the view.
+fn altitude_and_speed(mapping: &TextureMapping) -> (f64, f64) {
+    let altitude = (mapping.size_m * 0.02).clamp(20.0, 300.0);
+    (altitude, altitude * 250.0 / 300.0)
 }
 
 fn setup(
@@ -113,7 +123,8 @@ fn setup(
     mut materials: ResMut<Assets<ClipmapMaterial>>,
     mut meshes: ResMut<Assets<Mesh>>,
 ) {
-    let center = start();
+    let center = start(&terrain.mapping);
+    let (altitude, _) = altitude_and_speed(&terrain.mapping);
     let uv = terrain.mapping.uv_of(center);
     let mut clip = ClipStackTexture::from_settings(
         terrain.source.clone(),
@@ -157,16 +168,17 @@ fn setup(
     });
     commands.spawn((
         Camera3d::default(),
-        Transform::from_xyz(center.x as f32, 300.0, center.y as f32),
+        Transform::from_xyz(center.x as f32, altitude as f32, center.y as f32),
     ));
 }
 
-/// 250 m/s along the diagonal, 300 m up, looking ahead and down.
-fn fly(time: Res<Time>, mut cameras: Query<&mut Transform, With<Camera3d>>) {
-    let along = DVec2::new(1.0, 1.0).normalize() * 250.0 * time.elapsed_secs_f64();
-    let p = start() + along;
+/// Along the diagonal (250 m/s, 300 m up over large textures), looking ahead and down.
+fn fly(time: Res<Time>, terrain: Res<Terrain>, mut cameras: Query<&mut Transform, With<Camera3d>>) {
+    let (altitude, speed) = altitude_and_speed(&terrain.mapping);
+    let along = DVec2::new(1.0, 1.0).normalize() * speed * time.elapsed_secs_f64();
+    let p = start(&terrain.mapping) + along;
     for mut t in &mut cameras {
-        *t = Transform::from_xyz(p.x as f32, 300.0, p.y as f32)
+        *t = Transform::from_xyz(p.x as f32, altitude as f32, p.y as f32)
             .looking_to(Vec3::new(0.7, -0.35, 0.7), Vec3::Y);
     }
 }

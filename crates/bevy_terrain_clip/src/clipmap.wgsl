@@ -6,6 +6,11 @@
 // slot); where no layer covers, the resident base level is. textureSampleLevel avoids
 // derivatives, which jump across the toroidal wrap. CPU reference: `clip::stack::finest_covering_layer`.
 //
+// Where there is no data the terrain shows `clipmap.no_data`: outside the texture's [0, 1)²
+// (Repeat addressing would show copies of it), and in proportion to a texel's transparency —
+// the builder's padding and missing tiles are transparent black, so a texel's colour is taken
+// as premultiplied and the rest filled: rgb + (1 − a)·no_data (`clip::stack::over_no_data`).
+//
 // This module holds the bindings and the lookup; `clipmap_fragment.wgsl` (Bevy's shadows) and
 // `clipmap_soft_fragment.wgsl` (screen-space soft shadows) are the fragment stages using it.
 #define_import_path bevy_terrain_clip::clipmap
@@ -25,6 +30,8 @@ struct ClipmapParams {
     clip_size: f32,
     // Mip levels per layer to sample (1: mip 0 only).
     mips: u32,
+    // Linear colour where there is no data.
+    no_data: vec4<f32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var layers: texture_2d_array<f32>;
@@ -37,6 +44,17 @@ struct ClipmapParams {
 // `footprint` is the pixel's size in virtual-texture coordinates (taken outside the loop, in
 // uniform control flow); in layer i it spans footprint * 2^level texels, which picks the mip.
 fn sample_clip_stack(uv: vec2<f32>, footprint: f32) -> vec4<f32> {
+    if any(uv < vec2(0.0)) || any(uv >= vec2(1.0)) {
+        return clipmap.no_data;
+    }
+    return over_no_data(sample_resident(uv, footprint));
+}
+
+fn over_no_data(texel: vec4<f32>) -> vec4<f32> {
+    return vec4(texel.rgb + (1.0 - texel.a) * clipmap.no_data.rgb, 1.0);
+}
+
+fn sample_resident(uv: vec2<f32>, footprint: f32) -> vec4<f32> {
     for (var i = i32(clipmap.layer_count) - 1; i >= 0; i -= 1) {
         let level = clipmap.base_level + 1u + u32(i);
         let scale = exp2(f32(level));

@@ -28,6 +28,8 @@ pub struct ClipmapParams {
     pub clip_size: f32,
     /// Mip levels per layer sampled (1: mip 0 only, nearest).
     pub mips: u32,
+    /// Linear colour shown where there is no data (outside the texture, transparent texels).
+    pub no_data: Vec4,
 }
 
 impl Default for ClipmapParams {
@@ -38,6 +40,7 @@ impl Default for ClipmapParams {
             layer_count: 0,
             clip_size: 1.0,
             mips: 1,
+            no_data: Vec4::from(crate::settings::NO_DATA_COLOR.to_linear().to_f32_array()),
         }
     }
 }

@@ -37,7 +37,13 @@ pub struct ClipmapSettings {
     pub cache_tiles: u32,
     /// Per-frame update budget per virtual texture.
     pub budget: UpdateBudget,
+    /// What the terrain shows where the pyramid has no data: outside its extent (never repeated
+    /// copies of it), over transparent padding and over tiles that are missing or failed.
+    pub no_data_color: Color,
 }
+
+/// The default [`ClipmapSettings::no_data_color`]: a neutral grey-beige, plainly not imagery.
+pub const NO_DATA_COLOR: Color = Color::srgb(0.55, 0.53, 0.49);
 
 impl Default for ClipmapSettings {
     fn default() -> Self {
@@ -47,6 +53,7 @@ impl Default for ClipmapSettings {
             layer_mips: 3,
             cache_tiles: 256,
             budget: UpdateBudget::default(),
+            no_data_color: NO_DATA_COLOR,
         }
     }
 }
@@ -97,6 +104,17 @@ impl ClipmapSettings {
             UpdateBudget::Subtiles(n) => n > 0,
             UpdateBudget::Bytes(b) => b > 0,
         };
+        let colour = out.no_data_color.to_linear();
+        if ![colour.red, colour.green, colour.blue, colour.alpha]
+            .iter()
+            .all(|c| c.is_finite())
+        {
+            fixes.push(format!(
+                "no_data_color {:?} -> {NO_DATA_COLOR:?} (not finite)",
+                out.no_data_color
+            ));
+            out.no_data_color = NO_DATA_COLOR;
+        }
         if !budget_ok {
             fixes.push(format!(
                 "budget {:?} -> {:?}",
@@ -142,9 +160,11 @@ mod tests {
             layer_mips: 0,
             cache_tiles: 0,
             budget: UpdateBudget::Millis(f32::NAN),
+            no_data_color: Color::srgb(f32::NAN, 0.5, 0.5),
         };
         let (s, fixes) = bad.sanitized();
-        assert_eq!(fixes.len(), 5, "{fixes:?}");
+        assert_eq!(fixes.len(), 6, "{fixes:?}");
+        assert_eq!(s.no_data_color, NO_DATA_COLOR);
         assert_eq!(s.clip_size, 1024);
         assert_eq!(s.subtile_size, 512);
         assert!(s.layer_mips >= 1);

@@ -142,6 +142,8 @@ pub struct ClipStackTexture {
     pub budget: UpdateBudget,
     /// Where the texture lies in the world; with one, the centre of detail follows the camera.
     pub mapping: Option<TextureMapping>,
+    /// Shown where there is no data ([`ClipmapSettings::no_data_color`]).
+    pub no_data_color: Color,
     writes: Vec<SubtileWrite>,
     /// Running mean of the main world's cost of cutting one subtile and its mips (ms).
     prepare_ms_per_subtile: f64,
@@ -226,6 +228,7 @@ impl ClipStackTexture {
             center_uv,
             budget: UpdateBudget::Subtiles(16),
             mapping: None,
+            no_data_color: crate::settings::NO_DATA_COLOR,
             writes: Vec::new(),
             prepare_ms_per_subtile: 0.0,
         }
@@ -252,6 +255,7 @@ impl ClipStackTexture {
             images,
         );
         clip.budget = settings.budget;
+        clip.no_data_color = settings.no_data_color;
         clip
     }
 
@@ -662,6 +666,7 @@ pub fn clipmap_params(clip: &ClipStackTexture) -> ClipmapParams {
         } else {
             1
         },
+        no_data: Vec4::from(clip.no_data_color.to_linear().to_f32_array()),
         ..default()
     };
     let shrink = if clip.linear_filtering { 1.0 } else { 0.0 };
@@ -687,11 +692,18 @@ pub fn clipmap_params(clip: &ClipStackTexture) -> ClipmapParams {
 
 /// Keeps every stack's materials' coverage current.
 pub fn update_clipmap_materials(
-    stacks: Query<&ClipStackTexture>,
+    mut stacks: Query<&mut ClipStackTexture>,
+    settings: Option<Res<ClipmapSettings>>,
     mut materials: ResMut<Assets<ClipmapMaterial>>,
 ) {
-    for clip in &stacks {
-        let params = clipmap_params(clip);
+    for mut clip in &mut stacks {
+        // The no-data colour follows the settings live (the panel edits it).
+        if let Some(settings) = settings.as_ref().filter(|s| s.is_changed())
+            && clip.no_data_color != settings.no_data_color
+        {
+            clip.no_data_color = settings.no_data_color;
+        }
+        let params = clipmap_params(&clip);
         for handle in clip.materials() {
             let Some(material) = materials.get(handle) else {
                 continue;

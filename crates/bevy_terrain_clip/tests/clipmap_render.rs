@@ -147,3 +147,135 @@ fn terrain_material_samples_what_the_cpu_reference_picks() {
     let (far, _) = render_and_compare(DVec2::new(1.0e6, 1.0e6)).unwrap();
     assert!(far >= 0.99, "{far:.4} of pixels match at 10^6 m");
 }
+
+/// A pyramid much smaller than the clip (32 texels across under a 128-texel clip; users' partial
+/// pyramids are like this), its right quarter transparent padding, seen with ground all around
+/// it: the data shows (magnified from its finest level), and outside it and over the padding the
+/// documented no-data colour — never repeated copies of the texture, never dark padding.
+#[test]
+fn a_small_pyramid_renders_inside_its_extent_and_no_data_around_it() {
+    use bevy_terrain_clip::clip::stack::over_no_data;
+    use bevy_terrain_clip::settings::NO_DATA_COLOR;
+    let Some(mut harness) = RenderHarness::for_test("clipmap_small", SIZE, SIZE) else {
+        return;
+    };
+    harness.app_mut().add_plugins(TerrainClipPlugin);
+    // 16-texel tiles, 2 levels: virtual level 5 is the finest, 32 texels of 10 m.
+    let texel = |level: u32, x: u64, y: u64| {
+        let side = 1u64 << level;
+        if x * 4 >= side * 3 {
+            [0, 0, 0, 0]
+        } else {
+            [(x * 255 / side) as u8, (y * 255 / side) as u8, 90, 255]
+        }
+    };
+    let source = Arc::new(ProceduralTileSource::new(16, 2, texel));
+    const SMALL_M: f64 = 320.0;
+    const VIEW: f64 = 480.0;
+    let center = DVec2::splat(SMALL_M / 2.0);
+    let uv_of = move |p: DVec2| p / SMALL_M;
+    let entity = {
+        let world = harness.world_mut();
+        let mut clip = {
+            let mut images = world.resource_mut::<Assets<Image>>();
+            let mut clip = ClipStackTexture::new(source, 128, 16, 64, [0.5, 0.5], &mut images);
+            clip.set_linear_filtering(false, &mut images);
+            clip
+        };
+        let material = clip.material(
+            StandardMaterial {
+                unlit: true,
+                ..default()
+            },
+            &mut world.resource_mut::<Assets<ClipmapMaterial>>(),
+        );
+        let mesh = world.resource_mut::<Assets<Mesh>>().add(flat_patch_mesh(
+            center - DVec2::splat(VIEW),
+            2.0 * VIEW,
+            16,
+            center,
+            uv_of,
+        ));
+        world.spawn((
+            Mesh3d(mesh),
+            MeshMaterial3d(material),
+            Transform::from_xyz(center.x as f32, 0.0, center.y as f32),
+        ));
+        world.spawn((
+            Camera3d::default(),
+            Msaa::Off,
+            Tonemapping::None,
+            DebandDither::Disabled,
+            Projection::Orthographic(OrthographicProjection {
+                scaling_mode: ScalingMode::Fixed {
+                    width: VIEW as f32,
+                    height: VIEW as f32,
+                },
+                ..OrthographicProjection::default_3d()
+            }),
+            Transform::from_xyz(center.x as f32, 50.0, center.y as f32).looking_at(
+                Vec3::new(center.x as f32, 0.0, center.y as f32),
+                Vec3::NEG_Z,
+            ),
+        ));
+        world.spawn(clip).id()
+    };
+    harness.wait_until_ready().unwrap();
+    for _ in 0..3 {
+        harness.step();
+    }
+    let _ = entity;
+    let image = harness.render().unwrap();
+    let no_data = NO_DATA_COLOR.to_linear();
+    let no_data = [no_data.red, no_data.green, no_data.blue];
+    let srgb = |linear: [f32; 4]| {
+        let c = Color::linear_rgba(linear[0], linear[1], linear[2], 1.0).to_srgba();
+        [c.red, c.green, c.blue].map(|v| (v * 255.0).round() as i32)
+    };
+    let (mut matching, mut outside, mut padding, mut data) = (0usize, 0usize, 0usize, 0usize);
+    let mut expected = RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]);
+    for py in 0..SIZE {
+        for px in 0..SIZE {
+            let world = center
+                + DVec2::new(
+                    ((px as f64 + 0.5) / SIZE as f64 - 0.5) * VIEW,
+                    ((py as f64 + 0.5) / SIZE as f64 - 0.5) * VIEW,
+                );
+            let uv = uv_of(world);
+            let inside = (0.0..1.0).contains(&uv.x) && (0.0..1.0).contains(&uv.y);
+            let sampled = inside.then(|| {
+                let t = texel(5, (uv.x * 32.0) as u64, (uv.y * 32.0) as u64);
+                // Stored sRGB; the sampler returns linear.
+                let c = Color::srgba_u8(t[0], t[1], t[2], t[3]).to_linear();
+                [
+                    c.red * c.alpha,
+                    c.green * c.alpha,
+                    c.blue * c.alpha,
+                    c.alpha,
+                ]
+            });
+            match sampled {
+                None => outside += 1,
+                Some(t) if t[3] == 0.0 => padding += 1,
+                Some(_) => data += 1,
+            }
+            let want = srgb(over_no_data(sampled, no_data));
+            expected.set_pixel(px, py, [want[0] as u8, want[1] as u8, want[2] as u8, 255]);
+            let got = image.pixel(px, py);
+            if (0..3).all(|c| (got[c] as i32 - want[c]).abs() <= 2) {
+                matching += 1;
+            }
+        }
+    }
+    let dir = bevy_nature_harness::artifacts_dir().join("clipmap_small");
+    std::fs::create_dir_all(&dir).ok();
+    image.save_png(dir.join("gpu.png")).ok();
+    expected.save_png(dir.join("cpu.png")).ok();
+    let fraction = matching as f64 / (SIZE * SIZE) as f64;
+    eprintln!(
+        "small pyramid: {:.2} % of pixels match ({outside} outside, {padding} padding, {data} data)",
+        fraction * 100.0
+    );
+    assert!(outside > 2000 && padding > 500 && data > 2000);
+    assert!(fraction >= 0.99, "{fraction:.4} of pixels match");
+}

@@ -195,6 +195,21 @@ pub fn tile_of(upload: &SubtileUpload, tile_size: u32, subtile_size: u32) -> cra
     }
 }
 
+/// CPU reference of the shader's no-data fill (`clipmap.wgsl`): a sampled texel (linear RGBA,
+/// transparent texels black — padding, missing tiles) over the no-data colour, opaque;
+/// `None` outside the texture's `[0, 1)²` gives the no-data colour itself.
+pub fn over_no_data(texel: Option<[f32; 4]>, no_data: [f32; 3]) -> [f32; 4] {
+    match texel {
+        Some([r, g, b, a]) => [
+            r + (1.0 - a) * no_data[0],
+            g + (1.0 - a) * no_data[1],
+            b + (1.0 - a) * no_data[2],
+            1.0,
+        ],
+        None => [no_data[0], no_data[1], no_data[2], 1.0],
+    }
+}
+
 /// CPU reference of the shader's choice: the finest windowed layer whose coverage holds virtual
 /// coordinates `uv`, as `(layer index, level, level texel)`; layer 0 (the base level, always
 /// resident) otherwise.
