@@ -103,7 +103,14 @@ pub enum TileStatus {
         /// First frame a retry may start.
         retry_at: u64,
     },
+    /// Failed [`MAX_TILE_ATTEMPTS`] times: never requested again (the terrain shows the
+    /// no-data colour there).
+    GivenUp,
 }
+
+/// Loads of one tile that may fail before it is given up: with the doubling back-off, about
+/// 2⁶ frames of retrying — a file being written, a server's brief outage — then no more.
+pub const MAX_TILE_ATTEMPTS: u32 = 6;
 
 /// The queue of tile loads.
 #[derive(Clone, Debug, Default)]
@@ -134,7 +141,7 @@ impl TileRequests {
                 false
             }
             Some(TileStatus::Failed { retry_at, .. }) if frame < *retry_at => false,
-            Some(TileStatus::Absent) => false,
+            Some(TileStatus::Absent | TileStatus::GivenUp) => false,
             _ => {
                 // A retry keeps its failure count (in `failed_attempts`) for the next back-off.
                 self.queue.insert(key);
@@ -166,17 +173,21 @@ impl TileRequests {
         self.absent.insert(key);
     }
 
-    /// A load failed (I/O error, corrupt image) in frame `frame`: retry after a back-off.
-    pub fn failed(&mut self, key: TileKey, frame: u64) {
+    /// A load failed (I/O error, corrupt image) in frame `frame`: retry after a back-off, or
+    /// give the tile up after [`MAX_TILE_ATTEMPTS`] failures. Returns the failures so far.
+    pub fn failed(&mut self, key: TileKey, frame: u64) -> u32 {
         let attempts = self.failed_attempts.get(&key).copied().unwrap_or(0) + 1;
         self.failed_attempts.insert(key, attempts);
-        self.status.insert(
-            key,
+        let status = if attempts >= MAX_TILE_ATTEMPTS {
+            TileStatus::GivenUp
+        } else {
             TileStatus::Failed {
                 attempts,
                 retry_at: frame + backoff_frames(attempts),
-            },
-        );
+            }
+        };
+        self.status.insert(key, status);
+        attempts
     }
 
     /// The status of `key`, if requested.
@@ -260,5 +271,15 @@ mod tests {
             })
         );
         assert_eq!(backoff_frames(30), 256);
+        // A tile that keeps failing is given up, and not asked for again.
+        let mut frame = 20;
+        for attempt in 3..=MAX_TILE_ATTEMPTS {
+            frame += 300;
+            assert!(r.request(key(3, 0, 0), frame), "attempt {attempt}");
+            r.next_batch(1);
+            assert_eq!(r.failed(key(3, 0, 0), frame), attempt);
+        }
+        assert_eq!(r.status(&key(3, 0, 0)), Some(TileStatus::GivenUp));
+        assert!(!r.request(key(3, 0, 0), frame + 100_000));
     }
 }

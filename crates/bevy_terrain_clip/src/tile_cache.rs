@@ -24,6 +24,8 @@ pub struct TileCacheStats {
     pub absent: u64,
     /// Loads that failed.
     pub failed: u64,
+    /// Tiles given up after [`MAX_TILE_ATTEMPTS`](crate::cache::MAX_TILE_ATTEMPTS) failures.
+    pub given_up: u64,
     /// Requests merged into a queued or running load.
     pub merged: u64,
     /// Tiles evicted to make room.
@@ -154,8 +156,17 @@ impl TileCache {
                     self.stats.absent += 1;
                 }
                 Err(e) => {
-                    warn!("terrain tile {key:?} failed (retried later): {e}");
-                    self.requests.failed(key, self.frame);
+                    let attempts = self.requests.failed(key, self.frame);
+                    let max = crate::cache::MAX_TILE_ATTEMPTS;
+                    // One warning when a tile first fails, one when it is given up.
+                    if attempts == 1 {
+                        warn!("terrain tile {key:?} failed (retried up to {max} times): {e}");
+                    } else if attempts >= max {
+                        warn!("terrain tile {key:?} given up after {attempts} failures: {e}");
+                        self.stats.given_up += 1;
+                    } else {
+                        bevy::log::debug!("terrain tile {key:?} failed again ({attempts}): {e}");
+                    }
                     self.requested_at.remove(&key);
                     self.stats.failed += 1;
                 }
