@@ -478,6 +478,51 @@ mod tests {
     }
 
     #[test]
+    fn the_height_query_reads_the_ground_back_in_metres() {
+        use crate::dem::{DiskHeightSource, HeightQuery, HeightScale};
+        let dir = std::env::temp_dir().join(format!("pyramid_query_{}", std::process::id()));
+        std::fs::remove_dir_all(&dir).ok();
+        // A tilted plane over 130 × 100 texels of 2 m, its north-west corner at (1000, 5000).
+        let (origin, mpt) = ([1000.0f64, 5000.0f64], 2.0f64);
+        let plane = |x: f64, z: f64| 100.0 + 0.3 * (x - origin[0]) - 0.2 * (z - origin[1]);
+        let scale = HeightScale::covering(0.0, 200.0);
+        let heights = ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(130, 100, |i, j| {
+            let centre = (
+                origin[0] + (i as f64 + 0.5) * mpt,
+                origin[1] + (j as f64 + 0.5) * mpt,
+            );
+            image::Luma([scale.value(plane(centre.0, centre.1) as f32)])
+        });
+        let settings = BuildSettings {
+            tile_size: 32,
+            origin_m: origin,
+            metres_per_texel: mpt,
+            heights: scale,
+            ..Default::default()
+        };
+        build_pyramid(&heights, &dir, &settings, &|_, _| {}, None).unwrap();
+        let mut query = HeightQuery::new(DiskHeightSource::open(&dir).unwrap(), 8);
+        // Anywhere inside the image (a texel in from its edges), across tile boundaries: the
+        // plane, to within the 16-bit step (a plane is exact under bilinear interpolation).
+        let mut worst = 0.0f64;
+        for k in 0..200 {
+            let x = origin[0] + mpt * (1.0 + 127.0 * ((k * 37 % 200) as f64 / 200.0));
+            let z = origin[1] + mpt * (1.0 + 97.0 * ((k * 91 % 200) as f64 / 200.0));
+            let h = query.height_at(x, z).unwrap().unwrap() as f64;
+            worst = worst.max((h - plane(x, z)).abs());
+        }
+        assert!(worst <= scale.scale_m, "worst {worst} m");
+        let n = query.normal_at(1100.0, 5100.0).unwrap().unwrap();
+        let len = (0.3f32 * 0.3 + 1.0 + 0.2 * 0.2).sqrt();
+        let want = [-0.3 / len, 1.0 / len, 0.2 / len];
+        assert!((0..3).all(|c| (n[c] - want[c]).abs() < 0.01), "{n:?}");
+        // Outside the pyramid: nothing.
+        assert_eq!(query.height_at(999.0, 5100.0).unwrap(), None);
+        assert_eq!(query.height_at(1100.0, 5000.0 + 512.0 + 1.0).unwrap(), None);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
     fn an_interrupted_build_resumes_to_the_same_files() {
         let base = std::env::temp_dir().join(format!("pyramid_resume_{}", std::process::id()));
         std::fs::remove_dir_all(&base).ok();

@@ -205,6 +205,100 @@ impl DiskHeightSource {
     }
 }
 
+/// Heights of the ground for gameplay: `height_at(x, z)` in metres at any world point over an
+/// elevation pyramid, bilinear between texel centres of its finest level (the surface the
+/// heights describe), and the surface normal. Decoded tiles stay in an LRU of `capacity` tiles;
+/// a tile not yet in it is read from disk on the calling thread, so the first query of a new
+/// area costs a file read (a few milliseconds for a 256² PNG).
+pub struct HeightQuery {
+    source: DiskHeightSource,
+    tiles: crate::cache::LruCache<Option<Arc<HeightTile>>>,
+}
+
+impl HeightQuery {
+    /// A query over `source` keeping up to `capacity` decoded tiles.
+    pub fn new(source: DiskHeightSource, capacity: usize) -> Self {
+        Self {
+            source,
+            tiles: crate::cache::LruCache::new(capacity.max(4)),
+        }
+    }
+
+    /// The finest level's texel `(i, j)` (north-west origin), `None` outside the data or where
+    /// its tile is absent.
+    fn texel(&mut self, i: i64, j: i64) -> Result<Option<f32>, TileError> {
+        let manifest = &self.source.manifest;
+        let side = (manifest.tile_size as i64) << (manifest.levels - 1);
+        if i < 0 || j < 0 || i >= side || j >= side {
+            return Ok(None);
+        }
+        let t = manifest.tile_size as i64;
+        let key = TileKey {
+            z: manifest.levels - 1,
+            x: (i / t) as u32,
+            y: (j / t) as u32,
+        };
+        if self.tiles.get(&key).is_none() {
+            let tile = self.source.load_heights(key)?.map(Arc::new);
+            self.tiles.insert(key, tile);
+        }
+        Ok(self
+            .tiles
+            .get(&key)
+            .and_then(|tile| tile.as_ref())
+            .map(|tile| tile.at((i % t) as u32, (j % t) as u32)))
+    }
+
+    /// The ground's height (m) at world `(x, z)`: bilinear between the four nearest texel
+    /// centres (clamped to the data at its edges); `None` outside the data.
+    pub fn height_at(&mut self, x: f64, z: f64) -> Result<Option<f32>, TileError> {
+        let manifest = self.source.manifest.clone();
+        let fx = (x - manifest.origin_m[0]) / manifest.metres_per_texel - 0.5;
+        let fz = (z - manifest.origin_m[1]) / manifest.metres_per_texel - 0.5;
+        let side = ((manifest.tile_size as i64) << (manifest.levels - 1)) as f64;
+        if !(fx >= -0.5 && fz >= -0.5 && fx < side - 0.5 && fz < side - 0.5) {
+            return Ok(None);
+        }
+        let clamp = |v: f64| v.clamp(0.0, side - 1.0);
+        let (fx, fz) = (clamp(fx), clamp(fz));
+        let (i, j) = (fx.floor() as i64, fz.floor() as i64);
+        let (tx, tz) = ((fx - i as f64) as f32, (fz - j as f64) as f32);
+        let mut corner = |di: i64, dj: i64| -> Result<Option<f32>, TileError> {
+            let (ci, cj) = ((i + di).min(side as i64 - 1), (j + dj).min(side as i64 - 1));
+            self.texel(ci, cj)
+        };
+        let (Some(h00), Some(h10), Some(h01), Some(h11)) =
+            (corner(0, 0)?, corner(1, 0)?, corner(0, 1)?, corner(1, 1)?)
+        else {
+            return Ok(None);
+        };
+        let top = h00 + (h10 - h00) * tx;
+        let bottom = h01 + (h11 - h01) * tx;
+        Ok(Some(top + (bottom - top) * tz))
+    }
+
+    /// The ground's unit normal (y up) at `(x, z)`, from central differences one texel apart;
+    /// `None` outside the data.
+    pub fn normal_at(&mut self, x: f64, z: f64) -> Result<Option<[f32; 3]>, TileError> {
+        let d = self.source.manifest.metres_per_texel;
+        let (Some(west), Some(east), Some(north), Some(south)) = (
+            self.height_at(x - d, z)?,
+            self.height_at(x + d, z)?,
+            self.height_at(x, z - d)?,
+            self.height_at(x, z + d)?,
+        ) else {
+            return Ok(None);
+        };
+        let (dx, dz) = (
+            (east - west) / (2.0 * d as f32),
+            (south - north) / (2.0 * d as f32),
+        );
+        let n = [-dx, 1.0, -dz];
+        let len = (n[0] * n[0] + 1.0 + n[2] * n[2]).sqrt();
+        Ok(Some([n[0] / len, n[1] / len, n[2] / len]))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
