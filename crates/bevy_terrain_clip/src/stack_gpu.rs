@@ -26,7 +26,7 @@ use bevy::render::renderer::RenderQueue;
 use bevy::render::texture::GpuImage;
 use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderSystems};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// The render world's cost of writing subtiles, shared with the main world so a
 /// [`UpdateBudget::Millis`] budget covers the whole upload: cutting and mip-filtering subtiles
@@ -145,6 +145,12 @@ pub struct ClipStackTexture {
     /// Shown where there is no data ([`ClipmapSettings::no_data_color`]).
     pub no_data_color: Color,
     writes: Vec<SubtileWrite>,
+    /// The base level being read on the IO task pool (its mip chain, concatenated).
+    base_task: Option<bevy::tasks::Task<Vec<u8>>>,
+    /// The base level's mips on their way to the GPU, sent every frame until written.
+    base_writes: Vec<SubtileWrite>,
+    /// Set by the render world once the base level is on the GPU.
+    base_written: Arc<AtomicBool>,
     /// Running mean of the main world's cost of cutting one subtile and its mips (ms).
     prepare_ms_per_subtile: f64,
 }
@@ -216,7 +222,27 @@ impl ClipStackTexture {
             dimension: Some(TextureViewDimension::D2Array),
             ..default()
         });
-        let base = images.add(base_level_image(source.as_ref(), clip_size));
+        // The base level is read off the main thread: until it arrives the placeholder is
+        // transparent, which the material shows as no data.
+        let mut placeholder = Image::new_uninit(
+            Extent3d {
+                width: clip_size,
+                height: clip_size,
+                depth_or_array_layers: 1,
+            },
+            TextureDimension::D2,
+            TextureFormat::Rgba8UnormSrgb,
+            RenderAssetUsages::RENDER_WORLD,
+        );
+        placeholder.texture_descriptor.mip_level_count = clip_size.trailing_zeros() + 1;
+        placeholder.data = Some(vec![0; base_level_bytes(clip_size)]);
+        placeholder.sampler = repeat_sampler(true);
+        let base = images.add(placeholder);
+        let base_task = {
+            let source = source.clone();
+            bevy::tasks::IoTaskPool::get_or_init(bevy::tasks::TaskPool::new)
+                .spawn(async move { base_level_data(source.as_ref(), clip_size) })
+        };
         Self {
             cache: TileCache::new(source, cache_tiles),
             stack,
@@ -230,6 +256,9 @@ impl ClipStackTexture {
             mapping: None,
             no_data_color: crate::settings::NO_DATA_COLOR,
             writes: Vec::new(),
+            base_task: Some(base_task),
+            base_writes: Vec::new(),
+            base_written: Arc::new(AtomicBool::new(false)),
             prepare_ms_per_subtile: 0.0,
         }
     }
@@ -294,6 +323,12 @@ impl ClipStackTexture {
         }
     }
 
+    /// Whether the base level is on the GPU (read off the main thread when the stack is made;
+    /// until then the terrain shows the no-data colour where no layer covers).
+    pub fn base_ready(&self) -> bool {
+        self.base_written.load(Ordering::Acquire)
+    }
+
     /// The uploads queued this frame.
     pub fn writes(&self) -> &[SubtileWrite] {
         &self.writes
@@ -317,12 +352,46 @@ fn repeat_sampler(linear: bool) -> bevy::image::ImageSampler {
     })
 }
 
-/// The base level `l_b = log2 c` as a `c × c` image with its full mip chain (box-filtered), read
-/// from `source` now (blocking: `(c / tile)²` tiles, or one coarser tile downsampled). A pyramid
+/// Bytes of a `c × c` RGBA8 base level with its full mip chain.
+fn base_level_bytes(clip_size: u32) -> usize {
+    let mut bytes = 0usize;
+    let mut size = clip_size as usize;
+    loop {
+        bytes += size * size * 4;
+        if size == 1 {
+            return bytes;
+        }
+        size /= 2;
+    }
+}
+
+/// The base level `l_b = log2 c` as a `c × c` image with its full mip chain
+/// ([`base_level_data`]), read from `source` now, blocking.
+pub fn base_level_image(source: &dyn TileSource, clip_size: u32) -> Image {
+    let data = base_level_data(source, clip_size);
+    let mut image = Image::new_uninit(
+        Extent3d {
+            width: clip_size,
+            height: clip_size,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.texture_descriptor.mip_level_count = clip_size.trailing_zeros() + 1;
+    image.data = Some(data);
+    image.sampler = repeat_sampler(true);
+    image
+}
+
+/// The base level `l_b = log2 c`'s `c × c` texels and its full mip chain (box-filtered),
+/// concatenated, read from `source` (blocking: `(c / tile)²` tiles, or one coarser tile
+/// downsampled; [`ClipStackTexture`] runs it on the IO task pool). A pyramid
 /// whose finest level is narrower than `c` texels gives its finest level, magnified (nearest) to
 /// `c`: the same ground, blurrier, rather than a level that does not exist. Missing or failed
 /// tiles are left transparent and logged.
-pub fn base_level_image(source: &dyn TileSource, clip_size: u32) -> Image {
+pub fn base_level_data(source: &dyn TileSource, clip_size: u32) -> Vec<u8> {
     let t = source.tile_size();
     let base_level = clip_size.trailing_zeros();
     let tile_bits = t.trailing_zeros();
@@ -372,27 +441,12 @@ pub fn base_level_image(source: &dyn TileSource, clip_size: u32) -> Image {
         size /= 2;
     }
     let mut data = level.clone();
-    let mut mips = 1;
     while size > 1 {
         level = halve(&level, size);
         size /= 2;
         data.extend_from_slice(&level);
-        mips += 1;
     }
-    let mut image = Image::new_uninit(
-        Extent3d {
-            width: clip_size,
-            height: clip_size,
-            depth_or_array_layers: 1,
-        },
-        TextureDimension::D2,
-        TextureFormat::Rgba8UnormSrgb,
-        RenderAssetUsages::RENDER_WORLD,
-    );
-    image.texture_descriptor.mip_level_count = mips;
-    image.data = Some(data);
-    image.sampler = repeat_sampler(true);
-    image
+    data
 }
 
 /// The 2×2 box filter of a `side × side` RGBA8 square (rounded means of the stored bytes).
@@ -439,6 +493,33 @@ pub fn stream_clip_stacks(
         let started = std::time::Instant::now();
         let clip = &mut *clip;
         clip.writes.clear();
+        // The base level, once read: one write per mip, sent until the render world has it.
+        if let Some(data) = clip
+            .base_task
+            .as_mut()
+            .and_then(bevy::tasks::futures::check_ready)
+        {
+            clip.base_task = None;
+            let (mut offset, mut size) = (0usize, clip.stack.clip_size);
+            for mip in 0.. {
+                let bytes = (size * size * 4) as usize;
+                clip.base_writes.push(SubtileWrite {
+                    layer: 0,
+                    mip,
+                    size,
+                    origin: [0, 0],
+                    texels: Arc::new(data[offset..offset + bytes].to_vec()),
+                });
+                offset += bytes;
+                if size == 1 {
+                    break;
+                }
+                size /= 2;
+            }
+        }
+        if clip.base_ready() {
+            clip.base_writes.clear();
+        }
         clip.stack.recenter(clip.center_uv);
         clip.cache.poll();
         let tile_size = clip.cache.source().tile_size();
@@ -595,7 +676,7 @@ pub const TILE_LATENCY_MS: DiagnosticPath = DiagnosticPath::const_new("terrain/t
 
 /// This frame's subtile writes (render world).
 #[derive(Resource, Default)]
-struct ExtractedClipWrites(Vec<(AssetId<Image>, SubtileWrite)>);
+struct ExtractedClipWrites(Vec<(AssetId<Image>, SubtileWrite, Option<Arc<AtomicBool>>)>);
 
 fn extract_clip_writes(
     mut extracted: ResMut<ExtractedClipWrites>,
@@ -604,7 +685,14 @@ fn extract_clip_writes(
     extracted.0.clear();
     for clip in &stacks {
         for write in &clip.writes {
-            extracted.0.push((clip.layers.id(), write.clone()));
+            extracted.0.push((clip.layers.id(), write.clone(), None));
+        }
+        for write in &clip.base_writes {
+            extracted.0.push((
+                clip.base.id(),
+                write.clone(),
+                Some(clip.base_written.clone()),
+            ));
         }
     }
 }
@@ -616,12 +704,22 @@ fn write_subtiles(
     cost: Res<UploadCost>,
 ) {
     let started = std::time::Instant::now();
-    let subtiles = extracted.0.iter().filter(|(_, w)| w.mip == 0).count();
-    for (image, write) in &extracted.0 {
+    let subtiles = extracted
+        .0
+        .iter()
+        .filter(|(_, w, base)| w.mip == 0 && base.is_none())
+        .count();
+    for (image, write, base_written) in &extracted.0 {
         let Some(gpu) = images.get(*image) else {
-            warn!("clip stack texture not prepared yet: a subtile upload was dropped");
+            // The base level is sent again next frame; a subtile is planned again.
+            if base_written.is_none() {
+                warn!("clip stack texture not prepared yet: a subtile upload was dropped");
+            }
             continue;
         };
+        if let Some(flag) = base_written {
+            flag.store(true, Ordering::Release);
+        }
         queue.write_texture(
             TexelCopyTextureInfo {
                 texture: &gpu.texture,
