@@ -123,6 +123,17 @@ pub const PALM_HEIGHT: f32 = 6.0;
 /// Leaves per crown of the canopy scene.
 pub const CANOPY_LEAVES: usize = 1500;
 
+/// A triangle list of `positions` and `normals`.
+fn triangle_mesh(positions: Vec<[f32; 3]>, normals: Vec<[f32; 3]>, indices: Vec<u32>) -> Mesh {
+    Mesh::new(
+        bevy::mesh::PrimitiveTopology::TriangleList,
+        bevy::asset::RenderAssetUsages::default(),
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+    .with_inserted_indices(bevy::mesh::Indices::U32(indices))
+}
+
 /// One crown of the canopy scene: `leaves` square leaves of side `leaf` m, centres uniform in an
 /// ellipsoid of radii `radii` around the origin, randomly turned (a fixed seed: the same crown
 /// every run).
@@ -161,13 +172,7 @@ pub fn crown_mesh(leaves: usize, radii: Vec3, leaf: f32, seed: u64) -> Mesh {
         }
         indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
     }
-    Mesh::new(
-        bevy::mesh::PrimitiveTopology::TriangleList,
-        bevy::asset::RenderAssetUsages::default(),
-    )
-    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
-    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
-    .with_inserted_indices(bevy::mesh::Indices::U32(indices))
+    triangle_mesh(positions, normals, indices)
 }
 
 /// Centre of the palm trunk at height fraction `t` ∈ [0, 1] (relative to [`PALM_BASE`]): a
@@ -204,13 +209,7 @@ pub fn palm_trunk_mesh(sides: usize, rings: usize) -> Mesh {
             indices.extend([a, c, b, b, c, d].map(|i| i as u32));
         }
     }
-    Mesh::new(
-        bevy::mesh::PrimitiveTopology::TriangleList,
-        bevy::asset::RenderAssetUsages::default(),
-    )
-    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
-    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
-    .with_inserted_indices(bevy::mesh::Indices::U32(indices))
+    triangle_mesh(positions, normals, indices)
 }
 
 /// The palm's crown, relative to the top of its trunk: `fronds` arching fronds, each a rachis
@@ -259,13 +258,7 @@ pub fn palm_fronds_mesh(fronds: usize) -> Mesh {
             }
         }
     }
-    Mesh::new(
-        bevy::mesh::PrimitiveTopology::TriangleList,
-        bevy::asset::RenderAssetUsages::default(),
-    )
-    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
-    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
-    .with_inserted_indices(bevy::mesh::Indices::U32(indices))
+    triangle_mesh(positions, normals, indices)
 }
 
 /// Spawns the palm of the beach scene at [`PALM_BASE`] with `parts` (visibility, markers)

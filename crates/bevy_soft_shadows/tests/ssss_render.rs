@@ -494,6 +494,36 @@ fn ssss_follows_eq_6_1_in_a_second_cascade() {
     }
 }
 
+/// The large sun of the thin-blocker and lattice tests (rad).
+const THETA_LARGE: f32 = 0.25;
+
+/// A harness for `test` with the soft shadows plugin, the ground, `blocker` at `at`, the sun and
+/// the top-down camera (not yet ready).
+fn large_sun_harness(test: &str, blocker: Cuboid, at: Vec3) -> Option<RenderHarness> {
+    let mut harness = RenderHarness::for_test(test, SIZE, SIZE)?;
+    harness.app_mut().add_plugins(SoftShadowsPlugin);
+    setup_scene(&mut harness, blocker, at, sun_direction(), CENTRE);
+    Some(harness)
+}
+
+/// Puts SSSS for the large sun (`taps_per_side` taps a side) on the scene's sun and renders
+/// until the soft shadow shows.
+fn large_sun_ssss(harness: &mut RenderHarness, hard: &[f32], taps_per_side: u32) -> Vec<f32> {
+    let sun = sun_entity(harness);
+    harness
+        .world_mut()
+        .entity_mut(sun)
+        .insert(ScreenSpaceSoftShadows {
+            light_size: THETA_LARGE,
+            max_occluder_distance: 6.0,
+            max_kernel_px: 60.0,
+            taps_per_side,
+            lazy_shadowing: false,
+            ..default()
+        });
+    render_until(harness, hard, |img| rmse(img, hard) > 0.001)
+}
+
 /// A thin blocker under a large light: a 0.1 m pole 4 m tall under a 0.25 rad sun. Its shadow is
 /// narrower than the penumbra from a metre behind the pole on, so the true shadow is a faint line
 /// whose contrast falls with the distance. SSSS must keep that contrast, neither washing the line
@@ -509,35 +539,18 @@ fn ssss_follows_eq_6_1_in_a_second_cascade() {
 /// middle).
 #[test]
 fn a_thin_blocker_keeps_its_contrast_under_a_large_light() {
-    const THETA_LARGE: f32 = 0.25;
-    let Some(mut harness) = RenderHarness::for_test("ssss_thin", SIZE, SIZE) else {
-        return;
-    };
-    harness.app_mut().add_plugins(SoftShadowsPlugin);
-    setup_scene(
-        &mut harness,
+    let Some(mut harness) = large_sun_harness(
+        "ssss_thin",
         Cuboid::new(0.1, 4.0, 0.1),
         Vec3::new(0.0, 2.0, 0.0),
-        sun_direction(),
-        CENTRE,
-    );
+    ) else {
+        return;
+    };
     harness.wait_until_ready().unwrap();
     let hard = to_linear(&harness.render().unwrap());
     let reference =
         area_light_reference_towards(&mut harness, sun_direction(), THETA_LARGE).linear();
-    let sun = sun_entity(&mut harness);
-    harness
-        .world_mut()
-        .entity_mut(sun)
-        .insert(ScreenSpaceSoftShadows {
-            light_size: THETA_LARGE,
-            max_occluder_distance: 6.0,
-            max_kernel_px: 60.0,
-            taps_per_side: 11,
-            lazy_shadowing: false,
-            ..default()
-        });
-    let ssss = render_until(&mut harness, &hard, |img| rmse(img, &hard) > 0.001);
+    let ssss = large_sun_ssss(&mut harness, &hard, 11);
     // Contrast of the line across z at x = −s: 1 − darkest visibility.
     let contrast = |img: &[f32], s: f32| {
         let (col, _) = pixel_of(-s, 0.0);
@@ -585,19 +598,14 @@ fn a_thin_blocker_keeps_its_contrast_under_a_large_light() {
 /// shadow's mean must match the area-light reference rendered in the same run.
 #[test]
 fn a_fine_lattice_under_a_large_light_casts_a_smooth_shadow() {
-    const THETA_LARGE: f32 = 0.25;
-    let Some(mut harness) = RenderHarness::for_test("ssss_lattice", SIZE, SIZE) else {
-        return;
-    };
-    harness.app_mut().add_plugins(SoftShadowsPlugin);
     // The scene's own blocker, out of the way (outside the view and its shadows).
-    setup_scene(
-        &mut harness,
+    let Some(mut harness) = large_sun_harness(
+        "ssss_lattice",
         Cuboid::new(0.1, 0.1, 0.1),
         Vec3::new(30.0, 0.05, 30.0),
-        sun_direction(),
-        CENTRE,
-    );
+    ) else {
+        return;
+    };
     let world = harness.world_mut();
     let slat = world
         .resource_mut::<Assets<Mesh>>()
@@ -621,19 +629,7 @@ fn a_fine_lattice_under_a_large_light_casts_a_smooth_shadow() {
     }
     harness.wait_until_ready().unwrap();
     let hard = to_linear(&harness.render().unwrap());
-    let sun = sun_entity(&mut harness);
-    harness
-        .world_mut()
-        .entity_mut(sun)
-        .insert(ScreenSpaceSoftShadows {
-            light_size: THETA_LARGE,
-            max_occluder_distance: 6.0,
-            max_kernel_px: 60.0,
-            taps_per_side: 5,
-            lazy_shadowing: false,
-            ..default()
-        });
-    let ssss = render_until(&mut harness, &hard, |img| rmse(img, &hard) > 0.001);
+    let ssss = large_sun_ssss(&mut harness, &hard, 5);
     let reference =
         area_light_reference_towards(&mut harness, sun_direction(), THETA_LARGE).linear();
     let dir = artifacts_dir().join("ssss_lattice");

@@ -27,6 +27,23 @@ pub fn mapbox_height([r, g, b]: [u8; 3]) -> f32 {
     (-10000.0 + (r as f64 * 65536.0 + g as f64 * 256.0 + b as f64) * 0.1) as f32
 }
 
+/// The Terrarium texel of height `h` (m), as the tile servers encode it (to 1/256 m).
+pub fn terrarium_texel(h: f32) -> [u8; 3] {
+    let v = h + 32768.0;
+    let r = (v / 256.0).floor();
+    let g = (v - r * 256.0).floor();
+    let b = ((v - r * 256.0 - g) * 256.0).round();
+    [r as u8, g as u8, b as u8]
+}
+
+/// The Mapbox Terrain-RGB texel of height `h` (m), to 0.1 m.
+pub fn mapbox_texel(h: f32) -> [u8; 3] {
+    let v = ((h as f64 + 10000.0) * 10.0)
+        .round()
+        .clamp(0.0, 16_777_215.0) as u32;
+    [(v >> 16) as u8, (v >> 8) as u8, v as u8]
+}
+
 /// The linear map from stored 16-bit values to metres of a `height16` pyramid.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HeightScale {
@@ -312,21 +329,6 @@ mod tests {
             )
             .unwrap();
         bytes
-    }
-
-    /// A Terrarium texel for height `h` (m), as the tile servers encode it.
-    fn terrarium_texel(h: f32) -> [u8; 3] {
-        let v = h + 32768.0;
-        let r = (v / 256.0).floor();
-        let g = (v - r * 256.0).floor();
-        let b = ((v - r * 256.0 - g) * 256.0).round();
-        [r as u8, g as u8, b as u8]
-    }
-
-    /// A Mapbox texel for height `h` (m).
-    fn mapbox_texel(h: f32) -> [u8; 3] {
-        let v = ((h as f64 + 10000.0) * 10.0).round() as u32;
-        [(v >> 16) as u8, (v >> 8) as u8, v as u8]
     }
 
     #[test]

@@ -224,20 +224,7 @@ impl ClipStackTexture {
         });
         // The base level is read off the main thread: until it arrives the placeholder is
         // transparent, which the material shows as no data.
-        let mut placeholder = Image::new_uninit(
-            Extent3d {
-                width: clip_size,
-                height: clip_size,
-                depth_or_array_layers: 1,
-            },
-            TextureDimension::D2,
-            TextureFormat::Rgba8UnormSrgb,
-            RenderAssetUsages::RENDER_WORLD,
-        );
-        placeholder.texture_descriptor.mip_level_count = clip_size.trailing_zeros() + 1;
-        placeholder.data = Some(vec![0; base_level_bytes(clip_size)]);
-        placeholder.sampler = repeat_sampler(true);
-        let base = images.add(placeholder);
+        let base = images.add(base_image(clip_size, vec![0; base_level_bytes(clip_size)]));
         let base_task = {
             let source = source.clone();
             bevy::tasks::IoTaskPool::get_or_init(bevy::tasks::TaskPool::new)
@@ -368,7 +355,11 @@ fn base_level_bytes(clip_size: u32) -> usize {
 /// The base level `l_b = log2 c` as a `c × c` image with its full mip chain
 /// ([`base_level_data`]), read from `source` now, blocking.
 pub fn base_level_image(source: &dyn TileSource, clip_size: u32) -> Image {
-    let data = base_level_data(source, clip_size);
+    base_image(clip_size, base_level_data(source, clip_size))
+}
+
+/// The base level's `c × c` texture with its full mip chain holding `data`.
+fn base_image(clip_size: u32, data: Vec<u8>) -> Image {
     let mut image = Image::new_uninit(
         Extent3d {
             width: clip_size,

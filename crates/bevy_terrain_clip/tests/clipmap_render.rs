@@ -24,6 +24,63 @@ const TEXTURE_M: f64 = 4096.0;
 /// so the base level shows at the edges.
 const VIEW_M: f64 = 3000.0;
 
+/// The harness's image assets.
+fn images_of(harness: &mut RenderHarness) -> Mut<'_, Assets<Image>> {
+    harness.world_mut().resource_mut::<Assets<Image>>()
+}
+
+/// Spawns `clip` (nearest filtering) under an unlit flat patch `2·half_m` wide around `center`
+/// and an orthographic camera looking straight down at it, `view_m` wide (image right = +x,
+/// up = −z); returns the stack's entity.
+fn spawn_top_down_view(
+    harness: &mut RenderHarness,
+    mut clip: ClipStackTexture,
+    center: DVec2,
+    half_m: f64,
+    view_m: f64,
+    uv_of: impl Fn(DVec2) -> DVec2,
+) -> Entity {
+    let world = harness.world_mut();
+    clip.set_linear_filtering(false, &mut world.resource_mut::<Assets<Image>>());
+    let material = clip.material(
+        StandardMaterial {
+            unlit: true,
+            ..default()
+        },
+        &mut world.resource_mut::<Assets<ClipmapMaterial>>(),
+    );
+    let mesh = world.resource_mut::<Assets<Mesh>>().add(flat_patch_mesh(
+        center - DVec2::splat(half_m),
+        2.0 * half_m,
+        16,
+        center,
+        uv_of,
+    ));
+    world.spawn((
+        Mesh3d(mesh),
+        MeshMaterial3d(material),
+        Transform::from_xyz(center.x as f32, 0.0, center.y as f32),
+    ));
+    world.spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Tonemapping::None,
+        DebandDither::Disabled,
+        Projection::Orthographic(OrthographicProjection {
+            scaling_mode: ScalingMode::Fixed {
+                width: view_m as f32,
+                height: view_m as f32,
+            },
+            ..OrthographicProjection::default_3d()
+        }),
+        Transform::from_xyz(center.x as f32, 50.0, center.y as f32).looking_at(
+            Vec3::new(center.x as f32, 0.0, center.y as f32),
+            Vec3::NEG_Z,
+        ),
+    ));
+    world.spawn(clip).id()
+}
+
 fn render_and_compare(origin: DVec2) -> Option<(f64, usize)> {
     let mut harness = RenderHarness::for_test("clipmap_render", SIZE, SIZE)?;
     harness.app_mut().add_plugins(TerrainClipPlugin);
@@ -31,52 +88,8 @@ fn render_and_compare(origin: DVec2) -> Option<(f64, usize)> {
     let center_uv = [0.37, 0.61];
     let center = origin + DVec2::new(center_uv[0], center_uv[1]) * TEXTURE_M;
     let uv_of = move |p: DVec2| (p - origin) / TEXTURE_M;
-    let entity = {
-        let world = harness.world_mut();
-        let mut clip = {
-            let mut images = world.resource_mut::<Assets<Image>>();
-            let mut clip = ClipStackTexture::new(source, 128, 32, 64, center_uv, &mut images);
-            clip.set_linear_filtering(false, &mut images);
-            clip
-        };
-        let material = clip.material(
-            StandardMaterial {
-                unlit: true,
-                ..default()
-            },
-            &mut world.resource_mut::<Assets<ClipmapMaterial>>(),
-        );
-        let mesh = world.resource_mut::<Assets<Mesh>>().add(flat_patch_mesh(
-            center - DVec2::splat(1800.0),
-            3600.0,
-            16,
-            center,
-            uv_of,
-        ));
-        world.spawn((
-            Mesh3d(mesh),
-            MeshMaterial3d(material),
-            Transform::from_xyz(center.x as f32, 0.0, center.y as f32),
-        ));
-        world.spawn((
-            Camera3d::default(),
-            Msaa::Off,
-            Tonemapping::None,
-            DebandDither::Disabled,
-            Projection::Orthographic(OrthographicProjection {
-                scaling_mode: ScalingMode::Fixed {
-                    width: VIEW_M as f32,
-                    height: VIEW_M as f32,
-                },
-                ..OrthographicProjection::default_3d()
-            }),
-            Transform::from_xyz(center.x as f32, 50.0, center.y as f32).looking_at(
-                Vec3::new(center.x as f32, 0.0, center.y as f32),
-                Vec3::NEG_Z,
-            ),
-        ));
-        world.spawn(clip).id()
-    };
+    let clip = ClipStackTexture::new(source, 128, 32, 64, center_uv, &mut images_of(&mut harness));
+    let entity = spawn_top_down_view(&mut harness, clip, center, 1800.0, VIEW_M, uv_of);
     harness.wait_until_ready().unwrap();
     for _ in 0..200 {
         harness.step();
@@ -168,52 +181,15 @@ fn a_small_pyramid_renders_inside_its_extent_and_no_data_around_it() {
     const VIEW: f64 = 480.0;
     let center = DVec2::splat(SMALL_M / 2.0);
     let uv_of = move |p: DVec2| p / SMALL_M;
-    let entity = {
-        let world = harness.world_mut();
-        let mut clip = {
-            let mut images = world.resource_mut::<Assets<Image>>();
-            let mut clip = ClipStackTexture::new(source, 128, 16, 64, [0.5, 0.5], &mut images);
-            clip.set_linear_filtering(false, &mut images);
-            clip
-        };
-        let material = clip.material(
-            StandardMaterial {
-                unlit: true,
-                ..default()
-            },
-            &mut world.resource_mut::<Assets<ClipmapMaterial>>(),
-        );
-        let mesh = world.resource_mut::<Assets<Mesh>>().add(flat_patch_mesh(
-            center - DVec2::splat(VIEW),
-            2.0 * VIEW,
-            16,
-            center,
-            uv_of,
-        ));
-        world.spawn((
-            Mesh3d(mesh),
-            MeshMaterial3d(material),
-            Transform::from_xyz(center.x as f32, 0.0, center.y as f32),
-        ));
-        world.spawn((
-            Camera3d::default(),
-            Msaa::Off,
-            Tonemapping::None,
-            DebandDither::Disabled,
-            Projection::Orthographic(OrthographicProjection {
-                scaling_mode: ScalingMode::Fixed {
-                    width: VIEW as f32,
-                    height: VIEW as f32,
-                },
-                ..OrthographicProjection::default_3d()
-            }),
-            Transform::from_xyz(center.x as f32, 50.0, center.y as f32).looking_at(
-                Vec3::new(center.x as f32, 0.0, center.y as f32),
-                Vec3::NEG_Z,
-            ),
-        ));
-        world.spawn(clip).id()
-    };
+    let clip = ClipStackTexture::new(
+        source,
+        128,
+        16,
+        64,
+        [0.5, 0.5],
+        &mut images_of(&mut harness),
+    );
+    let entity = spawn_top_down_view(&mut harness, clip, center, VIEW, VIEW, uv_of);
     harness.wait_until_ready().unwrap();
     // The base level (all there is of this pyramid) is read off the main thread.
     for _ in 0..200 {

@@ -3,18 +3,9 @@
 //! decoded to metres by `--dem terrarium`, whose pyramid reads back the known heights.
 
 use bevy_terrain_clip::cache::TileKey;
-use bevy_terrain_clip::dem::DiskHeightSource;
+use bevy_terrain_clip::dem::{DiskHeightSource, terrarium_texel};
 use bevy_terrain_clip::pyramid::{PyramidManifest, TexelFormat};
 use std::process::Command;
-
-/// A Terrarium texel for height `h` (m).
-fn terrarium_texel(h: f32) -> [u8; 3] {
-    let v = h + 32768.0;
-    let r = (v / 256.0).floor();
-    let g = (v - r * 256.0).floor();
-    let b = ((v - r * 256.0 - g) * 256.0).round();
-    [r as u8, g as u8, b as u8]
-}
 
 /// The known height of pixel (x, y): a slope from −20 m to 2,475 m with a ripple.
 fn height(x: u32, y: u32) -> f32 {
