@@ -244,6 +244,19 @@ pub fn render_until(
     panic!("the soft shadow never showed");
 }
 
+/// A screen-sized SSSS texture (`bytes_per_texel` bytes of f32 channels a texel) read back.
+pub fn screen_floats(
+    harness: &mut RenderHarness,
+    image: &Handle<Image>,
+    bytes_per_texel: u32,
+) -> Vec<f32> {
+    floats(
+        &harness
+            .read_image(image.clone(), SIZE, SIZE, bytes_per_texel)
+            .unwrap(),
+    )
+}
+
 /// Little-endian f32s.
 pub fn floats(bytes: &[u8]) -> Vec<f32> {
     bytes
@@ -322,16 +335,8 @@ pub fn assert_distance_pass_matches(
     use bevy_soft_shadows::ssss::distance::pixel_sigma;
     use bevy_soft_shadows::ssss::receiver::SsssTextures;
     let textures = harness.world_mut().resource::<SsssTextures>().clone();
-    let distance = floats(
-        &harness
-            .read_image(textures.distance.clone(), SIZE, SIZE, 16)
-            .unwrap(),
-    );
-    let refined = floats(
-        &harness
-            .read_image(textures.refined.clone(), SIZE, SIZE, 16)
-            .unwrap(),
-    );
+    let distance = screen_floats(harness, &textures.distance, 16);
+    let refined = screen_floats(harness, &textures.refined, 16);
     let m_per_px = VIEW_M / SIZE as f32;
     let sigma_of = |width: f32| {
         pixel_sigma(
@@ -417,25 +422,13 @@ pub fn read_ssss_screen(
 ) {
     use bevy_soft_shadows::ssss::receiver::SsssTextures;
     let textures = harness.world_mut().resource::<SsssTextures>().clone();
-    let distance = floats(
-        &harness
-            .read_image(textures.distance.clone(), SIZE, SIZE, 16)
-            .unwrap(),
-    );
-    let refined = floats(
-        &harness
-            .read_image(textures.refined.clone(), SIZE, SIZE, 16)
-            .unwrap(),
-    );
+    let distance = screen_floats(harness, &textures.distance, 16);
+    let refined = screen_floats(harness, &textures.refined, 16);
     // (visibility, light) per pixel: keep the visibility.
-    let visibility: Vec<f32> = floats(
-        &harness
-            .read_image(textures.visibility.clone(), SIZE, SIZE, 8)
-            .unwrap(),
-    )
-    .into_iter()
-    .step_by(2)
-    .collect();
+    let visibility: Vec<f32> = screen_floats(harness, &textures.visibility, 8)
+        .into_iter()
+        .step_by(2)
+        .collect();
     let n = (SIZE * SIZE) as usize;
     let bounds: Vec<[f32; 2]> = (0..n)
         .map(|i| [distance[4 * i + 1], distance[4 * i + 2]])
