@@ -468,6 +468,7 @@ pub fn stream_clip_stacks(
 ) {
     let (mut quality, mut uploaded, mut loaded, mut latency, mut failed) =
         (f64::INFINITY, 0usize, 0u64, 0.0f64, 0u64);
+    let mut usable = f64::INFINITY;
     // Running mean of the render world's write time per subtile (learned from the frames that
     // wrote some); charged to the millisecond budget for every subtile planned.
     let (write_ms, written) = cost.last_write();
@@ -621,7 +622,11 @@ pub fn stream_clip_stacks(
                 sample
             };
         }
-        quality = quality.min(clip.stack.quality() as f64 * 100.0);
+        // What is really resident: the base level counts once it is on the GPU.
+        let layers = clip.stack.layers.len() as f64 + 1.0;
+        let missing_base = if clip.base_ready() { 0.0 } else { 1.0 / layers };
+        quality = quality.min((clip.stack.quality() as f64 - missing_base) * 100.0);
+        usable = usable.min((clip.stack.usable_coverage() - missing_base) * 100.0);
         uploaded += planned;
         loaded += clip.cache.stats.loaded;
         failed += clip.cache.stats.failed;
@@ -629,6 +634,7 @@ pub fn stream_clip_stacks(
     }
     if quality.is_finite() {
         diagnostics.add_measurement(&QUALITY, || quality);
+        diagnostics.add_measurement(&USABLE, || usable);
         diagnostics.add_measurement(&SUBTILES_UPLOADED, || uploaded as f64);
         diagnostics.add_measurement(&TILES_LOADED, || loaded as f64);
         diagnostics.add_measurement(&TILES_FAILED, || failed as f64);
@@ -648,6 +654,8 @@ pub fn stream_clip_stacks(
 
 /// Share of the clip stack holding valid data (%, the worst stack).
 pub const QUALITY: DiagnosticPath = DiagnosticPath::const_new("terrain/stack_valid_percent");
+/// Lowest share of a stack the shader can sample, base level and coverage rectangles (%).
+pub const USABLE: DiagnosticPath = DiagnosticPath::const_new("terrain/stack_usable_percent");
 /// CPU time of texture updates (ms): this frame's subtile cutting and mip filtering plus the
 /// last render frame's `write_texture` calls, all clip stacks together.
 pub const UPLOAD_MS: DiagnosticPath = DiagnosticPath::const_new("terrain/upload_ms");
@@ -808,6 +816,7 @@ pub fn update_clipmap_materials(
 pub(crate) fn build(app: &mut App) {
     for path in [
         QUALITY,
+        USABLE,
         SUBTILES_UPLOADED,
         TILES_LOADED,
         TILES_FAILED,

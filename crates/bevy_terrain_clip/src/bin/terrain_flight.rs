@@ -3,6 +3,7 @@
 //!
 //! ```text
 //! cargo run -p bevy_terrain_clip --bin terrain_flight -- [--paper] [--cold] [--no-prefetch]
+//!     [--no-grid-shift]
 //!     [--speed M_S] [--subtiles N] [--frames N] [--latency-ms MS] [--disk-mb-s MB]
 //!     [--decode-ms MS] [--stats FILE]
 //! ```
@@ -10,14 +11,15 @@
 //! `--paper` starts from the paper's own setting (`FlightConfig::paper`: 21 levels, 0.25 m
 //! texels, cold start, 8 ms decode) instead of this crate's default (20 levels, 0.5 m, warm).
 //! `--stats FILE` flies the configuration given and, beside it, the paper's setting with and
-//! without prefetch and the default warm and cold, and writes
+//! without prefetch and the per-level grid shift, and the default warm (with and without the
+//! shift) and cold, and writes
 //! `{"runs": [{"config", "quality_avg", "quality_min", "usable_avg", "usable_min", …}]}`.
 
 use bevy_terrain_clip::flight::{FlightConfig, FlightReport, simulate_flight};
 
 fn run_json(name: &str, config: &FlightConfig, r: &FlightReport) -> String {
     format!(
-        "{{\"config\": \"{name}\", \"levels\": {}, \"metres_per_texel\": {}, \"tile\": {}, \"clip\": {}, \"subtile\": {}, \"speed_m_s\": {}, \"subtiles_budget\": {}, \"disk_latency_ms\": {}, \"disk_mb_s\": {:.1}, \"decode_ms\": {}, \"prefetch\": {}, \"cold_start\": {}, \"frames\": {}, \"quality_avg\": {:.4}, \"quality_min\": {:.4}, \"usable_avg\": {:.4}, \"usable_min\": {:.4}, \"subtiles_per_frame_avg\": {:.2}, \"subtiles_per_frame_max\": {}, \"tiles_per_frame_avg\": {:.3}, \"tile_latency_avg_ms\": {:.1}, \"tile_latency_max_ms\": {:.1}, \"upload_mb_s\": {:.2}, \"disk_read_mb_s\": {:.2}}}",
+        "{{\"config\": \"{name}\", \"levels\": {}, \"metres_per_texel\": {}, \"tile\": {}, \"clip\": {}, \"subtile\": {}, \"speed_m_s\": {}, \"subtiles_budget\": {}, \"disk_latency_ms\": {}, \"disk_mb_s\": {:.1}, \"decode_ms\": {}, \"prefetch\": {}, \"grid_shift\": {}, \"cold_start\": {}, \"frames\": {}, \"quality_avg\": {:.4}, \"quality_min\": {:.4}, \"usable_avg\": {:.4}, \"usable_min\": {:.4}, \"subtiles_per_frame_avg\": {:.2}, \"subtiles_per_frame_max\": {}, \"tiles_per_frame_avg\": {:.3}, \"tile_latency_avg_ms\": {:.1}, \"tile_latency_max_ms\": {:.1}, \"upload_mb_s\": {:.2}, \"disk_read_mb_s\": {:.2}}}",
         config.levels,
         config.metres_per_texel,
         config.tile_size,
@@ -29,6 +31,7 @@ fn run_json(name: &str, config: &FlightConfig, r: &FlightReport) -> String {
         config.disk.bytes_per_second / 1e6,
         config.decode_ms,
         config.prefetch,
+        config.grid_shift,
         config.cold_start,
         config.frames,
         r.quality_avg,
@@ -63,6 +66,9 @@ fn main() {
     if flag("--no-prefetch") {
         config.prefetch = false;
     }
+    if flag("--no-grid-shift") {
+        config.grid_shift = false;
+    }
     let mut stats = None;
     let mut it = args.into_iter();
     while let Some(flag) = it.next() {
@@ -84,8 +90,8 @@ fn main() {
             "--decode-ms" => config.decode_ms = number,
             _ => {
                 eprintln!(
-                    "unknown flag {flag}; flags: --paper --cold --no-prefetch --speed --subtiles \
-                     --frames --latency-ms --disk-mb-s --decode-ms --stats"
+                    "unknown flag {flag}; flags: --paper --cold --no-prefetch --no-grid-shift \
+                     --speed --subtiles --frames --latency-ms --disk-mb-s --decode-ms --stats"
                 );
                 std::process::exit(2)
             }
@@ -106,7 +112,21 @@ fn main() {
                 ..FlightConfig::paper()
             },
         ),
+        (
+            "paper_no_grid_shift",
+            FlightConfig {
+                grid_shift: false,
+                ..FlightConfig::paper()
+            },
+        ),
         ("default_warm", FlightConfig::default()),
+        (
+            "default_warm_no_grid_shift",
+            FlightConfig {
+                grid_shift: false,
+                ..FlightConfig::default()
+            },
+        ),
         (
             "default_cold",
             FlightConfig {

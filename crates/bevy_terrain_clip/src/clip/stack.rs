@@ -40,6 +40,9 @@ pub struct ClipStack {
     pub base_level: u32,
     /// Windowed layers t_1…, coarsest first (index 0 here is t_1).
     pub layers: Vec<LayerState>,
+    /// Shift each level's subtile grid by a golden-ratio fraction ([`center_subtile`]); on by
+    /// default, switchable to measure what it buys.
+    pub grid_shift: bool,
 }
 
 impl ClipStack {
@@ -55,7 +58,7 @@ impl ClipStack {
                     level,
                     n,
                     level_subtiles,
-                    center_subtile(center_uv, level, subtile_size),
+                    center_subtile(center_uv, level, subtile_size, true),
                 )
             })
             .collect();
@@ -64,7 +67,27 @@ impl ClipStack {
             subtile_size,
             base_level,
             layers,
+            grid_shift: true,
         }
+    }
+
+    /// The share of the stack the shader can sample: the base level (always resident here)
+    /// and, per windowed layer, the part of its window inside its coverage rectangle (the
+    /// largest fully valid ring). Never more than [`quality`](Self::quality), the share of
+    /// valid slots: one invalid subtile near a layer's centre costs it little slot share but
+    /// all of its usable coverage.
+    pub fn usable_coverage(&self) -> f64 {
+        let mut sum = 1.0;
+        let s = self.subtile_size as i64;
+        for (layer, coverage) in self.layers.iter().zip(self.coverage()) {
+            let (min, max) = layer.window();
+            let window = ((max[0] - min[0]) * s) as f64 * ((max[1] - min[1]) * s) as f64;
+            let covered = coverage.map_or(0.0, |(lo, hi)| {
+                ((hi[0] - lo[0]).max(0) as f64) * ((hi[1] - lo[1]).max(0) as f64)
+            });
+            sum += if window > 0.0 { covered / window } else { 1.0 };
+        }
+        sum / (self.layers.len() as f64 + 1.0)
     }
 
     /// Moves the centre of detail; returns the subtiles invalidated over all layers.
@@ -72,7 +95,7 @@ impl ClipStack {
         let s = self.subtile_size;
         self.layers
             .iter_mut()
-            .map(|l| l.recenter(center_subtile(center_uv, l.level, s)))
+            .map(|l| l.recenter(center_subtile(center_uv, l.level, s, self.grid_shift)))
             .sum()
     }
 
@@ -173,10 +196,14 @@ impl ClipStack {
 /// levels', so whenever the centre crosses a boundary of one level it crosses one in every finer
 /// level in the same frame, and several layers invalidate a strip at once — the dips of the
 /// paper's minimum quality. Shifted, the crossings of different levels fall on different frames.
-pub fn center_subtile(uv: [f64; 2], level: u32, subtile_size: u32) -> Subtile {
+pub fn center_subtile(uv: [f64; 2], level: u32, subtile_size: u32, shifted: bool) -> Subtile {
     let texels = (1u64 << level) as f64;
     let s = subtile_size as f64;
-    let shift = (level as f64 * 0.618_033_988_749_895).fract();
+    let shift = if shifted {
+        (level as f64 * 0.618_033_988_749_895).fract()
+    } else {
+        0.0
+    };
     [
         (uv[0] * texels / s + shift).floor() as i64,
         (uv[1] * texels / s + shift).floor() as i64,
@@ -341,7 +368,7 @@ mod tests {
     fn centre_subtiles_are_exact_far_from_the_origin() {
         // Level 20 with 1 m texels: 10^6 m from the origin is texel 10^6.
         let uv = [1_000_000.5 / (1u64 << 20) as f64, 0.5];
-        assert_eq!(center_subtile(uv, 20, 128)[0], 1_000_000 / 128);
+        assert_eq!(center_subtile(uv, 20, 128, true)[0], 1_000_000 / 128);
         let (_, _, texel) = finest_covering_layer(&ClipStack::new(21, 1024, 128, uv), uv);
         assert_eq!(texel[0], (1_000_000.5f64 / 2f64.powi(10)).floor() as i64);
     }
