@@ -8,7 +8,8 @@
 //
 // Where there is no data the terrain shows `clipmap.no_data`: outside the texture's [0, 1)²
 // (Repeat addressing would show copies of it), and in proportion to a texel's transparency —
-// the builder's padding and missing tiles are transparent black, so a texel's colour is taken
+// the builder's padding and the base level's missing tiles are transparent black (a finer layer's
+// missing subtile is outside its coverage, so a coarser layer shows), so a texel's colour is taken
 // as premultiplied and the rest filled: rgb + (1 − a)·no_data (`clip::stack::over_no_data`).
 //
 // This module holds the bindings and the lookup; `clipmap_fragment.wgsl` (Bevy's shadows) and

@@ -267,7 +267,9 @@ impl HeightQuery {
     }
 
     /// The ground's height (m) at world `(x, z)`: bilinear between the four nearest texel
-    /// centres (clamped to the data at its edges); `None` outside the data.
+    /// centres of the finest level (clamped to the data at its edges); `None` outside the data
+    /// and where a finest-level tile is absent (outside a partial level's inset) — coarser
+    /// levels are not consulted yet.
     pub fn height_at(&mut self, x: f64, z: f64) -> Result<Option<f32>, TileError> {
         let manifest = self.source.manifest.clone();
         let fx = (x - manifest.origin_m[0]) / manifest.metres_per_texel - 0.5;

@@ -38,7 +38,8 @@ pub struct ClipmapSettings {
     /// Per-frame update budget per virtual texture.
     pub budget: UpdateBudget,
     /// What the terrain shows where the pyramid has no data: outside its extent (never repeated
-    /// copies of it), over transparent padding and over tiles that are missing or failed.
+    /// copies of it), over transparent padding, and where the base level's tiles are missing or
+    /// failed (a finer layer's missing subtile shows the coarser level instead).
     pub no_data_color: Color,
 }
 
