@@ -56,6 +56,23 @@
 //! }
 //! ```
 //!
+//! So does a point light (its shadow map is Bevy's cube of six 90° faces; each face is dilated
+//! on its own, so near a face's edge a receiver does not see the blockers across it and that part
+//! of its outer penumbra is cut at the edge):
+//!
+//! ```no_run
+//! use bevy::prelude::*;
+//! use bevy_soft_shadows::prelude::*;
+//!
+//! fn bulb(mut commands: Commands) {
+//!     commands.spawn((
+//!         PointLight { shadow_maps_enabled: true, ..default() },
+//!         ScreenSpaceSoftShadows { light_size: 0.3, max_occluder_distance: 3.0, ..default() },
+//!         Transform::from_xyz(0.0, 4.0, 0.0),
+//!     ));
+//! }
+//! ```
+//!
 //! Diagnostics: `ssss/dilation_radius` (the min filter's coarse radius) and
 //! `ssss/segment_filter` (which form of the filter runs,
 //! [`SsssDilationFilter`](ssss::render::SsssDilationFilter)); with Bevy's
@@ -63,8 +80,8 @@
 //! `ssss_dilate`, `ssss_distance`, `ssss_blur_h`, `ssss_blur_v`).
 //!
 //! Limits: one SSSS light (a directional light if one has the component — the first
-//! shadow-casting directional light in Bevy's order — else the first spot light with it), one
-//! camera's size for the screen textures; point lights (cube shadow maps) are not supported.
+//! shadow-casting directional light in Bevy's order — else the first spot light with it, else
+//! the first point light with it), one camera's size for the screen textures.
 
 use bevy::prelude::*;
 

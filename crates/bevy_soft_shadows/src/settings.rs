@@ -11,13 +11,13 @@ use bevy::prelude::*;
 #[reflect(Component, Default, Debug, PartialEq)]
 pub struct ScreenSpaceSoftShadows {
     /// Size of the light source: for a directional light its angular diameter (radians; the Sun
-    /// is 0.0093), for a spot light its diameter (m). Larger lights give wider penumbrae. Must be
-    /// positive.
+    /// is 0.0093), for a spot or point light its diameter (m). Larger lights give wider
+    /// penumbrae. Must be positive.
     pub light_size: f32,
     /// Largest blocker–receiver distance (m) the min filter of the shadow map searches for
-    /// blockers: it bounds the widest outer penumbra. For a spot light the filter's window
-    /// covers every blocker at least this far from the light and at most this far in front of
-    /// its receiver (`ssss::min_filter::spot_coarse_radius`).
+    /// blockers: it bounds the widest outer penumbra. For a spot or point light the filter's
+    /// window covers every blocker at least this far from the light and at most this far in
+    /// front of its receiver (`ssss::min_filter::spot_fine_reach`).
     pub max_occluder_distance: f32,
     /// Smallest blur kernel radius in pixels (0 keeps hard contact shadows).
     pub min_kernel_px: f32,

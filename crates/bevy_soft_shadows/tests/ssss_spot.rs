@@ -17,7 +17,7 @@ use bevy::render::RenderApp;
 use bevy_nature_harness::compare::RgbaImage;
 use bevy_nature_harness::{RenderHarness, artifacts_dir};
 use bevy_soft_shadows::reference::{
-    LinearAverage, disk_rise_fraction, jittered_positions, linear_to_srgb, rise_width,
+    LinearAverage, disk_rise_fraction, jittered_positions, linear_to_srgb,
 };
 use bevy_soft_shadows::ssss::distance::{CoarseMap, FineMap, SpotProjection, spot_penumbra_width};
 use bevy_soft_shadows::ssss::min_filter::{
@@ -144,21 +144,6 @@ fn spot_scene(test: &str, neighbours: bool) -> Option<(RenderHarness, Entity, Ve
         .insert(Visibility::Inherited);
     harness.render().unwrap();
     Some((harness, lamp, unshadowed))
-}
-
-/// Each pixel's green over the unshadowed render's.
-fn visibility(img: &[f32], unshadowed: &[f32]) -> Vec<f32> {
-    img.iter()
-        .zip(unshadowed)
-        .enumerate()
-        .map(|(i, (&v, &u))| if i % 4 == 1 { v / u.max(1e-4) } else { v })
-        .collect()
-}
-
-/// The 10–90 % penumbra width (m) across the side edge at ground x, from a visibility image.
-fn width_at(visibility: &[f32], x: f32) -> f32 {
-    rise_width(&profile(visibility, x, 1.0), 0.1, 0.9).expect("the penumbra rises") * VIEW_M
-        / SIZE as f32
 }
 
 /// SSSS on a spot light with a directional light and two point lights beside it: the spot's shadow

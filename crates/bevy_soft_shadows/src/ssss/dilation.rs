@@ -9,7 +9,9 @@ use super::min_filter::{
 };
 use crate::settings::ScreenSpaceSoftShadows;
 use bevy::diagnostic::{Diagnostic, DiagnosticPath, Diagnostics, RegisterDiagnostic};
-use bevy::light::{Cascades, DirectionalLightShadowMap, SimulationLightSystems};
+use bevy::light::{
+    Cascades, DirectionalLightShadowMap, PointLightShadowMap, SimulationLightSystems,
+};
 use bevy::prelude::*;
 use bevy::render::extract_resource::ExtractResource;
 
@@ -47,7 +49,8 @@ pub const SEGMENT_FILTER: DiagnosticPath = DiagnosticPath::const_new("ssss/segme
 /// The SSSS light's dilation, as this frame's settings and shadow maps give it.
 #[derive(Resource, Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SsssDilationRadius {
-    /// The largest coarse radius over the light's shadow maps (its cascades, or the spot's map).
+    /// The largest coarse radius over the light's shadow maps (its cascades, the spot's map, or
+    /// the point light's cube faces).
     pub radius: usize,
     /// Shadow-map texels a side per coarse texel ([`dilation_block`]: the finest that holds the
     /// widest reach within [`MAX_COARSE_RADIUS`]).
@@ -68,11 +71,15 @@ impl Default for SsssDilationRadius {
 }
 
 /// The radius for the light the render world shades: the first directional light with SSSS
-/// (over its cascades; the widest until it has any), else the first spot light with it.
+/// (over its cascades; the widest until it has any), else the first spot light with it, else the
+/// first point light with it (`point_map_size`: `PointLightShadowMap::size`; its cube faces are
+/// 90° perspective maps, a spot's of half angle π/4).
 pub fn dilation_radius(
     directional: Option<(&ScreenSpaceSoftShadows, Option<&Cascades>)>,
     spot: Option<(&ScreenSpaceSoftShadows, &SpotLight)>,
+    point: Option<&ScreenSpaceSoftShadows>,
     shadow_map_size: f32,
+    point_map_size: f32,
 ) -> SsssDilationRadius {
     let capped = |reach: f32| reach > MAX_DILATION_TEXELS as f32;
     if let Some((settings, cascades)) = directional {
@@ -104,18 +111,25 @@ pub fn dilation_radius(
             capped: capped(reach),
         };
     }
-    if let Some((settings, spot)) = spot {
+    // Bevy clamps a spot's outer angle just below π/2 for the shadow projection.
+    let local = spot
+        .map(|(settings, spot)| {
+            (
+                settings,
+                spot.outer_angle
+                    .min(std::f32::consts::FRAC_PI_2 - 1e-4)
+                    .tan(),
+                shadow_map_size,
+            )
+        })
+        .or(point.map(|settings| (settings, 1.0, point_map_size)));
+    if let Some((settings, tan_half_angle, map_size)) = local {
         let s = settings.sanitized().0;
-        // Bevy clamps the outer angle just below π/2 for the shadow projection.
-        let tan_outer = spot
-            .outer_angle
-            .min(std::f32::consts::FRAC_PI_2 - 1e-4)
-            .tan();
         let reach = spot_fine_reach(
             s.light_size,
             s.max_occluder_distance,
-            tan_outer,
-            shadow_map_size,
+            tan_half_angle,
+            map_size,
         );
         let block = dilation_block(reach);
         return SsssDilationRadius {
@@ -127,11 +141,13 @@ pub fn dilation_radius(
     SsssDilationRadius::default()
 }
 
-#[allow(clippy::type_complexity)]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn measure_dilation(
     directional: Query<(&ScreenSpaceSoftShadows, Option<&Cascades>), With<DirectionalLight>>,
     spots: Query<(&ScreenSpaceSoftShadows, &SpotLight)>,
+    points: Query<&ScreenSpaceSoftShadows, With<PointLight>>,
     shadow_map: Res<DirectionalLightShadowMap>,
+    point_map: Res<PointLightShadowMap>,
     filter: Res<SsssDilationFilter>,
     mut dilation: ResMut<SsssDilationRadius>,
     mut diagnostics: Diagnostics,
@@ -140,7 +156,9 @@ fn measure_dilation(
     let now = dilation_radius(
         directional.iter().next(),
         spots.iter().next(),
+        points.iter().next(),
         shadow_map.size as f32,
+        point_map.size as f32,
     );
     if now.capped && !*warned {
         warn!(
@@ -185,7 +203,7 @@ mod tests {
             outer_angle: 0.75,
             ..default()
         };
-        let r = dilation_radius(None, Some((&settings, &lamp)), 2048.0);
+        let r = dilation_radius(None, Some((&settings, &lamp)), None, 2048.0, 1024.0);
         assert_eq!(
             r,
             SsssDilationRadius {
@@ -199,7 +217,7 @@ mod tests {
             light_size: 1.76,
             ..settings.clone()
         };
-        let r = dilation_radius(None, Some((&wide, &lamp)), 2048.0);
+        let r = dilation_radius(None, Some((&wide, &lamp)), None, 2048.0, 1024.0);
         assert_eq!(
             r,
             SsssDilationRadius {
@@ -214,7 +232,7 @@ mod tests {
             max_occluder_distance: 0.5,
             ..settings.clone()
         };
-        let r = dilation_radius(None, Some((&absurd, &lamp)), 4096.0);
+        let r = dilation_radius(None, Some((&absurd, &lamp)), None, 4096.0, 1024.0);
         assert!(r.capped);
         assert_eq!(r.radius, MAX_COARSE_RADIUS);
         // A directional light wins; before its cascades exist it assumes the widest window.
@@ -223,11 +241,43 @@ mod tests {
             max_occluder_distance: 5.0,
             ..default()
         };
-        let r = dilation_radius(Some((&sun, None)), Some((&settings, &lamp)), 2048.0);
+        let r = dilation_radius(
+            Some((&sun, None)),
+            Some((&settings, &lamp)),
+            None,
+            2048.0,
+            1024.0,
+        );
         assert_eq!(r.radius, MAX_COARSE_RADIUS);
         assert_eq!(
-            dilation_radius(None, None, 2048.0),
+            dilation_radius(None, None, None, 2048.0, 1024.0),
             SsssDilationRadius::default()
+        );
+        // A point light's faces: a 90° map of the point-light shadow map's size; a spot light
+        // wins over it.
+        let bulb = ScreenSpaceSoftShadows {
+            light_size: 0.6,
+            max_occluder_distance: 4.0,
+            ..default()
+        };
+        let reach = spot_fine_reach(0.6, 4.0, 1.0, 1024.0);
+        let block = dilation_block(reach);
+        assert_eq!(
+            dilation_radius(None, None, Some(&bulb), 2048.0, 1024.0),
+            SsssDilationRadius {
+                radius: coarse_radius_of(reach, block),
+                block,
+                capped: false
+            }
+        );
+        assert_ne!(
+            dilation_radius(None, None, Some(&bulb), 2048.0, 1024.0),
+            dilation_radius(None, None, Some(&bulb), 2048.0, 4096.0),
+            "the point map's size counts"
+        );
+        assert_eq!(
+            dilation_radius(None, Some((&settings, &lamp)), Some(&bulb), 2048.0, 1024.0),
+            dilation_radius(None, Some((&settings, &lamp)), None, 2048.0, 1024.0)
         );
     }
 }

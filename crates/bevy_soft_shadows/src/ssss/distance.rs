@@ -6,7 +6,8 @@
 //! For spot lights the light space is Bevy's spot shadow projection ([`SpotProjection`]): an
 //! infinite reverse-Z perspective whose stored depth is `near / d`, `d` the distance along the
 //! spot's axis — so depths turn back into distances exactly, and eq. 6.1 applies as written.
-//! For a directional light it is a cascade's orthographic projection
+//! A point light's six cube faces ([`PointProjection`]) are the same projection at 90°, each
+//! dilated on its own. For a directional light it is a cascade's orthographic projection
 //! ([`DirectionalCascade`]), whose depth is linear along the light; eq. 6.1 takes its limit for
 //! a light at infinity.
 
@@ -71,6 +72,99 @@ impl SpotProjection {
     /// Metres one texel of a `map_size`² shadow map spans at `distance`.
     pub fn texel_size(&self, distance: f32, map_size: f32) -> f32 {
         2.0 * distance * self.tan_outer / map_size
+    }
+}
+
+/// A local light's perspective shadow projection, as the distance pass reads it: a spot light's
+/// map or a point light's cube faces — infinite reverse-Z perspective maps whose stored depth is
+/// `near / d`, `d` the distance along the map's axis.
+pub trait LocalProjection {
+    /// The light's position.
+    fn position(&self) -> Vec3;
+    /// The near plane of its maps (`shadow_map_near_z`).
+    fn near(&self) -> f32;
+    /// Tangent of a map's half angle: a map spans ±this at unit distance.
+    fn tan_half_angle(&self) -> f32;
+    /// Which of the light's maps sees `world` (0 for a spot light, the cube face for a point
+    /// light), its coordinates there (uv in [0, 1]², v down) and its distance along that map's
+    /// axis; `None` within the near plane.
+    fn project_local(&self, world: Vec3) -> Option<(usize, Vec2, f32)>;
+}
+
+impl LocalProjection for SpotProjection {
+    fn position(&self) -> Vec3 {
+        self.position
+    }
+    fn near(&self) -> f32 {
+        self.near
+    }
+    fn tan_half_angle(&self) -> f32 {
+        self.tan_outer
+    }
+    fn project_local(&self, world: Vec3) -> Option<(usize, Vec2, f32)> {
+        self.project(world).map(|(uv, d)| (0, uv, d))
+    }
+}
+
+/// Bevy's point-light shadow projection (`fetch_point_shadow`): six 90° infinite reverse-Z
+/// perspective faces in a cube texture, face `f` of the light of clustered index `i` in layer
+/// `6i + f`, looked up along the light-to-point direction with z negated (Bevy's cube maps are
+/// left-handed). Which face and where on it follow the cube-map face selection of Vulkan and
+/// Direct3D (Vulkan spec, "Cube Map Face Selection"); the stored depth is `near / m`, `m` the
+/// major axis' magnitude — the distance along the face's axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointProjection {
+    /// The light's position.
+    pub position: Vec3,
+    /// `PointLight::shadow_map_near_z`.
+    pub near: f32,
+}
+
+impl PointProjection {
+    /// The cube face seeing `world` (+x, −x, +y, −y, +z, −z in the cube texture's own,
+    /// z-negated, space), its coordinates on the face (v down) and the distance along the face's
+    /// axis; `None` within the near plane.
+    pub fn project(&self, world: Vec3) -> Option<(usize, Vec2, f32)> {
+        let d = world - self.position;
+        let r = Vec3::new(d.x, d.y, -d.z);
+        let a = r.abs();
+        let (face, sc, tc, major) = if a.x >= a.y && a.x >= a.z {
+            if r.x >= 0.0 {
+                (0, -r.z, -r.y, a.x)
+            } else {
+                (1, r.z, -r.y, a.x)
+            }
+        } else if a.y >= a.z {
+            if r.y >= 0.0 {
+                (2, r.x, r.z, a.y)
+            } else {
+                (3, r.x, -r.z, a.y)
+            }
+        } else if r.z >= 0.0 {
+            (4, r.x, -r.y, a.z)
+        } else {
+            (5, -r.x, -r.y, a.z)
+        };
+        if major <= self.near {
+            return None;
+        }
+        let uv = Vec2::new(sc, tc) / major * 0.5 + Vec2::splat(0.5);
+        Some((face, uv, major))
+    }
+}
+
+impl LocalProjection for PointProjection {
+    fn position(&self) -> Vec3 {
+        self.position
+    }
+    fn near(&self) -> f32 {
+        self.near
+    }
+    fn tan_half_angle(&self) -> f32 {
+        1.0
+    }
+    fn project_local(&self, world: Vec3) -> Option<(usize, Vec2, f32)> {
+        self.project(world)
     }
 }
 
@@ -270,7 +364,7 @@ impl CoarseMap<'_> {
 
 /// Eq. 6.1 for a spot light of diameter `light_size`: the world width of the penumbra at
 /// receiver `world` (unit `normal`), behind the blocker the coarse map holds at its texel,
-/// refined on `fine` when given ([`refined_spot_blocker`]; see [`directional_penumbra_width`]).
+/// refined on `fine` when given ([`refined_local_blocker`]; see [`directional_penumbra_width`]).
 /// Zero outside the map, with no blocker nearer the light, or when the "blocker" is only the
 /// receiver's own surface across the dilation footprint ([`own_surface_gap`]).
 pub fn spot_penumbra_width(
@@ -281,26 +375,66 @@ pub fn spot_penumbra_width(
     normal: Vec3,
     light_size: f32,
 ) -> f32 {
-    let Some((uv, d_receiver)) = projection.project(world) else {
+    local_penumbra_width(
+        projection,
+        std::slice::from_ref(coarse),
+        fine.map(std::slice::from_ref),
+        world,
+        normal,
+        light_size,
+    )
+}
+
+/// [`spot_penumbra_width`] for a point light: `coarse` and `fine` hold its six cube faces, each
+/// dilated on its own — so a receiver near a face's edge does not see blockers across it, and
+/// its penumbra from those is cut at the edge (the limit of a per-face dilation).
+pub fn point_penumbra_width(
+    projection: &PointProjection,
+    coarse: &[CoarseMap],
+    fine: Option<&[FineMap]>,
+    world: Vec3,
+    normal: Vec3,
+    light_size: f32,
+) -> f32 {
+    local_penumbra_width(projection, coarse, fine, world, normal, light_size)
+}
+
+/// Eq. 6.1 for a local light of diameter `light_size`, `w = light_size · (d_r − d_b) / d_b`,
+/// with the distances along the axis of the map seeing the receiver (on one ray from the light
+/// their ratio is the distances' own); `coarse[k]` and `fine[k]` are the light's map `k` (see
+/// [`LocalProjection::project_local`]).
+pub fn local_penumbra_width(
+    projection: &impl LocalProjection,
+    coarse: &[CoarseMap],
+    fine: Option<&[FineMap]>,
+    world: Vec3,
+    normal: Vec3,
+    light_size: f32,
+) -> f32 {
+    let Some((map, uv, d_receiver)) = projection.project_local(world) else {
+        return 0.0;
+    };
+    let Some(coarse) = coarse.get(map) else {
         return 0.0;
     };
     if uv.cmplt(Vec2::ZERO).any() || uv.cmpgt(Vec2::ONE).any() {
         return 0.0;
     }
+    let near = projection.near();
     let blocker = coarse.at(uv);
-    if blocker <= projection.depth(d_receiver) {
+    if blocker <= near / d_receiver {
         return 0.0;
     }
-    let d_blocker = projection.distance(blocker);
+    let d_blocker = near / blocker;
     let gap = d_receiver - d_blocker;
-    let reach = ((coarse.radius + 1) * coarse.block) as f32
-        * projection.texel_size(d_receiver, coarse.map_size);
-    let cos_nl = normal.dot((projection.position - world).normalize());
+    let texel_size = 2.0 * d_receiver * projection.tan_half_angle() / coarse.map_size;
+    let reach = ((coarse.radius + 1) * coarse.block) as f32 * texel_size;
+    let cos_nl = normal.dot((projection.position() - world).normalize());
     if cos_nl > 0.0 && gap <= own_surface_gap(reach, cos_nl) {
         return 0.0;
     }
-    let d_blocker = match fine {
-        Some(fine) => refined_spot_blocker(
+    let d_blocker = match fine.and_then(|f| f.get(map)) {
+        Some(fine) => refined_local_blocker(
             projection, fine, uv, d_receiver, d_blocker, cos_nl, light_size,
         ),
         None => d_blocker,
@@ -308,15 +442,15 @@ pub fn spot_penumbra_width(
     penumbra_width(d_receiver, d_blocker, light_size)
 }
 
-/// [`refined_gap`] for a spot light of diameter `light_size` (`refined_spot_blocker` in
+/// [`refined_gap`] for a local light of diameter `light_size` (`refined_local_blocker` in
 /// `ssss.wgsl`): the mean distance from the light of the fine-map blockers hiding part of the
 /// lamp's disk from the receiver, weighted as there by the share of the disk each hides (`1/g²`
 /// for a blocker `g` in front of the receiver), `d_receiver` from the light — seen from the receiver, the disk
 /// spans `light_size/2 · g / d_receiver` around its ray at a blocker `g` in front of it — over a
 /// grid spanning the reach of the coarse map's nearest blocker `d_nearest`; with none,
 /// `d_nearest` stands.
-pub fn refined_spot_blocker(
-    projection: &SpotProjection,
+pub fn refined_local_blocker(
+    projection: &impl LocalProjection,
     fine: &FineMap,
     uv: Vec2,
     d_receiver: f32,
@@ -324,18 +458,19 @@ pub fn refined_spot_blocker(
     cos_nl: f32,
     light_size: f32,
 ) -> f32 {
+    let near = projection.near();
     let half = 0.5 * light_size;
-    let texel_per_distance = 2.0 * projection.tan_outer / fine.width as f32;
+    let texel_per_distance = 2.0 * projection.tan_half_angle() / fine.width as f32;
     let reach_texels =
         half * (d_receiver - d_nearest) / d_receiver / (d_nearest * texel_per_distance).max(1e-8);
     let slope = (1.0 - cos_nl * cos_nl).max(0.0).sqrt() / cos_nl.max(0.05);
     let receiver_texel = d_receiver * texel_per_distance;
     let (mut sum, mut count) = (0.0f32, 0.0f32);
     for (offset, depth) in fine.blocker_grid(uv, reach_texels) {
-        if depth <= projection.near / d_receiver {
+        if depth <= near / d_receiver {
             continue;
         }
-        let d = projection.near / depth;
+        let d = near / depth;
         let gap = d_receiver - d;
         let texels = offset.length();
         let lateral = texels * d * texel_per_distance;
@@ -597,5 +732,55 @@ mod tests {
         let ortho = pixel_sigma(0.4, 32.0, None, 0.0, 60.0);
         let persp = pixel_sigma(0.4, 32.0, Some(2.0), 0.0, 60.0);
         assert!((ortho - 2.0 * persp).abs() < 1e-5, "{ortho} {persp}");
+    }
+
+    /// The point projection is where Bevy renders each cube face: face `f` is drawn into layer
+    /// `f` from `Transform::looking_at(CUBE_MAP_FACES[f])` at the light with a 90° infinite
+    /// reverse-Z perspective (`create_point_shadow_maps`), NDC y up and rows down. For points all
+    /// around the light, the face the projection picks sees the point inside its frustum, at the
+    /// same uv and with the depth Bevy stores.
+    #[test]
+    fn the_point_projection_matches_the_faces_bevy_renders() {
+        use bevy::camera::primitives::CUBE_MAP_FACES;
+        let p = PointProjection {
+            position: Vec3::new(1.0, 4.0, -2.0),
+            near: 0.1,
+        };
+        let clip = Mat4::perspective_infinite_reverse_rh(std::f32::consts::FRAC_PI_2, 1.0, p.near);
+        let mut faces_seen = [0usize; 6];
+        let mut seed = 7u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
+        };
+        for _ in 0..600 {
+            let world = p.position + 6.0 * Vec3::new(next(), next(), next());
+            let Some((face, uv, distance)) = p.project(world) else {
+                continue;
+            };
+            faces_seen[face] += 1;
+            let f = &CUBE_MAP_FACES[face];
+            let view = bevy::prelude::Transform::from_translation(p.position)
+                .looking_at(p.position + f.target, f.up)
+                .to_matrix();
+            let c = clip * view.inverse() * world.extend(1.0);
+            let ndc = c.truncate() / c.w;
+            assert!(
+                ndc.x.abs() <= 1.0 + 1e-4 && ndc.y.abs() <= 1.0 + 1e-4,
+                "{world} on face {face} is outside it: {ndc}"
+            );
+            let rendered = Vec2::new(0.5 + 0.5 * ndc.x, 0.5 - 0.5 * ndc.y);
+            assert!(
+                rendered.distance(uv) < 1e-4,
+                "{world}, face {face}: uv {uv} vs rendered at {rendered}"
+            );
+            assert!(
+                (ndc.z - p.near / distance).abs() < 1e-5,
+                "stored depth {} vs near / distance {}",
+                ndc.z,
+                p.near / distance
+            );
+        }
+        assert!(faces_seen.iter().all(|&n| n > 30), "{faces_seen:?}");
     }
 }

@@ -4,11 +4,13 @@
 // of 2R + 1 coarse texels. Bevy's shadow maps are reverse Z, so "nearest the light" is the
 // maximum. The reach covers half the penumbra of a blocker `max_occluder_distance` in front of
 // the receiver, in the texels of each cascade: r = ⌈max_occluder_distance · tan(θ/2) / texel⌉,
-// R = ⌈r / BLOCK⌉. A spot light's one layer uses the radius computed on the CPU
-// (`ssss::min_filter::spot_coarse_radius`). CPU reference: `ssss::min_filter::coarse_dilate`.
+// R = ⌈r / BLOCK⌉. A spot light's one layer, and a point light's six cube faces (each dilated on
+// its own, in the point lights' cube texture viewed as a 2D array), use the radius computed on
+// the CPU (`ssss::min_filter::spot_fine_reach`, `coarse_radius_of`). CPU reference:
+// `ssss::min_filter::coarse_dilate`.
 #import bevy_pbr::mesh_view_types::{Lights, DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT}
 #import bevy_soft_shadows::ssss_types::{
-    SsssUniform, MAX_COARSE_RADIUS, NO_LIGHT, LIGHT_KIND_SPOT,
+    SsssUniform, MAX_COARSE_RADIUS, NO_LIGHT, LIGHT_KIND_SPOT, LIGHT_KIND_POINT,
 }
 
 @group(0) @binding(0) var shadow_depth: texture_depth_2d_array;
@@ -33,7 +35,12 @@ fn radius_of_layer(layer: u32) -> i32 {
     if ssss.light_kind == LIGHT_KIND_SPOT {
         // Spot shadow maps follow the directional cascades in the array.
         let spot_layer = i32(ssss.light_index) + lights.spot_light_shadowmap_offset;
-        return select(-1, i32(ssss.spot_radius), i32(layer) == spot_layer);
+        return select(-1, i32(ssss.local_radius), i32(layer) == spot_layer);
+    }
+    if ssss.light_kind == LIGHT_KIND_POINT {
+        // `shadow_depth` is then the point lights' cube texture: six faces per light, in its
+        // clustered order.
+        return select(-1, i32(ssss.local_radius), layer / 6u == ssss.light_index);
     }
     let i = ssss_light();
     if i == NO_LIGHT {

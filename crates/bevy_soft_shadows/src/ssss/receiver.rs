@@ -18,7 +18,8 @@ use bevy::shader::ShaderRef;
 #[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
 pub struct SoftShadowReceiver {
     /// The SSSS output (Rg32Float, the camera's size): the soft visibility (−1 where SSSS is
-    /// inactive) and the light (a spot light's clustered index, −1 for a directional light).
+    /// inactive) and the light (a spot light's clustered index `i`, a point light's as `−2 − i`,
+    /// −1 for a directional light).
     #[texture(100, sample_type = "float", filterable = false)]
     pub visibility: Handle<Image>,
 }
@@ -102,7 +103,7 @@ fn prepare_cameras_and_textures(
         (),
         (
             With<ScreenSpaceSoftShadows>,
-            Or<(With<DirectionalLight>, With<SpotLight>)>,
+            Or<(With<DirectionalLight>, With<SpotLight>, With<PointLight>)>,
         ),
     >,
     cameras: Query<
@@ -199,6 +200,7 @@ fn prepare_cameras_and_textures(
 fn switch_off_pcss_under_ssss(
     mut suns: Query<(Entity, &mut DirectionalLight), With<ScreenSpaceSoftShadows>>,
     mut spots: Query<(Entity, &mut SpotLight), With<ScreenSpaceSoftShadows>>,
+    mut points: Query<(Entity, &mut PointLight), With<ScreenSpaceSoftShadows>>,
 ) {
     for (entity, mut light) in &mut suns {
         if light.soft_shadow_size.is_some() {
@@ -213,6 +215,15 @@ fn switch_off_pcss_under_ssss(
         if light.soft_shadows_enabled {
             warn!(
                 "spot light {entity} has both ScreenSpaceSoftShadows and PCSS \
+                 (soft_shadows_enabled): SSSS replaces PCSS, soft_shadows_enabled set to false"
+            );
+            light.soft_shadows_enabled = false;
+        }
+    }
+    for (entity, mut light) in &mut points {
+        if light.soft_shadows_enabled {
+            warn!(
+                "point light {entity} has both ScreenSpaceSoftShadows and PCSS \
                  (soft_shadows_enabled): SSSS replaces PCSS, soft_shadows_enabled set to false"
             );
             light.soft_shadows_enabled = false;
@@ -273,23 +284,6 @@ fn convert_receivers(
     }
 }
 
-/// SSSS softens directional and spot lights only: a point light's six cube-face shadow maps
-/// would each need their own dilation (eq. 6.1 per face), which is not built. A point light with
-/// [`ScreenSpaceSoftShadows`] keeps Bevy's shadow and gets a warning, once.
-fn warn_about_point_lights(
-    lights: Query<Entity, (With<ScreenSpaceSoftShadows>, With<PointLight>)>,
-    mut warned: Local<bevy::platform::collections::HashSet<Entity>>,
-) {
-    for entity in &lights {
-        if warned.insert(entity) {
-            warn!(
-                "ScreenSpaceSoftShadows on point light {entity}: SSSS supports directional and \
-                 spot lights only; this light keeps Bevy's shadows"
-            );
-        }
-    }
-}
-
 /// Registers the main-world side.
 pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "receiver.wgsl");
@@ -306,6 +300,5 @@ pub(crate) fn build(app: &mut App) {
                 convert_receivers,
             )
                 .chain(),
-        )
-        .add_systems(PostUpdate, warn_about_point_lights);
+        );
 }

@@ -23,7 +23,7 @@
     mesh_view_types::{DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT, POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT},
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
     lighting,
-    shadows::{fetch_directional_shadow, fetch_spot_shadow},
+    shadows::{fetch_directional_shadow, fetch_point_shadow, fetch_spot_shadow},
 }
 
 // A directional SSSS light: the first shadow-casting directional light.
@@ -37,7 +37,7 @@ fn soft_shadow_light() -> u32 {
 }
 
 // `soft` is what `soft_visibility_at` read: (visibility, light), the light being a spot light's
-// clustered index or −1 for the directional light.
+// clustered index i, a point light's as −2 − i, or −1 for the directional light.
 fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, soft: vec2<f32>) -> vec4<f32> {
     if soft.x < 0.0 || (pbr_input.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u {
         return color;
@@ -61,7 +61,18 @@ fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, 
     input.F_ab = lighting::F_AB(m.perceptual_roughness, NdotV);
     var bevy_visibility = 1.0;
     var direct = vec3(0.0);
-    if soft.y >= 0.0 {
+    if soft.y <= -1.5 {
+        // A point light: Bevy's `fetch_point_shadow` and `lighting::point_light`, as its
+        // clustered light loop calls them.
+        let id = u32(-soft.y - 2.0 + 0.5);
+        let light = &view_bindings::clustered_lights.data[id];
+        if ((*light).flags & POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
+            return color;
+        }
+        bevy_visibility = fetch_point_shadow(
+            id, pbr_input.world_position, pbr_input.world_normal, frag_xy);
+        direct = lighting::point_light(id, &input, true, true);
+    } else if soft.y >= 0.0 {
         // A spot light: Bevy's `fetch_spot_shadow` and `lighting::spot_light`, as its clustered
         // light loop calls them.
         let id = u32(soft.y);

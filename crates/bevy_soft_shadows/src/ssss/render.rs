@@ -52,14 +52,16 @@ pub struct SsssUniform {
     pub lazy_shadowing: u32,
     /// 1 while a light has SSSS.
     pub enabled: u32,
-    /// Which kind of light has SSSS: [`LIGHT_KIND_DIRECTIONAL`] or [`LIGHT_KIND_SPOT`].
+    /// Which kind of light has SSSS: [`LIGHT_KIND_DIRECTIONAL`], [`LIGHT_KIND_SPOT`] or
+    /// [`LIGHT_KIND_POINT`].
     pub light_kind: u32,
-    /// For a spot light, its index in Bevy's clustered light array (its shadow map is layer
-    /// `index + spot_light_shadowmap_offset` of the shadow texture array).
+    /// For a spot or point light, its index in Bevy's clustered light array (a spot's shadow map
+    /// is layer `index + spot_light_shadowmap_offset` of the shadow texture array; a point
+    /// light's faces are layers `6 · index ..` of the point lights' cube texture).
     pub light_index: u32,
-    /// For a spot light, the coarse dilation radius `R` (`min_filter::spot_fine_reach`,
+    /// For a spot or point light, the coarse dilation radius `R` (`min_filter::spot_fine_reach`,
     /// `min_filter::coarse_radius_of`).
-    pub spot_radius: u32,
+    pub local_radius: u32,
     /// 1: blur every screen tile; 0: only the active ones ([`super::tiles`]).
     pub all_tiles: u32,
     /// Shadow-map texels a side per texel of the coarse dilated map
@@ -71,6 +73,8 @@ pub struct SsssUniform {
 pub const LIGHT_KIND_DIRECTIONAL: u32 = 0;
 /// [`SsssUniform::light_kind`] of a spot light (`ssss_types.wgsl`).
 pub const LIGHT_KIND_SPOT: u32 = 1;
+/// [`SsssUniform::light_kind`] of a point light (`ssss_types.wgsl`).
+pub const LIGHT_KIND_POINT: u32 = 2;
 
 impl SsssUniform {
     /// The uniform for (sanitised) settings.
@@ -86,21 +90,24 @@ impl SsssUniform {
             enabled: 1,
             light_kind: LIGHT_KIND_DIRECTIONAL,
             light_index: 0,
-            spot_radius: 0,
+            local_radius: 0,
             all_tiles: (!s.tile_classification) as u32,
             dilation_block: super::min_filter::DILATION_BLOCK as u32,
         }
     }
 }
 
-/// Insert into the render world to get copies of layer 0 of the shadow map and of the coarse
+/// Insert into the render world to get copies of one layer of the SSSS light's shadow texture
+/// (the directional and spot lights' array, or the point lights' cube faces) and of the coarse
 /// dilated map (both R32Float, row-major, rows padded to 256 bytes) in `fine` and `coarse`
 /// after the next frame — for tests of the dilation against its CPU reference.
 #[derive(Resource, Default, Clone)]
 pub struct SsssDilationReadback {
-    /// Layer 0 of the shadow map: buffer and (width, height).
+    /// Which layer to copy (0 unless set).
+    pub layer: u32,
+    /// That layer of the shadow map: buffer and (width, height).
     pub fine: Option<(Buffer, UVec2)>,
-    /// Layer 0 of the coarse dilated map: buffer and (width, height).
+    /// That layer of the coarse dilated map: buffer and (width, height).
     pub coarse: Option<(Buffer, UVec2)>,
     /// The form of the min filter that made it: `Direct` or `Segments`.
     pub filter: Option<SsssDilationFilter>,
@@ -183,9 +190,9 @@ fn prepare_tile_buffers(
 struct ExtractedSsss {
     uniform: SsssUniform,
     textures: SsssTextures,
-    /// The render-world entity of the spot light with SSSS (its clustered index is only known
-    /// after Bevy's `prepare_lights`).
-    spot: Option<Entity>,
+    /// The render-world entity of the spot or point light with SSSS (its clustered index is only
+    /// known after Bevy's `prepare_lights`).
+    local: Option<Entity>,
     /// The largest coarse dilation radius over the light's shadow maps (for
     /// [`SsssDilationFilter::Auto`]).
     max_radius: usize,
@@ -194,20 +201,21 @@ struct ExtractedSsss {
 }
 
 /// The light SSSS shades: the first directional light with [`ScreenSpaceSoftShadows`], else the
-/// first spot light with it (its shadows must be on: without a shadow map there is nothing to
-/// soften, and SSSS stays off with a warning).
-#[allow(clippy::type_complexity)]
+/// first spot light with it, else the first point light with it (a local light's shadows must be
+/// on: without a shadow map there is nothing to soften, and SSSS stays off with a warning).
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn extract_ssss(
     mut extracted: ResMut<ExtractedSsss>,
     directional: Extract<Query<&ScreenSpaceSoftShadows, With<DirectionalLight>>>,
     dilation: Extract<Res<super::dilation::SsssDilationRadius>>,
     spots: Extract<Query<(Entity, &ScreenSpaceSoftShadows, &SpotLight, &RenderEntity)>>,
+    points: Extract<Query<(Entity, &ScreenSpaceSoftShadows, &PointLight, &RenderEntity)>>,
     textures: Extract<Res<SsssTextures>>,
     active: Extract<Res<SsssActive>>,
     mut warned: Local<bool>,
 ) {
     extracted.textures = textures.clone();
-    extracted.spot = None;
+    extracted.local = None;
     extracted.uniform = SsssUniform::default();
     extracted.max_radius = 0;
     extracted.block = super::min_filter::DILATION_BLOCK;
@@ -224,13 +232,44 @@ fn extract_ssss(
         };
         return;
     }
-    let Some((entity, settings, spot, render_entity)) = spots.iter().next() else {
+    let spot = spots
+        .iter()
+        .next()
+        .map(|(entity, settings, spot, render_entity)| {
+            (
+                entity,
+                settings,
+                spot.shadow_maps_enabled,
+                render_entity,
+                LIGHT_KIND_SPOT,
+            )
+        });
+    let point = || {
+        points
+            .iter()
+            .next()
+            .map(|(entity, settings, point, render_entity)| {
+                (
+                    entity,
+                    settings,
+                    point.shadow_maps_enabled,
+                    render_entity,
+                    LIGHT_KIND_POINT,
+                )
+            })
+    };
+    let Some((entity, settings, shadows, render_entity, kind)) = spot.or_else(point) else {
         return;
     };
-    if !spot.shadow_maps_enabled {
+    if !shadows {
         if !*warned {
+            let what = if kind == LIGHT_KIND_SPOT {
+                "spot"
+            } else {
+                "point"
+            };
             warn!(
-                "ScreenSpaceSoftShadows on spot light {entity}: its shadow maps are off \
+                "ScreenSpaceSoftShadows on {what} light {entity}: its shadow maps are off \
                  (shadow_maps_enabled = false), so SSSS is off too"
             );
             *warned = true;
@@ -239,10 +278,10 @@ fn extract_ssss(
     }
     *warned = false;
     let settings = settings.sanitized().0;
-    extracted.spot = Some(render_entity.id());
+    extracted.local = Some(render_entity.id());
     extracted.uniform = SsssUniform {
-        light_kind: LIGHT_KIND_SPOT,
-        spot_radius: extracted.max_radius as u32,
+        light_kind: kind,
+        local_radius: extracted.max_radius as u32,
         dilation_block: extracted.block as u32,
         ..SsssUniform::new(&settings)
     };
@@ -258,9 +297,9 @@ fn prepare_uniform(
     clustered: Res<GlobalClusterableObjectMeta>,
     mut buffer: ResMut<SsssUniformBuffer>,
 ) {
-    // A spot light's place in the clustered light array (Bevy sorts it every frame).
-    if let Some(spot) = extracted.spot {
-        match clustered.entity_to_index.get(&spot) {
+    // A local light's place in the clustered light array (Bevy sorts it every frame).
+    if let Some(light) = extracted.local {
+        match clustered.entity_to_index.get(&light) {
             Some(&index) => extracted.uniform.light_index = index as u32,
             None => extracted.uniform.enabled = 0,
         }
@@ -377,6 +416,7 @@ fn init_pipelines(
                 texture_2d(unfiltered),
                 storage_buffer_read_only_sized(false, None).visibility(ShaderStages::VERTEX),
                 texture_2d(TextureSampleType::Uint),
+                texture_2d_array(TextureSampleType::Depth),
             ),
         ),
     );
@@ -573,7 +613,7 @@ fn prepare_dilation(
     views: Query<(Entity, &ViewShadowBindings), With<SoftShadowCamera>>,
 ) {
     for (entity, shadows) in &views {
-        let texture = &shadows.directional_light_depth_texture;
+        let texture = shadow_source(&extracted, shadows);
         let block = extracted.block.max(1) as u32;
         let size = Extent3d {
             width: texture.width().div_ceil(block),
@@ -613,6 +653,16 @@ fn prepare_dilation(
             scan_sink,
             size,
         });
+    }
+}
+
+/// The shadow texture the SSSS light's maps are in: the point lights' cube texture for a point
+/// light, else the directional and spot lights' array.
+fn shadow_source<'a>(extracted: &ExtractedSsss, shadows: &'a ViewShadowBindings) -> &'a Texture {
+    if extracted.uniform.light_kind == LIGHT_KIND_POINT {
+        &shadows.point_light_depth_texture
+    } else {
+        &shadows.directional_light_depth_texture
     }
 }
 
@@ -714,6 +764,11 @@ fn ssss(
         return;
     };
     let device = ctx.render_device().clone();
+    // A point light's cube faces as a 2D array: the dilation and the refined search read single
+    // texels, which a cube view does not allow.
+    let point_faces = array_view(&shadows.point_light_depth_texture);
+    let source = shadow_source(&extracted, shadows);
+    let source_view = array_view(source);
     let rows_view = array_view(&dilation.rows.texture);
     let dilated_view = array_view(&dilation.dilated.texture);
     let scan_view = array_view(&dilation.scan.texture);
@@ -724,7 +779,7 @@ fn ssss(
             "ssss_dilate",
             &dilate_layout,
             &BindGroupEntries::sequential((
-                &shadows.directional_light_depth_texture_view,
+                &source_view,
                 input,
                 output,
                 lights_binding.clone(),
@@ -771,6 +826,7 @@ fn ssss(
                 blur_in,
                 tile_list.as_entire_binding(),
                 sums,
+                &point_faces,
             )),
         )
     };
@@ -986,7 +1042,7 @@ fn ssss(
             &mut ctx,
             &pipelines,
             &pipeline_cache,
-            &shadows.directional_light_depth_texture,
+            source,
             &dilation.dilated.texture,
             |fine_view| dilate_group(&rows_view, fine_view, &scan_view),
             lights_offset.offset,
@@ -996,8 +1052,13 @@ fn ssss(
     time_span.end(ctx.command_encoder());
 }
 
-/// Copies layer 0 of a texture into a new mappable-by-copy buffer.
-fn copy_layer0(ctx: &mut RenderContext, texture: &Texture, label: &'static str) -> (Buffer, UVec2) {
+/// Copies one layer of a texture into a new mappable-by-copy buffer.
+fn copy_layer(
+    ctx: &mut RenderContext,
+    texture: &Texture,
+    layer: u32,
+    label: &'static str,
+) -> (Buffer, UVec2) {
     let (w, h) = (texture.width(), texture.height());
     let stride = (w * 4).div_ceil(256) * 256;
     let buffer = ctx.render_device().create_buffer(&BufferDescriptor {
@@ -1010,7 +1071,11 @@ fn copy_layer0(ctx: &mut RenderContext, texture: &Texture, label: &'static str) 
         TexelCopyTextureInfo {
             texture,
             mip_level: 0,
-            origin: Origin3d::ZERO,
+            origin: Origin3d {
+                x: 0,
+                y: 0,
+                z: layer.min(texture.depth_or_array_layers() - 1),
+            },
             aspect: TextureAspect::All,
         },
         TexelCopyBufferInfo {
@@ -1074,8 +1139,9 @@ fn copy_for_readback(
             shadow.depth_or_array_layers(),
         );
     }
-    readback.fine = Some(copy_layer0(ctx, &fine, "ssss_shadow_copy_buffer"));
-    readback.coarse = Some(copy_layer0(ctx, dilated, "ssss_dilated_copy_buffer"));
+    let layer = readback.layer;
+    readback.fine = Some(copy_layer(ctx, &fine, layer, "ssss_shadow_copy_buffer"));
+    readback.coarse = Some(copy_layer(ctx, dilated, layer, "ssss_dilated_copy_buffer"));
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 // bind Bevy's mesh view group (view, lights, shadow maps, prepass depth and normals):
 //
 // - `distance`: per pixel the hard shadow (Bevy's own lookup), the blocker found in the dilated
-//   shadow map, the penumbra width by eq. 6.1 (a spot light, or its limit for a light at
+//   shadow map, the penumbra width by eq. 6.1 (a spot or point light, or its limit for a light at
 //   infinity) and eq. 6.2 (in pixels), and the kernel's σ along x and y from the surface
 //   normal; written as (hard, σx, σy, eye depth). Its blocker is the dilated map's, the farthest
 //   in the window, so its σ is an upper bound: the tile classification (`tiles.wgsl`) runs on it.
@@ -21,14 +21,15 @@
     mesh_view_types::{DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT, POINT_LIGHT_FLAGS_SPOT_LIGHT_Y_NEGATIVE},
     prepass_utils::{prepass_depth, prepass_normal},
     shadows::{
-        fetch_directional_shadow, fetch_spot_shadow, get_cascade_index,
+        fetch_directional_shadow, fetch_point_shadow, fetch_spot_shadow, get_cascade_index,
         world_to_directional_light_local,
     },
     view_transformations::{frag_coord_to_ndc, position_ndc_to_world, position_world_to_view, depth_ndc_to_view_z},
 }
 #import bevy_render::maths::orthonormalize
 #import bevy_soft_shadows::ssss_types::{
-    SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS, MAX_COARSE_RADIUS, LIGHT_KIND_SPOT,
+    SsssUniform, NO_LIGHT, KERNEL_REACH_SIGMAS, MAX_COARSE_RADIUS, LIGHT_KIND_DIRECTIONAL,
+    LIGHT_KIND_SPOT, LIGHT_KIND_POINT,
     TILE, BLOCKER_GRID, tap_offset, tap_cell, tap_layout, SUM_SCALE,
 }
 
@@ -41,6 +42,10 @@
 // Prefix sums of `blur_in.r` along the pass (`box_sums.wgsl`): rows for the horizontal pass,
 // columns for the vertical one.
 @group(2) @binding(5) var line_sums: texture_2d<u32>;
+// The point lights' cube shadow texture viewed as a 2D array (face f of the light of clustered
+// index i is layer 6i + f): the mesh view group binds it as a cube array, which `textureLoad`
+// cannot read.
+@group(2) @binding(6) var point_faces: texture_depth_2d_array;
 
 // One quad per active tile: instance `i` covers tile `active_tiles[i]`, clipped to the screen.
 @vertex
@@ -66,13 +71,22 @@ struct DistanceOutput {
     @location(2) visibility: vec4<f32>,
 }
 
+// Which light the receivers re-weight (`receiver_functions::apply_soft_shadow`): a spot light's
+// clustered index i, a point light's as −2 − i, −1 for the directional light.
 fn receiver_light() -> f32 {
-    return select(-1.0, f32(ssss.light_index), ssss.light_kind == LIGHT_KIND_SPOT);
+    if ssss.light_kind == LIGHT_KIND_SPOT {
+        return f32(ssss.light_index);
+    }
+    if ssss.light_kind == LIGHT_KIND_POINT {
+        return -2.0 - f32(ssss.light_index);
+    }
+    return -1.0;
 }
 
-// The SSSS light: a spot light's clustered index, or the first shadow-casting directional light.
+// The SSSS light: a spot or point light's clustered index, or the first shadow-casting
+// directional light.
 fn ssss_light() -> u32 {
-    if ssss.light_kind == LIGHT_KIND_SPOT {
+    if ssss.light_kind != LIGHT_KIND_DIRECTIONAL {
         return ssss.light_index;
     }
     for (var i = 0u; i < view_bindings::lights.n_directional_lights; i += 1u) {
@@ -92,6 +106,9 @@ fn hard_shadow(light: u32, world: vec3<f32>, normal: vec3<f32>, frag_xy: vec2<f3
     if ssss.light_kind == LIGHT_KIND_SPOT {
         let near = view_bindings::clustered_lights.data[light].shadow_map_near_z;
         return fetch_spot_shadow(light, vec4(world, 1.0), normal, near, frag_xy);
+    }
+    if ssss.light_kind == LIGHT_KIND_POINT {
+        return fetch_point_shadow(light, vec4(world, 1.0), normal, frag_xy);
     }
     return fetch_directional_shadow(light, vec4(world, 1.0), normal, view_z_of(world), frag_xy);
 }
@@ -203,10 +220,19 @@ fn refined_gap(local: vec3<f32>, gap_max: f32, texel_size: f32, depth_per_metre:
     return gap_max;
 }
 
-// Eq. 6.1 for a spot light of diameter `light_size`: w = light_size · (d_r − d_b) / d_b, with
-// the distances along the spot's axis. Bevy's spot shadow map is an infinite reverse-Z
-// perspective projection, so a stored depth is near / d (as in `fetch_spot_shadow`).
-fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>, refine: bool) -> f32 {
+// Where a local light's shadow map sees a point: its map coordinates (v down), its distance
+// from the light along the map's axis (0 where the map does not see it), the layer of the shadow
+// texture array, and the tangent of the map's half angle.
+struct LocalTexel {
+    uv: vec2<f32>,
+    distance: f32,
+    layer: i32,
+    tan_half_angle: f32,
+}
+
+// Bevy's spot shadow projection (`distance::SpotProjection`): the spot's axis from the clustered
+// light, `orthonormalize` for the map's orientation about it.
+fn spot_texel(id: u32, world: vec3<f32>) -> LocalTexel {
     let light = &view_bindings::clustered_lights.data[id];
     let to_light = (*light).position_radius.xyz - world;
     var spot_dir = vec3((*light).light_custom_data.x, 0.0, (*light).light_custom_data.y);
@@ -215,51 +241,120 @@ fn spot_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>, refine: bool) -> 
         spot_dir.y = -spot_dir.y;
     }
     let projected = (-to_light) * orthonormalize(-spot_dir);
-    let d_r = -projected.z;
+    var out: LocalTexel;
+    out.distance = max(-projected.z, 0.0);
+    out.tan_half_angle = (*light).spot_light_tan_angle;
+    out.uv = projected.xy / (out.tan_half_angle * max(out.distance, 1e-8)) * vec2(0.5, -0.5) + vec2(0.5);
+    out.layer = i32(id) + view_bindings::lights.spot_light_shadowmap_offset;
+    return out;
+}
+
+// Bevy's point shadow projection (`distance::PointProjection`): six 90° faces, sampled along the
+// light-to-point direction with z flipped (`fetch_point_shadow`: Bevy's cube maps are
+// left-handed), the face and its coordinates by the cube-map face selection of Vulkan and
+// Direct3D; the distance is the major axis', as Bevy's depth `near / major axis` stores it.
+fn point_texel(id: u32, world: vec3<f32>) -> LocalTexel {
+    let light = &view_bindings::clustered_lights.data[id];
+    let d = world - (*light).position_radius.xyz;
+    let r = vec3(d.x, d.y, -d.z);
+    let a = abs(r);
+    var face = 0;
+    var sc_tc = vec2(0.0);
+    var major = 0.0;
+    if a.x >= a.y && a.x >= a.z {
+        major = a.x;
+        face = select(1, 0, r.x >= 0.0);
+        sc_tc = select(vec2(r.z, -r.y), vec2(-r.z, -r.y), r.x >= 0.0);
+    } else if a.y >= a.z {
+        major = a.y;
+        face = select(3, 2, r.y >= 0.0);
+        sc_tc = select(vec2(r.x, -r.z), vec2(r.x, r.z), r.y >= 0.0);
+    } else {
+        major = a.z;
+        face = select(5, 4, r.z >= 0.0);
+        sc_tc = select(vec2(-r.x, -r.y), vec2(r.x, -r.y), r.z >= 0.0);
+    }
+    var out: LocalTexel;
+    out.distance = major;
+    out.tan_half_angle = 1.0;
+    out.uv = sc_tc / max(major, 1e-8) * 0.5 + vec2(0.5);
+    out.layer = i32(id) * 6 + face;
+    return out;
+}
+
+// The fine shadow map of the SSSS light: its size, and its stored depth at a texel.
+fn fine_size() -> vec2<i32> {
+    if ssss.light_kind == LIGHT_KIND_POINT {
+        return vec2<i32>(textureDimensions(point_faces).xy);
+    }
+    return vec2<i32>(textureDimensions(view_bindings::directional_shadow_textures).xy);
+}
+
+fn fine_depth(p: vec2<i32>, layer: i32) -> f32 {
+    if ssss.light_kind == LIGHT_KIND_POINT {
+        return textureLoad(point_faces, p, layer, 0);
+    }
+    return textureLoad(view_bindings::directional_shadow_textures, p, layer, 0);
+}
+
+// Eq. 6.1 for a local (spot or point) light of diameter `light_size`:
+// w = light_size · (d_r − d_b) / d_b, with the distances along the map's axis — on one ray from
+// the light their ratio is that of the distances themselves. Bevy's local shadow maps are
+// infinite reverse-Z perspective projections, so a stored depth is near / d (as in
+// `fetch_spot_shadow` and `fetch_point_shadow`). A point light's faces are dilated each on its own:
+// a receiver near a face's edge does not see blockers across it (`distance::point_penumbra_width`).
+fn local_penumbra(id: u32, world: vec3<f32>, normal: vec3<f32>, refine: bool) -> f32 {
+    let light = &view_bindings::clustered_lights.data[id];
+    let to_light = (*light).position_radius.xyz - world;
+    var t: LocalTexel;
+    if ssss.light_kind == LIGHT_KIND_POINT {
+        t = point_texel(id, world);
+    } else {
+        t = spot_texel(id, world);
+    }
+    let d_r = t.distance;
     let near = (*light).shadow_map_near_z;
     if d_r <= near {
         return 0.0;
     }
-    let tan_outer = (*light).spot_light_tan_angle;
-    let uv = projected.xy / (tan_outer * d_r) * vec2(0.5, -0.5) + vec2(0.5);
+    let uv = t.uv;
     if any(uv < vec2(0.0)) || any(uv > vec2(1.0)) {
         return 0.0;
     }
     let size = vec2<f32>(textureDimensions(dilated));
     let texel = vec2<i32>(clamp(uv * size, vec2(0.0), size - 1.0));
-    let layer = i32(id) + view_bindings::lights.spot_light_shadowmap_offset;
-    let blocker = textureLoad(dilated, texel, layer, 0).r;
+    let blocker = textureLoad(dilated, texel, t.layer, 0).r;
     if blocker <= near / d_r {
         return 0.0;
     }
     let d_b = near / blocker;
     let gap = d_r - d_b;
-    // A shadow-map texel spans 2·d·tan_outer / size metres at distance d.
-    let fine = f32(textureDimensions(view_bindings::directional_shadow_textures).x);
-    let texel_size = 2.0 * d_r * tan_outer / fine;
-    let reach = (f32(ssss.spot_radius) + 1.0) * f32(ssss.dilation_block) * texel_size;
+    // A shadow-map texel spans 2·d·tan_half_angle / size metres at distance d.
+    let fine = f32(fine_size().x);
+    let texel_size = 2.0 * d_r * t.tan_half_angle / fine;
+    let reach = (f32(ssss.local_radius) + 1.0) * f32(ssss.dilation_block) * texel_size;
     let cos_nl = dot(normal, normalize(to_light));
     if is_own_surface(gap, reach, cos_nl) {
         return 0.0;
     }
     var d_blocker = d_b;
     if refine {
-        d_blocker = refined_spot_blocker(uv, d_r, d_b, near, tan_outer, cos_nl, layer);
+        d_blocker = refined_local_blocker(uv, d_r, d_b, near, t.tan_half_angle, cos_nl, t.layer);
     }
     return (d_r - d_blocker) * ssss.light_size / d_blocker;
 }
 
-// `refined_gap` for a spot light (`distance::refined_spot_blocker`): the distance from the light
+// `refined_gap` for a local light (`distance::refined_local_blocker`): the distance from the light
 // of the blockers hiding part of the lamp's disk from the receiver, averaged weighted by the share
 // of the disk each hides (1/g²). Seen from the
 // receiver `d_r` away, the disk of diameter `light_size` spans `light_size/2 · g / d_r` around
 // the receiver's ray at a blocker `g` in front of the receiver; a texel spans
-// `2 d tan_outer / size` metres at distance `d` from the light.
-fn refined_spot_blocker(uv: vec2<f32>, d_r: f32, d_nearest: f32, near: f32, tan_outer: f32, cos_nl: f32, layer: i32) -> f32 {
-    let size = vec2<i32>(textureDimensions(view_bindings::directional_shadow_textures).xy);
+// `2 d tan_half_angle / size` metres at distance `d` from the light.
+fn refined_local_blocker(uv: vec2<f32>, d_r: f32, d_nearest: f32, near: f32, tan_half_angle: f32, cos_nl: f32, layer: i32) -> f32 {
+    let size = fine_size();
     let centre = blocker_grid_centre(uv, size);
     let half = 0.5 * ssss.light_size;
-    let texel_per_distance = 2.0 * tan_outer / f32(size.x);
+    let texel_per_distance = 2.0 * tan_half_angle / f32(size.x);
     let reach_texels = half * (d_r - d_nearest) / d_r / max(d_nearest * texel_per_distance, 1e-8);
     let slope = sqrt(max(1.0 - cos_nl * cos_nl, 0.0)) / max(cos_nl, 0.05);
     let receiver_texel = d_r * texel_per_distance;
@@ -272,7 +367,7 @@ fn refined_spot_blocker(uv: vec2<f32>, d_r: f32, d_nearest: f32, near: f32, tan_
             if any(p < vec2(0)) || any(p >= size) {
                 continue;
             }
-            let depth = textureLoad(view_bindings::directional_shadow_textures, p, layer, 0);
+            let depth = fine_depth(p, layer);
             if depth <= near / d_r {
                 continue;
             }
@@ -329,8 +424,8 @@ fn distance_map(in: FullscreenVertexOutput, refine: bool) -> vec4<f32> {
     let eye_depth = -view_z;
     let hard = hard_shadow(i, world, normal, in.position.xy);
     var world_width = 0.0;
-    if ssss.light_kind == LIGHT_KIND_SPOT {
-        world_width = spot_penumbra(i, world, normal, refine);
+    if ssss.light_kind != LIGHT_KIND_DIRECTIONAL {
+        world_width = local_penumbra(i, world, normal, refine);
     } else {
         world_width = directional_penumbra(i, world, normal, view_z, refine);
     }
@@ -460,8 +555,7 @@ fn blur_horizontal(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     return vec4(blur(in, vec2(1, 0), 1u, 3u), depth, 0.0, 1.0);
 }
 
-// The receivers read (visibility, light): the light is a spot light's clustered index, or −1
-// for the directional light (`receiver_functions::apply_soft_shadow`).
+// The receivers read (visibility, light): `receiver_light`.
 @fragment
 fn blur_vertical(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     return vec4(blur(in, vec2(0, 1), 2u, 1u), receiver_light(), 0.0, 1.0);

@@ -2,7 +2,7 @@
 
 // Mirrors `ssss::render::SsssUniform`.
 struct SsssUniform {
-    // Angular diameter of a directional light (rad), diameter of a spot light (m).
+    // Angular diameter of a directional light (rad), diameter of a spot or point light (m).
     light_size: f32,
     max_occluder_distance: f32,
     min_kernel_px: f32,
@@ -12,12 +12,12 @@ struct SsssUniform {
     lazy_shadowing: u32,
     // 1 while a light has SSSS; 0 makes the passes write "inactive" (-1) for the receivers.
     enabled: u32,
-    // LIGHT_KIND_DIRECTIONAL or LIGHT_KIND_SPOT.
+    // LIGHT_KIND_DIRECTIONAL, LIGHT_KIND_SPOT or LIGHT_KIND_POINT.
     light_kind: u32,
-    // A spot light's index in the clustered light array.
+    // A spot or point light's index in the clustered light array.
     light_index: u32,
-    // A spot light's coarse dilation radius (`ssss::min_filter::coarse_radius_of`).
-    spot_radius: u32,
+    // A spot or point light's coarse dilation radius (`ssss::min_filter::coarse_radius_of`).
+    local_radius: u32,
     // 1: blur every screen tile; 0: only the active ones (`ssss::tiles`).
     all_tiles: u32,
     // Shadow-map texels a side per coarse texel (`ssss::min_filter::dilation_block`).
@@ -26,6 +26,7 @@ struct SsssUniform {
 
 const LIGHT_KIND_DIRECTIONAL: u32 = 0u;
 const LIGHT_KIND_SPOT: u32 = 1u;
+const LIGHT_KIND_POINT: u32 = 2u;
 
 // The widest coarse dilation radius (`ssss::min_filter::MAX_COARSE_RADIUS`).
 const MAX_COARSE_RADIUS: u32 = 16u;

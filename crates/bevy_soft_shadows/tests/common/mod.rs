@@ -450,3 +450,21 @@ pub fn read_ssss_screen(
     };
     (visibility, buffers, bounds)
 }
+
+/// Each pixel's green over the unshadowed render's (a local light's falloff varies over the
+/// view, so its visibility is each pixel over the render with the blocker hidden).
+pub fn visibility(img: &[f32], unshadowed: &[f32]) -> Vec<f32> {
+    img.iter()
+        .zip(unshadowed)
+        .enumerate()
+        .map(|(i, (&v, &u))| if i % 4 == 1 { v / u.max(1e-4) } else { v })
+        .collect()
+}
+
+/// The 10–90 % penumbra width (m) across the side edge at ground x, from a visibility image.
+pub fn width_at(visibility: &[f32], x: f32) -> f32 {
+    bevy_soft_shadows::reference::rise_width(&profile(visibility, x, 1.0), 0.1, 0.9)
+        .expect("the penumbra rises")
+        * VIEW_M
+        / SIZE as f32
+}
