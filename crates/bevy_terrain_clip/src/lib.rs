@@ -22,6 +22,7 @@ pub mod cache;
 pub mod clip;
 pub mod dem;
 pub mod flight;
+pub mod geometry;
 pub mod material;
 pub mod pyramid;
 pub mod settings;
