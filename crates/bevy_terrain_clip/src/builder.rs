@@ -472,6 +472,14 @@ mod tests {
             .unwrap();
         let stored = heights.get_pixel(69, 39).0[0] as f32;
         assert_eq!(tile.at(5, 7), -100.0 + 0.5 * stored);
+        // Streamed as a source of heights: the same metres, one f32 a texel.
+        use crate::source::{TexelKind, TileSource};
+        assert_eq!(source.texels(), TexelKind::Height);
+        let streamed = bevy::tasks::block_on(source.load(TileKey { z: 3, x: 2, y: 1 }))
+            .unwrap()
+            .unwrap();
+        assert_eq!(streamed.height(5, 7), tile.at(5, 7));
+        assert_eq!(streamed.rgba.len(), 32 * 32 * 4);
         let refused = DiskTileSource::open(&dir).unwrap_err().to_string();
         assert!(refused.contains("height16"), "{refused}");
         std::fs::remove_dir_all(&dir).ok();

@@ -222,6 +222,45 @@ impl DiskHeightSource {
     }
 }
 
+impl HeightTile {
+    /// As a [`TileData`](crate::source::TileData) of `f32` texels, for a height clip stack.
+    pub fn into_tile_data(self) -> crate::source::TileData {
+        crate::source::TileData {
+            size: self.size,
+            rgba: self.metres.iter().flat_map(|h| h.to_le_bytes()).collect(),
+        }
+    }
+}
+
+/// A height pyramid streams into a height clip stack
+/// ([`ClipStackTexture::heights`](crate::stack_gpu::ClipStackTexture::heights)): its tiles
+/// decoded to `f32` metres.
+impl crate::source::TileSource for DiskHeightSource {
+    fn tile_size(&self) -> u32 {
+        self.manifest.tile_size
+    }
+
+    fn levels(&self) -> u32 {
+        self.manifest.levels
+    }
+
+    fn may_exist(&self, key: TileKey) -> bool {
+        self.manifest.may_exist(key)
+    }
+
+    fn load(
+        &self,
+        key: TileKey,
+    ) -> bevy::tasks::BoxedFuture<'static, Result<Option<crate::source::TileData>, TileError>> {
+        let source = self.clone();
+        Box::pin(async move { Ok(source.load_heights(key)?.map(HeightTile::into_tile_data)) })
+    }
+
+    fn texels(&self) -> crate::source::TexelKind {
+        crate::source::TexelKind::Height
+    }
+}
+
 /// Heights of the ground for gameplay: `height_at(x, z)` in metres at any world point over an
 /// elevation pyramid, bilinear between texel centres of its finest level (the surface the
 /// heights describe), and the surface normal. Decoded tiles stay in an LRU of `capacity` tiles;

@@ -13,13 +13,88 @@ use bevy::tasks::BoxedFuture;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// A decoded tile: `size × size` RGBA8 texels, rows top (north) first.
+/// A decoded tile: `size × size` texels of four bytes, rows top (north) first — RGBA8 for
+/// imagery, a little-endian `f32` height in metres for heights ([`TileSource::texels`]).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct TileData {
     /// Side in texels.
     pub size: u32,
     /// `size² · 4` bytes.
     pub rgba: Vec<u8>,
+}
+
+/// What a source's texels are: what the clip stack's texture holds and how its mips are made.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum TexelKind {
+    /// RGBA8 imagery (sRGB).
+    #[default]
+    Color,
+    /// Heights in metres, one little-endian `f32` a texel.
+    Height,
+}
+
+impl TexelKind {
+    /// For messages.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Color => "imagery (RGBA8)",
+            Self::Height => "heights (f32 metres)",
+        }
+    }
+
+    /// The GPU format of a clip stack of these texels.
+    pub fn texture_format(self) -> bevy::render::render_resource::TextureFormat {
+        match self {
+            Self::Color => bevy::render::render_resource::TextureFormat::Rgba8UnormSrgb,
+            Self::Height => bevy::render::render_resource::TextureFormat::R32Float,
+        }
+    }
+
+    /// The 2×2 box filter of a `side × side` square of these texels: rounded means of each
+    /// byte for imagery, means of the heights for heights (paper 4, §3 "Texture pyramid": each
+    /// level interpolates the four texels of the finer one).
+    pub fn halve(self, texels: &[u8], side: u32) -> Vec<u8> {
+        match self {
+            Self::Color => halve_rgba8(texels, side),
+            Self::Height => {
+                let h = (side / 2).max(1);
+                let at = |x: u32, y: u32| {
+                    let i = ((y.min(side - 1) * side + x.min(side - 1)) * 4) as usize;
+                    f32::from_le_bytes([texels[i], texels[i + 1], texels[i + 2], texels[i + 3]])
+                };
+                let mut out = Vec::with_capacity((h * h * 4) as usize);
+                for y in 0..h {
+                    for x in 0..h {
+                        let sum = at(2 * x, 2 * y)
+                            + at(2 * x + 1, 2 * y)
+                            + at(2 * x, 2 * y + 1)
+                            + at(2 * x + 1, 2 * y + 1);
+                        out.extend_from_slice(&(0.25 * sum).to_le_bytes());
+                    }
+                }
+                out
+            }
+        }
+    }
+}
+
+/// The 2×2 box filter of a `side × side` RGBA8 square (rounded means of the stored bytes).
+pub fn halve_rgba8(texels: &[u8], side: u32) -> Vec<u8> {
+    let h = (side / 2).max(1);
+    let mut out = vec![0u8; (h * h * 4) as usize];
+    for y in 0..h {
+        for x in 0..h {
+            for c in 0..4 {
+                let at = |dx: u32, dy: u32| {
+                    texels[(((2 * y + dy).min(side - 1) * side + (2 * x + dx).min(side - 1)) * 4
+                        + c) as usize] as u32
+                };
+                out[((y * h + x) * 4 + c) as usize] =
+                    ((at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1) + 2) / 4) as u8;
+            }
+        }
+    }
+    out
 }
 
 impl TileData {
@@ -41,6 +116,11 @@ impl TileData {
             },
             expected: tile_size,
         })
+    }
+
+    /// The height (m) at column `x`, row `y` of a height tile.
+    pub fn height(&self, x: u32, y: u32) -> f32 {
+        f32::from_le_bytes(self.texel(x, y))
     }
 
     /// The texel at column `x`, row `y`.
@@ -124,6 +204,10 @@ pub trait TileSource: Send + Sync + 'static {
     fn may_exist(&self, key: TileKey) -> bool;
     /// Loads a tile.
     fn load(&self, key: TileKey) -> BoxedFuture<'static, Result<Option<TileData>, TileError>>;
+    /// What its texels are (imagery unless it says otherwise).
+    fn texels(&self) -> TexelKind {
+        TexelKind::Color
+    }
 }
 
 /// Tiles read from an XYZ/TMS directory with a `pyramid.json` manifest.
@@ -218,6 +302,8 @@ pub struct ProceduralTileSource {
     pub levels: u32,
     /// The texels.
     pub texel: Arc<TexelFn>,
+    /// What they are.
+    pub kind: TexelKind,
 }
 
 impl std::fmt::Debug for ProceduralTileSource {
@@ -225,6 +311,7 @@ impl std::fmt::Debug for ProceduralTileSource {
         f.debug_struct("ProceduralTileSource")
             .field("tile_size", &self.tile_size)
             .field("levels", &self.levels)
+            .field("kind", &self.kind)
             .finish()
     }
 }
@@ -315,6 +402,21 @@ impl ProceduralTileSource {
             tile_size,
             levels,
             texel: Arc::new(texel),
+            kind: TexelKind::Color,
+        }
+    }
+
+    /// A source of heights (m) from `height(virtual level, texel x, texel y)`.
+    pub fn heights(
+        tile_size: u32,
+        levels: u32,
+        height: impl Fn(u32, u64, u64) -> f32 + Send + Sync + 'static,
+    ) -> Self {
+        Self {
+            tile_size,
+            levels,
+            texel: Arc::new(move |l, x, y| height(l, x, y).to_le_bytes()),
+            kind: TexelKind::Height,
         }
     }
 
@@ -351,6 +453,10 @@ impl TileSource for ProceduralTileSource {
         let source = self.clone();
         Box::pin(async move { Ok(source.may_exist(key).then(|| source.tile(key))) })
     }
+
+    fn texels(&self) -> TexelKind {
+        self.kind
+    }
 }
 
 #[cfg(test)]
@@ -365,6 +471,27 @@ mod tests {
             .unwrap()
             .save_with_format(path, image::ImageFormat::Png)
             .unwrap();
+    }
+
+    #[test]
+    fn heights_are_halved_as_metres_and_imagery_as_bytes() {
+        let heights: Vec<u8> = [1.5f32, -2.0, 100.25, 0.25]
+            .iter()
+            .flat_map(|h| h.to_le_bytes())
+            .collect();
+        let half = TexelKind::Height.halve(&heights, 2);
+        assert_eq!(f32::from_le_bytes(half[..4].try_into().unwrap()), 25.0);
+        // The same bytes halved as RGBA8 are per-byte means: not the mean height.
+        assert_ne!(TexelKind::Color.halve(&heights, 2), half);
+        let source =
+            ProceduralTileSource::heights(8, 2, |l, x, y| l as f32 + x as f32 * 0.5 - y as f32);
+        assert_eq!(source.texels(), TexelKind::Height);
+        let tile = source.tile(TileKey { z: 1, x: 1, y: 0 });
+        assert_eq!(tile.height(3, 2), 4.0 + 11.0 * 0.5 - 2.0);
+        assert_eq!(
+            ProceduralTileSource::new(8, 2, address_texel).texels(),
+            TexelKind::Color
+        );
     }
 
     #[test]

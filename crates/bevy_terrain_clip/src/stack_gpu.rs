@@ -12,7 +12,7 @@ use crate::cache::TileKey;
 use crate::clip::stack::{ClipStack, SubtileUpload, tile_of};
 use crate::material::{ClipmapExtension, ClipmapMaterial, ClipmapParams, MAX_LAYERS};
 use crate::settings::{ClipmapSettings, UpdateBudget};
-use crate::source::TileSource;
+use crate::source::{TexelKind, TileSource};
 use crate::tile_cache::TileCache;
 use bevy::asset::RenderAssetUsages;
 use bevy::diagnostic::{Diagnostic, DiagnosticPath, Diagnostics, RegisterDiagnostic};
@@ -20,7 +20,7 @@ use bevy::prelude::*;
 use bevy::render::render_asset::{RenderAssets, prepare_assets};
 use bevy::render::render_resource::{
     Extent3d, Origin3d, TexelCopyBufferLayout, TexelCopyTextureInfo, TextureAspect,
-    TextureDimension, TextureFormat, TextureUsages, TextureViewDescriptor, TextureViewDimension,
+    TextureDimension, TextureUsages, TextureViewDescriptor, TextureViewDimension,
 };
 use bevy::render::renderer::RenderQueue;
 use bevy::render::texture::GpuImage;
@@ -127,8 +127,10 @@ pub struct ClipStackTexture {
     pub stack: ClipStack,
     /// The RAM tile cache.
     pub cache: TileCache,
-    /// The `c × c × layers` texture array (RGBA8 sRGB).
+    /// The `c × c × layers` texture array (RGBA8 sRGB for imagery, R32Float for heights).
     pub layers: Handle<Image>,
+    /// What the stack holds (its source's [`TileSource::texels`]).
+    pub texels: TexelKind,
     /// The base level `l_b` (`c × c`, full mip chain), loaded when the stack is made.
     pub base: Handle<Image>,
     /// Layers sampled trilinearly (coverage shrinks by a texel); otherwise nearest, mip 0.
@@ -189,6 +191,70 @@ impl ClipStackTexture {
         mips: u32,
         images: &mut Assets<Image>,
     ) -> Self {
+        Self::build(
+            source,
+            [clip_size, subtile_size, mips],
+            cache_tiles,
+            center_uv,
+            TexelKind::Color,
+            images,
+        )
+    }
+
+    /// A stack of heights: `source`'s heights (`TexelKind::Height`: an elevation pyramid's
+    /// [`DiskHeightSource`](crate::dem::DiskHeightSource), or
+    /// [`ProceduralTileSource::heights`](crate::source::ProceduralTileSource::heights)) streamed
+    /// into an R32Float texture array, one mip a layer, sized by `settings` like
+    /// [`from_settings`](Self::from_settings). The terrain geometry's vertex shader reads it with
+    /// `textureLoad` (32-bit float textures are not filterable everywhere). A source of imagery is
+    /// refused with an error and the stack stays empty (no data), never converted.
+    pub fn heights(
+        source: Arc<dyn TileSource>,
+        settings: &ClipmapSettings,
+        center_uv: [f64; 2],
+        images: &mut Assets<Image>,
+    ) -> Self {
+        let (settings, fixes) = settings.sanitized();
+        for fix in fixes {
+            warn!("ClipmapSettings: {fix}");
+        }
+        let mut clip = Self::build(
+            source,
+            [settings.clip_size, settings.subtile_size, 1],
+            settings.cache_tiles as usize,
+            center_uv,
+            TexelKind::Height,
+            images,
+        );
+        clip.budget = settings.budget;
+        clip.linear_filtering = false;
+        clip
+    }
+
+    fn build(
+        source: Arc<dyn TileSource>,
+        [clip_size, subtile_size, mips]: [u32; 3],
+        cache_tiles: usize,
+        center_uv: [f64; 2],
+        kind: TexelKind,
+        images: &mut Assets<Image>,
+    ) -> Self {
+        // A stack holds one kind of texel: a source of the other kind is an error, and the stack
+        // shows no data rather than heights as colours or colours as heights.
+        let source = if source.texels() != kind {
+            error!(
+                "clip stack: the source holds {}, the stack is for {}; nothing is streamed",
+                source.texels().describe(),
+                kind.describe()
+            );
+            Arc::new(NoTiles {
+                tile_size: source.tile_size(),
+                levels: source.levels(),
+                kind,
+            }) as Arc<dyn TileSource>
+        } else {
+            source
+        };
         // A subtile is cut from one tile: no larger than the source's tiles (`pyramid_build
         // --tile 64` under the default 128-texel subtiles).
         let subtile_size = if subtile_size > source.tile_size() {
@@ -211,10 +277,10 @@ impl ClipStackTexture {
                 depth_or_array_layers: layer_count,
             },
             TextureDimension::D2,
-            TextureFormat::Rgba8UnormSrgb,
+            kind.texture_format(),
             RenderAssetUsages::RENDER_WORLD,
         );
-        image.sampler = repeat_sampler(true);
+        image.sampler = repeat_sampler(kind == TexelKind::Color);
         image.texture_descriptor.mip_level_count = mips;
         image.texture_descriptor.usage |=
             TextureUsages::COPY_DST | TextureUsages::COPY_SRC | TextureUsages::TEXTURE_BINDING;
@@ -224,7 +290,11 @@ impl ClipStackTexture {
         });
         // The base level is read off the main thread: until it arrives the placeholder is
         // transparent, which the material shows as no data.
-        let base = images.add(base_image(clip_size, vec![0; base_level_bytes(clip_size)]));
+        let base = images.add(base_image(
+            clip_size,
+            vec![0; base_level_bytes(clip_size)],
+            kind,
+        ));
         let base_task = {
             let source = source.clone();
             bevy::tasks::IoTaskPool::get_or_init(bevy::tasks::TaskPool::new)
@@ -234,6 +304,7 @@ impl ClipStackTexture {
             cache: TileCache::new(source, cache_tiles),
             stack,
             layers: images.add(image),
+            texels: kind,
             base,
             linear_filtering: true,
             layer_mips: mips,
@@ -302,6 +373,8 @@ impl ClipStackTexture {
 
     /// Switches between bilinear and nearest sampling of the layers and the base level.
     pub fn set_linear_filtering(&mut self, linear: bool, images: &mut Assets<Image>) {
+        // Heights are read texel by texel (R32Float is not filterable everywhere).
+        let linear = linear && self.texels == TexelKind::Color;
         self.linear_filtering = linear;
         for handle in [&self.layers, &self.base] {
             if let Some(mut image) = images.get_mut(handle) {
@@ -355,11 +428,15 @@ fn base_level_bytes(clip_size: u32) -> usize {
 /// The base level `l_b = log2 c` as a `c × c` image with its full mip chain
 /// ([`base_level_data`]), read from `source` now, blocking.
 pub fn base_level_image(source: &dyn TileSource, clip_size: u32) -> Image {
-    base_image(clip_size, base_level_data(source, clip_size))
+    base_image(
+        clip_size,
+        base_level_data(source, clip_size),
+        source.texels(),
+    )
 }
 
 /// The base level's `c × c` texture with its full mip chain holding `data`.
-fn base_image(clip_size: u32, data: Vec<u8>) -> Image {
+fn base_image(clip_size: u32, data: Vec<u8>, kind: TexelKind) -> Image {
     let mut image = Image::new_uninit(
         Extent3d {
             width: clip_size,
@@ -367,13 +444,44 @@ fn base_image(clip_size: u32, data: Vec<u8>) -> Image {
             depth_or_array_layers: 1,
         },
         TextureDimension::D2,
-        TextureFormat::Rgba8UnormSrgb,
+        kind.texture_format(),
         RenderAssetUsages::RENDER_WORLD,
     );
     image.texture_descriptor.mip_level_count = clip_size.trailing_zeros() + 1;
     image.data = Some(data);
-    image.sampler = repeat_sampler(true);
+    image.sampler = repeat_sampler(kind == TexelKind::Color);
     image
+}
+
+/// A source with no tiles: what a stack streams when given a source of the wrong kind.
+struct NoTiles {
+    tile_size: u32,
+    levels: u32,
+    kind: TexelKind,
+}
+
+impl TileSource for NoTiles {
+    fn tile_size(&self) -> u32 {
+        self.tile_size
+    }
+    fn levels(&self) -> u32 {
+        self.levels
+    }
+    fn may_exist(&self, _: TileKey) -> bool {
+        false
+    }
+    fn load(
+        &self,
+        _: TileKey,
+    ) -> bevy::tasks::BoxedFuture<
+        'static,
+        Result<Option<crate::source::TileData>, crate::source::TileError>,
+    > {
+        Box::pin(async { Ok(None) })
+    }
+    fn texels(&self) -> TexelKind {
+        self.kind
+    }
 }
 
 /// The base level `l_b = log2 c`'s `c × c` texels and its full mip chain (box-filtered),
@@ -428,12 +536,12 @@ pub fn base_level_data(source: &dyn TileSource, clip_size: u32) -> Vec<u8> {
         (level, size) = (magnified, clip_size);
     }
     while size > clip_size {
-        level = halve(&level, size);
+        level = source.texels().halve(&level, size);
         size /= 2;
     }
     let mut data = level.clone();
     while size > 1 {
-        level = halve(&level, size);
+        level = source.texels().halve(&level, size);
         size /= 2;
         data.extend_from_slice(&level);
     }
@@ -442,21 +550,7 @@ pub fn base_level_data(source: &dyn TileSource, clip_size: u32) -> Vec<u8> {
 
 /// The 2×2 box filter of a `side × side` RGBA8 square (rounded means of the stored bytes).
 pub fn halve(texels: &[u8], side: u32) -> Vec<u8> {
-    let h = (side / 2).max(1);
-    let mut out = vec![0u8; (h * h * 4) as usize];
-    for y in 0..h {
-        for x in 0..h {
-            for c in 0..4 {
-                let at = |dx: u32, dy: u32| {
-                    texels[(((2 * y + dy).min(side - 1) * side + (2 * x + dx).min(side - 1)) * 4
-                        + c) as usize] as u32
-                };
-                out[((y * h + x) * 4 + c) as usize] =
-                    ((at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1) + 2) / 4) as u8;
-            }
-        }
-    }
-    out
+    crate::source::halve_rgba8(texels, side)
 }
 
 /// Recentres every clip stack, polls its tile cache and queues this frame's subtile uploads.
@@ -595,7 +689,8 @@ pub fn stream_clip_stacks(
             // Mip 0, then each mip the 2×2 box filter of the one before.
             let (mut texels, mut size) = (texels, s);
             for mip in 0..clip.layer_mips {
-                let next = (mip + 1 < clip.layer_mips && size > 1).then(|| halve(&texels, size));
+                let next = (mip + 1 < clip.layer_mips && size > 1)
+                    .then(|| clip.texels.halve(&texels, size));
                 clip.writes.push(SubtileWrite {
                     layer: upload.layer as u32 - 1,
                     mip,

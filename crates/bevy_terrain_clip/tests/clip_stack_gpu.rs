@@ -16,8 +16,8 @@ use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy::render::texture::GpuImage;
 use bevy_nature_harness::RenderHarness;
 use bevy_nature_harness::headless::read_buffer_now;
-use bevy_terrain_clip::source::{ProceduralTileSource, address_texel};
-use bevy_terrain_clip::stack_gpu::{ClipStackTexture, halve};
+use bevy_terrain_clip::source::{ProceduralTileSource, TexelKind, address_texel};
+use bevy_terrain_clip::stack_gpu::ClipStackTexture;
 use bevy_terrain_clip::stack_gpu::{QUALITY, SUBTILES_UPLOADED};
 use bevy_terrain_clip::{ClipmapSettings, TerrainClipPlugin, UpdateBudget};
 use std::sync::Arc;
@@ -121,8 +121,13 @@ fn settle_and_compare(
             )
         })
         .collect();
+    let (mips, kind) = (clip.layer_mips, clip.texels);
     let data = read_layers(harness, image, layers.len() as u32, 0);
-    let mip1 = read_layers(harness, image, layers.len() as u32, 1);
+    let mip1 = if mips > 1 {
+        read_layers(harness, image, layers.len() as u32, 1)
+    } else {
+        Vec::new()
+    };
     let half = SUBTILE / 2;
     let mut checked = 0u32;
     for (layer, (level, slots)) in layers.iter().enumerate() {
@@ -138,8 +143,8 @@ fn settle_and_compare(
                     ));
                 }
             }
-            let expected_mip1 = halve(&full, SUBTILE);
-            for y in 0..half {
+            let expected_mip1 = kind.halve(&full, SUBTILE);
+            for y in 0..half * (mips > 1) as u32 {
                 for x in 0..half {
                     let (tx, ty) = (origin[0] / 2 + x, origin[1] / 2 + y);
                     let i = (((layer as u32 * (CLIP / 2) + ty) * (CLIP / 2) + tx) * 4) as usize;
@@ -237,6 +242,80 @@ fn gpu_layers_hold_the_pyramid_texels_of_their_toroidal_slots() {
     // Only the subtiles that entered the windows were uploaded, not the whole stack.
     assert!(entering > 0 && entering < 64, "{entering}");
     assert_eq!(uploaded, entering as usize);
+}
+
+/// A height that says where it was sampled: a different metre value for every level and texel
+/// (to the f32's precision), with a fractional part, so a wrong level or texel, a truncation to
+/// 8 or 16 bits or a colour conversion would show.
+fn address_height(level: u32, x: u64, y: u64) -> f32 {
+    level as f32 * 1000.0 + (x % 251) as f32 * 3.25 + (y % 241) as f32 * 0.0625 - 400.0
+}
+
+/// Heights stream into an R32Float stack texel for texel: every valid slot of every layer read
+/// back equals the source's heights exactly; a source of the wrong kind is refused and streams
+/// nothing.
+#[test]
+fn height_layers_hold_the_pyramid_heights_exactly() {
+    let Some(mut harness) = RenderHarness::for_test("clip_stack_gpu_heights", 16, 16) else {
+        return;
+    };
+    harness.app_mut().add_plugins(TerrainClipPlugin);
+    let settings = ClipmapSettings {
+        clip_size: CLIP,
+        subtile_size: SUBTILE,
+        cache_tiles: 64,
+        budget: UpdateBudget::Subtiles(16),
+        ..default()
+    };
+    let (heights, imagery_as_heights, heights_as_imagery) = {
+        let world = harness.world_mut();
+        let mut images = world.resource_mut::<Assets<Image>>();
+        let heights = ClipStackTexture::heights(
+            Arc::new(ProceduralTileSource::heights(64, 6, address_height)),
+            &settings,
+            [0.42, 0.55],
+            &mut images,
+        );
+        let wrong = ClipStackTexture::heights(
+            Arc::new(ProceduralTileSource::new(64, 6, address_texel)),
+            &settings,
+            [0.42, 0.55],
+            &mut images,
+        );
+        let wrong_too = ClipStackTexture::from_settings(
+            Arc::new(ProceduralTileSource::heights(64, 6, address_height)),
+            &settings,
+            [0.42, 0.55],
+            &mut images,
+        );
+        assert_eq!(heights.texels, TexelKind::Height);
+        assert_eq!(heights.layer_mips, 1);
+        (
+            world.spawn(heights).id(),
+            world.spawn(wrong).id(),
+            world.spawn(wrong_too).id(),
+        )
+    };
+    harness.world_mut().spawn(Camera3d::default());
+    harness.wait_until_ready().unwrap();
+    let (checked, _) = settle_and_compare(&mut harness, heights, |l, x, y| {
+        address_height(l, x, y).to_le_bytes()
+    });
+    assert_eq!(checked, 4 * CLIP * CLIP);
+    for refused in [imagery_as_heights, heights_as_imagery] {
+        let clip = harness
+            .world_mut()
+            .get::<ClipStackTexture>(refused)
+            .unwrap();
+        assert!(
+            clip.stack
+                .layers
+                .iter()
+                .flat_map(|l| l.slots())
+                .all(|s| s.state != bevy_terrain_clip::clip::layer::SlotState::Valid),
+            "a source of the wrong kind streamed"
+        );
+    }
 }
 
 /// A second virtual texture (e.g. an overlay map) with texels of its own.
