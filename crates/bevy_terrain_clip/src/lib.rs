@@ -28,6 +28,7 @@ pub mod pyramid;
 pub mod settings;
 pub mod source;
 pub mod stack_gpu;
+pub mod terrain;
 pub mod tile_cache;
 
 pub use settings::{ClipmapSettings, UpdateBudget};
@@ -48,6 +49,7 @@ impl Plugin for TerrainClipPlugin {
         if app.world().contains_resource::<AssetServer>() {
             stack_gpu::build(app);
             material::build(app);
+            terrain::build(app);
         }
     }
 }

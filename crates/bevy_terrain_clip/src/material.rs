@@ -5,7 +5,7 @@
 //! coordinates are virtual-texture coordinates computed in f64 with [`flat_patch_mesh`].
 
 use bevy::asset::{RenderAssetUsages, embedded_asset};
-use bevy::math::{DVec2, Vec4};
+use bevy::math::{DVec2, Vec2, Vec4};
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
 use bevy::prelude::*;
@@ -45,6 +45,59 @@ impl Default for ClipmapParams {
     }
 }
 
+/// What the vertex stage needs to know about the height stack, for a material with relief
+/// (`relief.wgsl`; CPU reference [`crate::geometry::relief`]).
+#[derive(Clone, Copy, Debug, PartialEq, ShaderType, Reflect)]
+pub struct ReliefParams {
+    /// Per windowed layer of the height stack, the valid level texels `[min.xy, max.xy)`.
+    pub coverage: [Vec4; MAX_LAYERS],
+    /// The height stack's base level l_b.
+    pub base_level: u32,
+    /// Its windowed layers.
+    pub layer_count: u32,
+    /// Its clip size c.
+    pub clip_size: f32,
+    /// World side of the height texture (m).
+    pub size: f32,
+    /// World (x, z) of the height texture's (0, 0).
+    pub origin: Vec2,
+    /// World (x, z) of the colour texture's (0, 0): the vertex stage gives the fragment stage
+    /// the colour stack's coordinates.
+    pub color_origin: Vec2,
+    /// World side of the colour texture (m).
+    pub color_size: f32,
+}
+
+impl Default for ReliefParams {
+    fn default() -> Self {
+        Self {
+            coverage: [Vec4::ZERO; MAX_LAYERS],
+            base_level: 0,
+            layer_count: 0,
+            clip_size: 1.0,
+            size: 1.0,
+            origin: Vec2::ZERO,
+            color_origin: Vec2::ZERO,
+            color_size: 1.0,
+        }
+    }
+}
+
+impl ReliefParams {
+    /// As the CPU reference reads it.
+    pub fn height_layers(&self) -> crate::geometry::relief::HeightLayers {
+        crate::geometry::relief::HeightLayers {
+            coverage: self.coverage[..self.layer_count as usize]
+                .iter()
+                .map(|c| c.to_array())
+                .collect(),
+            base_level: self.base_level,
+            origin: self.origin,
+            size: self.size,
+        }
+    }
+}
+
 /// The clip stack's textures and coverage (kept up to date by the plugin).
 #[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
 #[bind_group_data(ClipmapKey)]
@@ -67,6 +120,19 @@ pub struct ClipmapExtension {
     /// without, the terrain is lit with Bevy's own shadows and needs nothing from it.
     #[texture(105, sample_type = "float", filterable = false)]
     pub soft_visibility: Option<Handle<Image>>,
+    /// The windowed layers of a height clip stack (R32Float): with them, the vertex stage
+    /// displaces the mesh to the terrain's heights (`terrain_vertex.wgsl`, main pass and
+    /// prepasses, shadow maps included) and gives the fragment stage the colour stack's
+    /// coordinates from the world position; [`TerrainGeometry`](crate::terrain::TerrainGeometry)
+    /// sets them up. Without, the mesh is drawn as it is.
+    #[texture(106, dimension = "2d_array", sample_type = "float", filterable = false)]
+    pub height_layers: Option<Handle<Image>>,
+    /// The height stack's base level (R32Float, with its mips).
+    #[texture(107, sample_type = "float", filterable = false)]
+    pub height_base: Option<Handle<Image>>,
+    /// The height stack's coverage and the textures' places in the world.
+    #[uniform(108)]
+    pub relief: ReliefParams,
 }
 
 /// What the terrain pipeline is specialised on.
@@ -74,12 +140,15 @@ pub struct ClipmapExtension {
 pub struct ClipmapKey {
     /// The material receives screen-space soft shadows.
     pub soft_shadows: bool,
+    /// The vertex stage reads heights from a height stack.
+    pub relief: bool,
 }
 
 impl From<&ClipmapExtension> for ClipmapKey {
     fn from(material: &ClipmapExtension) -> Self {
         Self {
             soft_shadows: material.soft_visibility.is_some(),
+            relief: material.height_layers.is_some() && material.height_base.is_some(),
         }
     }
 }
@@ -94,6 +163,11 @@ const SHADER: &str = "embedded://bevy_terrain_clip/clipmap_fragment.wgsl";
 /// `bevy_soft_shadows::receiver_functions` only has to resolve when a pipeline uses it.)
 static SOFT_SHADER: std::sync::OnceLock<Handle<bevy::shader::Shader>> = std::sync::OnceLock::new();
 
+/// The vertex stage with relief (main pass and prepasses), swapped in by `specialize` for
+/// materials with a height stack.
+static RELIEF_VERTEX_SHADER: std::sync::OnceLock<Handle<bevy::shader::Shader>> =
+    std::sync::OnceLock::new();
+
 impl MaterialExtension for ClipmapExtension {
     fn fragment_shader() -> ShaderRef {
         ShaderRef::Path(SHADER.into())
@@ -105,6 +179,13 @@ impl MaterialExtension for ClipmapExtension {
         _layout: &bevy::mesh::MeshVertexBufferLayoutRef,
         key: bevy::pbr::MaterialExtensionKey<Self>,
     ) -> Result<(), bevy::render::render_resource::SpecializedMeshPipelineError> {
+        // Relief: the vertex stage of every pass (main, prepasses, shadow maps), so the depth,
+        // the normals and the shadows follow the heights too.
+        if key.bind_group_data.relief
+            && let Some(relief) = RELIEF_VERTEX_SHADER.get()
+        {
+            descriptor.vertex.shader = relief.clone();
+        }
         // Only the main pass's fragment stage: the prepass and shadow pipelines run Bevy's
         // prepass shader (`PREPASS_PIPELINE`) and must keep it.
         if key.bind_group_data.soft_shadows
@@ -165,11 +246,7 @@ pub fn flat_patch_mesh(
 /// Keeps the terrain's shader modules loaded.
 #[derive(Resource)]
 #[allow(dead_code)]
-struct ClipmapShaders(
-    Handle<bevy::shader::Shader>,
-    Handle<bevy::shader::Shader>,
-    Handle<bevy::shader::Shader>,
-);
+struct ClipmapShaders(Vec<Handle<bevy::shader::Shader>>);
 
 /// Registers the material.
 pub(crate) fn build(app: &mut App) {
@@ -183,7 +260,14 @@ pub(crate) fn build(app: &mut App) {
         bevy::asset::load_embedded_asset!(app, "clipmap_soft_fragment.wgsl");
     let forward: Handle<bevy::shader::Shader> =
         bevy::asset::load_embedded_asset!(app, "clipmap_fragment.wgsl");
+    embedded_asset!(app, "relief.wgsl");
+    embedded_asset!(app, "terrain_vertex.wgsl");
+    let relief: Handle<bevy::shader::Shader> =
+        bevy::asset::load_embedded_asset!(app, "relief.wgsl");
+    let vertex: Handle<bevy::shader::Shader> =
+        bevy::asset::load_embedded_asset!(app, "terrain_vertex.wgsl");
     let _ = SOFT_SHADER.set(soft.clone());
-    app.insert_resource(ClipmapShaders(module, soft, forward));
+    let _ = RELIEF_VERTEX_SHADER.set(vertex.clone());
+    app.insert_resource(ClipmapShaders(vec![module, soft, forward, relief, vertex]));
     app.add_plugins(MaterialPlugin::<ClipmapMaterial>::default());
 }

@@ -360,6 +360,7 @@ impl ClipStackTexture {
                 base: self.base.clone(),
                 params: clipmap_params(self),
                 soft_visibility: None,
+                ..default()
             },
         });
         self.materials.push(handle.clone());

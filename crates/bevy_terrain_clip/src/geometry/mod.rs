@@ -7,12 +7,15 @@
 //!   cracks;
 //! - [`tile`]: a patch's four triangular tiles (one per edge, split by the diagonals) with the
 //!   stitching strips that join them along the diagonals, as integer lattice meshes — the unit
-//!   meshes the GPU instances, and the CPU reference of every vertex position.
+//!   meshes the GPU instances, and the CPU reference of every vertex position;
+//! - [`relief`]: the height of a vertex, read from the height clip stack (the CPU reference of
+//!   the vertex stage's lookup).
 //!
 //! Every vertex lies on one integer lattice over the whole terrain (the finest patch's side is
 //! [`PatchGrid::r_high`] lattice steps), so "shared vertices coincide" is an exact comparison.
 
 pub mod patch;
+pub mod relief;
 pub mod tile;
 
 pub use patch::{

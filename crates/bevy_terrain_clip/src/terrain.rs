@@ -1,0 +1,378 @@
+//! Terrain with relief, the main-world side: each frame the seamless patches of
+//! [`crate::geometry`] are selected for the scene camera and drawn as instanced unit tile meshes
+//! (one entity per tile; Bevy batches the tiles sharing a mesh and the material into one
+//! instanced draw), displaced in the vertex stage by a height clip stack
+//! ([`ClipStackTexture::heights`]) and coloured by a colour stack's material.
+//!
+//! ```no_run
+//! # use bevy::prelude::*;
+//! # use bevy_terrain_clip::{terrain::TerrainGeometry, stack_gpu::{ClipStackTexture, TextureMapping}};
+//! # fn setup(mut commands: Commands, heights: ClipStackTexture, material: Handle<bevy_terrain_clip::material::ClipmapMaterial>) {
+//! // `heights` is a height stack with a mapping; `material` a colour stack's material.
+//! let heights = commands.spawn(heights).id();
+//! commands.spawn(TerrainGeometry::new(heights, material));
+//! # }
+//! ```
+
+use crate::geometry::patch::{PatchGrid, PatchView, Selection, select_patches};
+use crate::geometry::tile::unit_tile;
+use crate::material::{ClipmapMaterial, MAX_LAYERS, ReliefParams};
+use crate::stack_gpu::{ClipStackTexture, clipmap_params};
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::primitives::Frustum;
+use bevy::camera::visibility::NoFrustumCulling;
+use bevy::diagnostic::{Diagnostic, DiagnosticPath, Diagnostics, RegisterDiagnostic};
+use bevy::math::Vec4;
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+
+/// Draws a terrain with relief over a height clip stack.
+#[derive(Component, Clone, Debug, Reflect)]
+#[reflect(Component)]
+pub struct TerrainGeometry {
+    /// The entity holding the height stack ([`ClipStackTexture::heights`]); its
+    /// [`mapping`](ClipStackTexture::mapping) places the terrain square in the world.
+    pub heights: Entity,
+    /// The material colouring the ground (a colour stack's
+    /// [`material`](ClipStackTexture::material)); its relief bindings are filled in from the
+    /// height stack.
+    pub material: Handle<ClipmapMaterial>,
+    /// Segments along a patch edge at the high resolution (a power of two, at least 4); the
+    /// low resolution is half of it.
+    pub resolution: u32,
+    /// Depth of the patch hierarchy; `None`: as deep as the height pyramid, so the finest
+    /// patches' vertices are one finest height texel apart (capped at the 2^24 lattice).
+    pub max_level: Option<u8>,
+    /// ρ of eq. 1 (`ε = ρ·l/d`): larger gives finer meshes.
+    pub precision: f32,
+    /// Hierarchical frustum culling of the patches.
+    pub culling: bool,
+    /// The lowest and highest terrain heights (m): patch bounds and edge distances.
+    pub height_range: (f32, f32),
+}
+
+impl TerrainGeometry {
+    /// A terrain over the height stack on `heights`, coloured by `material`, with defaults:
+    /// 16 segments an edge, ρ = 6, culling on, heights within ±2 km.
+    pub fn new(heights: Entity, material: Handle<ClipmapMaterial>) -> Self {
+        Self {
+            heights,
+            material,
+            resolution: 16,
+            max_level: None,
+            precision: 6.0,
+            culling: true,
+            height_range: (-2000.0, 2000.0),
+        }
+    }
+}
+
+/// The patches drawn this frame, and what the selection did.
+#[derive(Component, Clone, Debug, Default)]
+pub struct TerrainPatches {
+    /// The hierarchy they come from.
+    pub grid: Option<PatchGrid>,
+    /// The view they were selected for.
+    pub view: Option<PatchView>,
+    /// The patches and counters.
+    pub selection: Selection,
+    /// Triangles drawn.
+    pub triangles: usize,
+    /// CPU time of the selection (µs).
+    pub selection_us: f64,
+}
+
+/// A tile entity of a terrain (its [`TerrainTiles`] owns it).
+#[derive(Component, Clone, Copy, Debug)]
+pub struct TerrainTile;
+
+/// The tile entities of a terrain, reused frame to frame.
+#[derive(Component, Clone, Debug, Default)]
+pub struct TerrainTiles(pub Vec<Entity>);
+
+/// The unit tile meshes, one per (edge, resolution, diagonal resolutions), with triangle counts.
+#[derive(Resource, Default)]
+struct UnitTileMeshes(HashMap<(u32, usize, u32, u32, u32), (Handle<Mesh>, usize)>);
+
+/// Patches drawn.
+pub const PATCHES: DiagnosticPath = DiagnosticPath::const_new("terrain/patches");
+/// Triangles drawn.
+pub const TRIANGLES: DiagnosticPath = DiagnosticPath::const_new("terrain/triangles");
+/// CPU time of the patch selection (µs).
+pub const SELECTION_US: DiagnosticPath = DiagnosticPath::const_new("terrain/selection_us");
+
+/// The hierarchy over a height stack's texture.
+pub fn patch_grid(geometry: &TerrainGeometry, heights: &ClipStackTexture) -> Option<PatchGrid> {
+    let mapping = heights.mapping?;
+    let r = geometry.resolution.max(4).next_power_of_two();
+    let finest = heights.stack.layers.last().map_or(heights.stack.base_level, |l| l.level);
+    let lattice_bits = 24 - r.trailing_zeros();
+    let max_level = geometry
+        .max_level
+        .map_or(finest.saturating_sub(r.trailing_zeros()), u32::from)
+        .min(lattice_bits) as u8;
+    PatchGrid::new(
+        Vec2::new(mapping.origin_m.x as f32, mapping.origin_m.y as f32),
+        mapping.size_m as f32,
+        max_level,
+        r,
+    )
+    .ok()
+}
+
+/// The relief parameters of a height stack, with the colour texture's place.
+pub fn relief_params(heights: &ClipStackTexture, color: Option<&ClipStackTexture>) -> ReliefParams {
+    let p = clipmap_params(heights);
+    let mapping = heights.mapping.unwrap_or(crate::stack_gpu::TextureMapping {
+        origin_m: default(),
+        size_m: 1.0,
+    });
+    let color_mapping = color.and_then(|c| c.mapping).unwrap_or(mapping);
+    let mut coverage = [Vec4::ZERO; MAX_LAYERS];
+    coverage.copy_from_slice(&p.coverage);
+    ReliefParams {
+        coverage,
+        base_level: p.base_level,
+        layer_count: p.layer_count,
+        clip_size: p.clip_size,
+        size: mapping.size_m as f32,
+        origin: Vec2::new(mapping.origin_m.x as f32, mapping.origin_m.y as f32),
+        color_origin: Vec2::new(
+            color_mapping.origin_m.x as f32,
+            color_mapping.origin_m.y as f32,
+        ),
+        color_size: color_mapping.size_m as f32,
+    }
+}
+
+/// Fills in each terrain material's height stack and keeps its coverage current.
+fn update_relief(
+    terrains: Query<&TerrainGeometry>,
+    stacks: Query<&ClipStackTexture>,
+    mut materials: ResMut<Assets<ClipmapMaterial>>,
+) {
+    for geometry in &terrains {
+        let Ok(heights) = stacks.get(geometry.heights) else {
+            continue;
+        };
+        let color = stacks
+            .iter()
+            .find(|c| c.materials().contains(&geometry.material));
+        let relief = relief_params(heights, color);
+        let Some(material) = materials.get(&geometry.material) else {
+            continue;
+        };
+        let ext = &material.extension;
+        if ext.relief != relief
+            || ext.height_layers.as_ref() != Some(&heights.layers)
+            || ext.height_base.as_ref() != Some(&heights.base)
+        {
+            let ext = &mut materials.get_mut(&geometry.material).unwrap().extension;
+            ext.relief = relief;
+            ext.height_layers = Some(heights.layers.clone());
+            ext.height_base = Some(heights.base.clone());
+        }
+    }
+}
+
+fn unit_mesh(r: u32, e: usize, n: u32, d0: u32, d1: u32) -> (Mesh, usize) {
+    let tile = unit_tile(r, e, n, d0, d1);
+    let positions: Vec<[f32; 3]> = tile
+        .vertices
+        .iter()
+        .map(|p| [p[0] as f32, 0.0, p[1] as f32])
+        .collect();
+    let count = positions.len();
+    let mut mesh = Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+    // The vertex stage computes both from the heights and the world position; the attributes
+    // make Bevy's pipeline pass them on.
+    mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; count]);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_UV_0, vec![[0.0f32, 0.0]; count]);
+    mesh.insert_indices(Indices::U32(
+        tile.triangles.iter().flatten().copied().collect(),
+    ));
+    (mesh, tile.triangles.len())
+}
+
+/// Selects the patches for the scene camera and places the tile entities.
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+fn draw_terrain(
+    mut commands: Commands,
+    cameras: Query<(&Camera, &GlobalTransform, &Frustum), (With<Camera3d>, Without<TerrainTile>)>,
+    mut terrains: Query<(
+        Entity,
+        &TerrainGeometry,
+        Option<&mut TerrainPatches>,
+        Option<&mut TerrainTiles>,
+    )>,
+    stacks: Query<&ClipStackTexture>,
+    mut tiles: Query<
+        (
+            &mut Mesh3d,
+            &mut MeshMaterial3d<ClipmapMaterial>,
+            &mut Transform,
+            &mut GlobalTransform,
+            &mut Visibility,
+        ),
+        With<TerrainTile>,
+    >,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut unit_meshes: ResMut<UnitTileMeshes>,
+    mut diagnostics: Diagnostics,
+    mut warned: Local<bevy::platform::collections::HashSet<Entity>>,
+) {
+    let Some((_, camera, frustum)) = cameras
+        .iter()
+        .filter(|(c, ..)| c.is_active)
+        .min_by_key(|(c, ..)| c.order)
+    else {
+        return;
+    };
+    for (entity, geometry, patches, owned) in &mut terrains {
+        let Some(grid) = stacks
+            .get(geometry.heights)
+            .ok()
+            .and_then(|h| patch_grid(geometry, h))
+        else {
+            if warned.insert(entity) {
+                warn!(
+                    "TerrainGeometry on {entity}: {:?} holds no height stack with a mapping \
+                     (ClipStackTexture::heights, then set its mapping); nothing is drawn",
+                    geometry.heights
+                );
+            }
+            continue;
+        };
+        let view = PatchView {
+            eye: camera.translation(),
+            precision: geometry.precision.max(1e-3),
+            frustum: geometry
+                .culling
+                .then(|| frustum.half_spaces.map(|h| h.normal_d())),
+            heights: (
+                geometry.height_range.0.min(geometry.height_range.1),
+                geometry.height_range.0.max(geometry.height_range.1),
+            ),
+        };
+        let started = std::time::Instant::now();
+        let selection = select_patches(&grid, &view);
+        let selection_us = started.elapsed().as_secs_f64() * 1e6;
+        // One tile per patch edge, on its unit mesh.
+        let mut placed = Vec::with_capacity(selection.patches.len() * 4);
+        let mut triangles = 0;
+        for patch in &selection.patches {
+            let corner = grid.world(patch.id.corner(&grid));
+            let unit = patch.id.side(&grid) as f32 / grid.r_high as f32 * grid.lattice_step();
+            for e in 0..4 {
+                let key = (
+                    grid.r_high,
+                    e,
+                    patch.edges[e],
+                    patch.diagonal(e),
+                    patch.diagonal(e + 1),
+                );
+                let (handle, count) = unit_meshes
+                    .0
+                    .entry(key)
+                    .or_insert_with(|| {
+                        let (mesh, count) = unit_mesh(key.0, key.1, key.2, key.3, key.4);
+                        (meshes.add(mesh), count)
+                    })
+                    .clone();
+                triangles += count;
+                placed.push((
+                    handle,
+                    Transform::from_xyz(corner.x, 0.0, corner.y)
+                        .with_scale(Vec3::new(unit, 1.0, unit)),
+                ));
+            }
+        }
+        let mut owned_tiles = owned.map(|t| t.0.clone()).unwrap_or_default();
+        while owned_tiles.len() < placed.len() {
+            owned_tiles.push(
+                commands
+                    .spawn((
+                        TerrainTile,
+                        Mesh3d(placed[owned_tiles.len()].0.clone()),
+                        MeshMaterial3d(geometry.material.clone()),
+                        placed[owned_tiles.len()].1,
+                        // Set here too: this runs after transform propagation.
+                        GlobalTransform::from(placed[owned_tiles.len()].1),
+                        Visibility::Visible,
+                        // The patches are culled by the selection; Bevy's culling would use the
+                        // flat mesh's bounds.
+                        NoFrustumCulling,
+                    ))
+                    .id(),
+            );
+        }
+        for (i, &tile) in owned_tiles.iter().enumerate() {
+            let Ok((mut mesh, mut material, mut transform, mut global, mut visibility)) =
+                tiles.get_mut(tile)
+            else {
+                continue;
+            };
+            match placed.get(i) {
+                Some((handle, place)) => {
+                    if mesh.0 != *handle {
+                        mesh.0 = handle.clone();
+                    }
+                    if material.0 != geometry.material {
+                        material.0 = geometry.material.clone();
+                    }
+                    if *transform != *place {
+                        // Set both: this runs after transform propagation.
+                        *transform = *place;
+                        *global = GlobalTransform::from(*place);
+                    }
+                    if *visibility != Visibility::Visible {
+                        *visibility = Visibility::Visible;
+                    }
+                }
+                None => {
+                    if *visibility != Visibility::Hidden {
+                        *visibility = Visibility::Hidden;
+                    }
+                }
+            }
+        }
+        diagnostics.add_measurement(&PATCHES, || selection.patches.len() as f64);
+        diagnostics.add_measurement(&TRIANGLES, || triangles as f64);
+        diagnostics.add_measurement(&SELECTION_US, || selection_us);
+        let record = TerrainPatches {
+            grid: Some(grid),
+            view: Some(view),
+            selection,
+            triangles,
+            selection_us,
+        };
+        match patches {
+            Some(mut p) => *p = record,
+            None => {
+                commands.entity(entity).insert(record);
+            }
+        }
+        commands.entity(entity).insert(TerrainTiles(owned_tiles));
+    }
+}
+
+/// Registers the terrain geometry (with the render plugins).
+pub(crate) fn build(app: &mut App) {
+    for path in [PATCHES, TRIANGLES, SELECTION_US] {
+        app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
+    }
+    app.register_type::<TerrainGeometry>()
+        .init_resource::<UnitTileMeshes>()
+        .add_systems(
+            PostUpdate,
+            (draw_terrain, update_relief)
+                .chain()
+                .after(bevy::camera::visibility::VisibilitySystems::UpdateFrusta)
+                .before(bevy::camera::visibility::VisibilitySystems::CheckVisibility),
+        );
+}
