@@ -91,9 +91,13 @@ pub struct TerrainTile;
 #[derive(Component, Clone, Debug, Default)]
 pub struct TerrainTiles(pub Vec<Entity>);
 
-/// The unit tile meshes, one per (edge, resolution, diagonal resolutions), with triangle counts.
+/// A unit tile mesh's key: (patch resolution, edge, segments on the edge, on the half-diagonal
+/// at its start, at its end).
+type UnitTileKey = (u32, usize, u32, u32, u32);
+
+/// The unit tile meshes, with their triangle counts.
 #[derive(Resource, Default)]
-struct UnitTileMeshes(HashMap<(u32, usize, u32, u32, u32), (Handle<Mesh>, usize)>);
+struct UnitTileMeshes(HashMap<UnitTileKey, (Handle<Mesh>, usize)>);
 
 /// Patches drawn.
 pub const PATCHES: DiagnosticPath = DiagnosticPath::const_new("terrain/patches");
