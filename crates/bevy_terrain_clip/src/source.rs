@@ -331,26 +331,29 @@ pub fn address_texel(level: u32, x: u64, y: u64) -> [u8; 4] {
 /// Procedural aerial imagery: fields, forest and water from value-noise octaves, each level
 /// carrying only the octaves its texels resolve (wavelength ≥ 2 texels), plus a faint 1 km grid
 /// (`texture_m` = world size of the whole texture) so motion and scale read well.
+/// Hash of a lattice point and octave to [0, 1).
+fn hash(ix: i64, iy: i64, octave: u32) -> f64 {
+    let mut h = (ix as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (iy as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+        ^ (octave as u64).wrapping_mul(0x1656_67B1_9E37_79F9);
+    h ^= h >> 29;
+    h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h ^= h >> 32;
+    (h >> 11) as f64 / (1u64 << 53) as f64
+}
+/// Value noise (smoothstep between lattice hashes) at (u, v) of one octave.
+fn value_noise(u: f64, v: f64, octave: u32) -> f64 {
+    let (x0, y0) = (u.floor(), v.floor());
+    let (fx, fy) = (u - x0, v - y0);
+    let (sx, sy) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
+    let (ix, iy) = (x0 as i64, y0 as i64);
+    let a = hash(ix, iy, octave) + sx * (hash(ix + 1, iy, octave) - hash(ix, iy, octave));
+    let b =
+        hash(ix, iy + 1, octave) + sx * (hash(ix + 1, iy + 1, octave) - hash(ix, iy + 1, octave));
+    a + sy * (b - a)
+}
+
 pub fn imagery_texel(level: u32, x: u64, y: u64, texture_m: f64) -> [u8; 4] {
-    fn hash(ix: i64, iy: i64, octave: u32) -> f64 {
-        let mut h = (ix as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-            ^ (iy as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
-            ^ (octave as u64).wrapping_mul(0x1656_67B1_9E37_79F9);
-        h ^= h >> 29;
-        h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        h ^= h >> 32;
-        (h >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn noise(u: f64, v: f64, octave: u32) -> f64 {
-        let (x0, y0) = (u.floor(), v.floor());
-        let (fx, fy) = (u - x0, v - y0);
-        let (sx, sy) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
-        let (ix, iy) = (x0 as i64, y0 as i64);
-        let a = hash(ix, iy, octave) + sx * (hash(ix + 1, iy, octave) - hash(ix, iy, octave));
-        let b = hash(ix, iy + 1, octave)
-            + sx * (hash(ix + 1, iy + 1, octave) - hash(ix, iy + 1, octave));
-        a + sy * (b - a)
-    }
     let texels = (1u64 << level) as f64;
     let (u, v) = ((x as f64 + 0.5) / texels, (y as f64 + 0.5) / texels);
     let (mut value, mut amplitude, mut total) = (0.0, 1.0, 0.0);
@@ -360,7 +363,7 @@ pub fn imagery_texel(level: u32, x: u64, y: u64, texture_m: f64) -> [u8; 4] {
         if frequency * 2.0 > texels {
             break;
         }
-        let n = noise(u * frequency, v * frequency, octave);
+        let n = value_noise(u * frequency, v * frequency, octave);
         if octave < 5 {
             value += n * amplitude;
             total += amplitude;
@@ -389,6 +392,32 @@ pub fn imagery_texel(level: u32, x: u64, y: u64, texture_m: f64) -> [u8; 4] {
     let grid = if on_grid(u) || on_grid(v) { 0.12 } else { 0.0 };
     let q = |c: f64| ((c + grid).clamp(0.0, 1.0) * 255.0).round() as u8;
     [q(r), q(g), q(b), 255]
+}
+
+/// Procedural relief (m) at a level texel, to go with [`imagery_texel`]: rolling hills and
+/// ridges up to about 700 m from value-noise octaves of wavelengths from `texture_m / 32` down,
+/// each level carrying only the octaves its texels resolve (wavelength ≥ 2 texels), so coarser
+/// levels are the finer ones without their detail — a pyramid's mips.
+pub fn relief_texel(level: u32, x: u64, y: u64, texture_m: f64) -> f32 {
+    let texels = (1u64 << level) as f64;
+    let (u, v) = ((x as f64 + 0.5) / texels, (y as f64 + 0.5) / texels);
+    let (mut height, mut amplitude) = (0.0, 420.0);
+    for octave in 0..22u32 {
+        let frequency = 32.0 * 2f64.powi(octave as i32);
+        if frequency * 2.0 > texels || texture_m / frequency < 4.0 {
+            break;
+        }
+        // Ridged octaves above the first two: sharp crests, rounded valleys.
+        let n = value_noise(u * frequency, v * frequency, octave + 40);
+        let shaped = if octave < 2 {
+            n
+        } else {
+            1.0 - (2.0 * n - 1.0).abs()
+        };
+        height += (shaped - 0.5) * amplitude;
+        amplitude *= 0.48;
+    }
+    height as f32
 }
 
 impl ProceduralTileSource {

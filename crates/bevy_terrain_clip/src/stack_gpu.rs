@@ -394,6 +394,54 @@ impl ClipStackTexture {
     pub fn writes(&self) -> &[SubtileWrite] {
         &self.writes
     }
+
+    /// For a height stack with a [`mapping`](Self::mapping): the ground's height (m) at world
+    /// `(x, z)` from the tiles in RAM — the finest pyramid level whose tiles around the point
+    /// are resident, bilinear between texel centres (clamped at the texture's edges) — with
+    /// the virtual level it came from. Never reads from disk or blocks (gameplay queries, a
+    /// camera keeping above the ground); `None` outside the texture, before any tile is in,
+    /// or for a stack of imagery.
+    pub fn resident_height(&mut self, world: bevy::math::DVec2) -> Option<(f32, u32)> {
+        let mapping = self.mapping?;
+        if self.texels != TexelKind::Height {
+            return None;
+        }
+        let uv = mapping.uv_of(world);
+        if !(0.0..1.0).contains(&uv.x) || !(0.0..1.0).contains(&uv.y) {
+            return None;
+        }
+        let source = self.cache.source().clone();
+        let tile = source.tile_size();
+        let tile_bits = tile.trailing_zeros();
+        for z in (0..source.levels()).rev() {
+            let level = z + tile_bits;
+            let side = 1i64 << level;
+            let t = uv * side as f64 - 0.5;
+            let (x0, y0) = (t.x.floor() as i64, t.y.floor() as i64);
+            let (fx, fy) = ((t.x - x0 as f64) as f32, (t.y - y0 as f64) as f32);
+            let texel = |cache: &mut TileCache, x: i64, y: i64| -> Option<f32> {
+                let (x, y) = (x.clamp(0, side - 1) as u64, y.clamp(0, side - 1) as u64);
+                let key = TileKey {
+                    z,
+                    x: (x >> tile_bits) as u32,
+                    y: (y >> tile_bits) as u32,
+                };
+                if !cache.contains(key) {
+                    return None;
+                }
+                let data = cache.get(key)?;
+                Some(data.height((x % tile as u64) as u32, (y % tile as u64) as u32))
+            };
+            let corners = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                .map(|(dx, dy)| texel(&mut self.cache, x0 + dx, y0 + dy));
+            if let [Some(a), Some(b), Some(c), Some(d)] = corners {
+                let top = a + (b - a) * fx;
+                let bottom = c + (d - c) * fx;
+                return Some((top + (bottom - top) * fy, level));
+            }
+        }
+        None
+    }
 }
 
 fn repeat_sampler(linear: bool) -> bevy::image::ImageSampler {

@@ -110,7 +110,11 @@ pub const SELECTION_US: DiagnosticPath = DiagnosticPath::const_new("terrain/sele
 pub fn patch_grid(geometry: &TerrainGeometry, heights: &ClipStackTexture) -> Option<PatchGrid> {
     let mapping = heights.mapping?;
     let r = geometry.resolution.max(4).next_power_of_two();
-    let finest = heights.stack.layers.last().map_or(heights.stack.base_level, |l| l.level);
+    let finest = heights
+        .stack
+        .layers
+        .last()
+        .map_or(heights.stack.base_level, |l| l.level);
     let lattice_bits = 24 - r.trailing_zeros();
     let max_level = geometry
         .max_level

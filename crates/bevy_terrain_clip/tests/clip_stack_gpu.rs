@@ -17,7 +17,7 @@ use bevy::render::texture::GpuImage;
 use bevy_nature_harness::RenderHarness;
 use bevy_nature_harness::headless::read_buffer_now;
 use bevy_terrain_clip::source::{ProceduralTileSource, TexelKind, address_texel};
-use bevy_terrain_clip::stack_gpu::ClipStackTexture;
+use bevy_terrain_clip::stack_gpu::{ClipStackTexture, TextureMapping};
 use bevy_terrain_clip::stack_gpu::{QUALITY, SUBTILES_UPLOADED};
 use bevy_terrain_clip::{ClipmapSettings, TerrainClipPlugin, UpdateBudget};
 use std::sync::Arc;
@@ -270,12 +270,17 @@ fn height_layers_hold_the_pyramid_heights_exactly() {
     let (heights, imagery_as_heights, heights_as_imagery) = {
         let world = harness.world_mut();
         let mut images = world.resource_mut::<Assets<Image>>();
-        let heights = ClipStackTexture::heights(
+        let mut heights = ClipStackTexture::heights(
             Arc::new(ProceduralTileSource::heights(64, 6, address_height)),
             &settings,
             [0.42, 0.55],
             &mut images,
         );
+        // 1 m texels at the finest level (11); the camera below keeps the centre where it is.
+        heights.mapping = Some(TextureMapping {
+            origin_m: bevy::math::DVec2::ZERO,
+            size_m: 2048.0,
+        });
         let wrong = ClipStackTexture::heights(
             Arc::new(ProceduralTileSource::new(64, 6, address_texel)),
             &settings,
@@ -296,12 +301,38 @@ fn height_layers_hold_the_pyramid_heights_exactly() {
             world.spawn(wrong_too).id(),
         )
     };
-    harness.world_mut().spawn(Camera3d::default());
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Transform::from_xyz(0.42 * 2048.0, 50.0, 0.55 * 2048.0),
+    ));
     harness.wait_until_ready().unwrap();
     let (checked, _) = settle_and_compare(&mut harness, heights, |l, x, y| {
         address_height(l, x, y).to_le_bytes()
     });
     assert_eq!(checked, 4 * CLIP * CLIP);
+    // The resident height query: bilinear between the finest level's texel centres.
+    let mut clip = harness
+        .world_mut()
+        .get_mut::<ClipStackTexture>(heights)
+        .unwrap();
+    for (x, z) in [(861.3, 1126.8), (870.5, 1120.25), (855.0, 1130.9)] {
+        let (h, level) = clip
+            .resident_height(bevy::math::DVec2::new(x, z))
+            .expect("resident");
+        assert_eq!(level, 11);
+        let (tx, tz) = (x - 0.5, z - 0.5);
+        let (x0, z0) = (tx.floor(), tz.floor());
+        let (fx, fz) = ((tx - x0) as f32, (tz - z0) as f32);
+        let at = |dx: f64, dz: f64| address_height(11, (x0 + dx) as u64, (z0 + dz) as u64);
+        let top = at(0.0, 0.0) + (at(1.0, 0.0) - at(0.0, 0.0)) * fx;
+        let bottom = at(0.0, 1.0) + (at(1.0, 1.0) - at(0.0, 1.0)) * fx;
+        let want = top + (bottom - top) * fz;
+        assert!((h - want).abs() < 1e-3, "({x}, {z}): {h} vs {want}");
+    }
+    assert_eq!(
+        clip.resident_height(bevy::math::DVec2::new(-5.0, 10.0)),
+        None
+    );
     for refused in [imagery_as_heights, heights_as_imagery] {
         let clip = harness
             .world_mut()
