@@ -32,12 +32,15 @@ use std::sync::Arc;
 /// Side of the terrain patch drawn around the camera (m), rebuilt as the camera moves on.
 const PATCH_M: f64 = 24_000.0;
 
+/// An elevation source, where it lies, and its lowest and highest heights (m).
+type Relief = (Arc<dyn TileSource>, TextureMapping, (f32, f32));
+
 #[derive(Resource, Clone)]
 struct Terrain {
     source: Arc<dyn TileSource>,
     mapping: TextureMapping,
     /// Heights and where they lie, for relief; `None`: flat ground.
-    heights: Option<(Arc<dyn TileSource>, TextureMapping, (f32, f32))>,
+    heights: Option<Relief>,
 }
 
 /// The height stack's entity, which the flight reads the ground from.
