@@ -1,4 +1,4 @@
-//! Building a tile pyramid from one large image (spec T1, issue 5): the image is padded to a
+//! Building a tile pyramid from one large image: the image is padded to a
 //! power-of-two square of whole tiles (transparent beyond its edges), cut into the finest
 //! level's tiles, and every coarser tile is the 2×2 box filter of its four children — the exact
 //! average for a halving, which is what a mip chain of the whole image would hold.

@@ -1,4 +1,4 @@
-//! The RAM side of the virtual texture (spec T1): an LRU cache of decoded tiles and the request
+//! The RAM side of the virtual texture: an LRU cache of decoded tiles and the request
 //! queue feeding the loaders — coarsest level first, duplicates merged, absent tiles (outside
 //! partial levels) remembered, failed tiles retried with exponential back-off. Plain Rust; the
 //! plugin runs the loads on Bevy's IO task pool.

@@ -1,4 +1,4 @@
-// Terrain fragment stage sampling a clip stack (Seoane et al. 2007, paper 1; spec T1 "Shader").
+// Terrain fragment stage sampling a clip stack (Seoane et al. 2007, paper 1).
 //
 // The mesh's first texture coordinates are virtual-texture coordinates, computed on the CPU in
 // f64 (exact far from the world origin). Level texel t = uv * 2^level. The finest windowed layer

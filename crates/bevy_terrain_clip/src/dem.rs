@@ -1,4 +1,4 @@
-//! Elevation tiles: heights in metres from the encodings real DEM pyramids use (spec T1/T2).
+//! Elevation tiles: heights in metres from the encodings real DEM pyramids use.
 //!
 //! - `height16`: 16-bit grayscale PNG, `h = offset + scale · v` with the manifest's
 //!   `height_offset_m` and `height_scale_m` (what `pyramid_build` writes);

@@ -1,4 +1,4 @@
-//! The paper's flight test (Seoane et al. 2007, table 1; spec T1) as a deterministic simulation
+//! The paper's flight test (Seoane et al. 2007, table 1) as a deterministic simulation
 //! of the streaming logic: a camera flies a straight line at constant speed over a virtual
 //! texture; every frame the clip stack recentres, tiles arrive from a disk model (latency plus
 //! bandwidth, one request at a time, coarsest level first), and subtiles whose tiles are in the

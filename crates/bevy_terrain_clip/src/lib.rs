@@ -11,7 +11,11 @@
 //! ring-ordered updates under a budget, coverage, the CPU reference of the shader's layer choice)
 //! and [`cache`] (LRU tile cache, coarsest-first request queue with merging, absent tiles and
 //! back-off), [`pyramid`] (XYZ/TMS tile pyramids with a validated JSON manifest), [`source`] (asynchronous
-//! tile sources: disk and procedural). The streaming, GPU stack and terrain material land on top (issue 5).
+//! tile sources: disk and procedural), [`dem`] (elevation tiles in metres), [`geometry`] (seamless
+//! terrain patches: selection, tiles and stitching strips, the vertex stage's height lookup). On
+//! top: [`stack_gpu`] (clip stacks of imagery or heights streamed into texture arrays),
+//! [`material`] (the terrain material) and [`terrain`] ([`TerrainGeometry`](terrain::TerrainGeometry):
+//! the ground with relief).
 //!
 //! Add [`TerrainClipPlugin`]; tune [`ClipmapSettings`] (a reflected resource).
 

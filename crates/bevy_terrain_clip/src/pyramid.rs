@@ -1,6 +1,6 @@
 //! Tile pyramids on disk in the layout real users have: XYZ or TMS directories of image tiles
 //! (`z/x/y.png`, what GDAL's `gdal2tiles` and tile servers produce) plus a small JSON manifest,
-//! `pyramid.json`, saying how the pyramid maps onto the world (spec T1).
+//! `pyramid.json`, saying how the pyramid maps onto the world.
 //!
 //! Level `z` of the pyramid is `2^z × 2^z` tiles of `tile_size²` texels, so virtual-texture level
 //! `z + log2(tile_size)`. XYZ counts rows from the top (north), TMS from the bottom. Finer levels

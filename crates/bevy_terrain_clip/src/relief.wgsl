@@ -1,6 +1,6 @@
-// The terrain's heights from a height clip stack, for the vertex stage (spec T2: "heights fetched
-// in the vertex shader, here from a height clipmap through T1"). CPU reference:
-// `geometry::relief` (`height_level`, `height_at`, `normal_at`).
+// The terrain's heights from a height clip stack, for the vertex stage (paper 4 fetches heights
+// in the vertex shader). CPU reference: `geometry::relief` (`height_level`, `height_at`,
+// `normal_at`).
 //
 // A vertex at world (x, z) takes the height of the finest windowed layer whose valid rectangle
 // holds the 2 × 2 level texels around it, bilinear between their centres (`textureLoad`: R32Float

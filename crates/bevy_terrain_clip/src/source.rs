@@ -1,4 +1,4 @@
-//! Where tiles come from (spec T1): the [`TileSource`] trait, asynchronous so loads run on
+//! Where tiles come from: the [`TileSource`] trait, asynchronous so loads run on
 //! Bevy's IO task pool; a [`DiskTileSource`] over an XYZ/TMS pyramid directory; and a
 //! [`ProceduralTileSource`] computing texels from a function (tests, and flights over data too
 //! large to store).

@@ -1,5 +1,5 @@
 //! [`TileCache`]: the RAM tile cache of one virtual texture, loading through a [`TileSource`]
-//! on Bevy's IO task pool (spec T1). Misses queue a load — coarsest level first, duplicates
+//! on Bevy's IO task pool. Misses queue a load — coarsest level first, duplicates
 //! merged — and [`TileCache::poll`] (once a frame) collects finished loads and starts new ones.
 //! Absent tiles are remembered; failed tiles (corrupt image, I/O error) are logged and retried
 //! with exponential back-off; latency and traffic are counted in [`TileCacheStats`].

@@ -1,4 +1,4 @@
-//! Screen Space Soft Shadows (Gumbau 2011, ch. 6; spec S1) — the algorithm in plain Rust, the
+//! Screen Space Soft Shadows (Gumbau 2011, ch. 6) — the algorithm in plain Rust, the
 //! CPU reference of every GPU pass:
 //!
 //! 1. [`min_filter`]: the shadow map dilated by a separable nearest-depth filter (§6.2.1), so

@@ -1,4 +1,4 @@
-//! One layer of the clip stack, as bookkeeping (Seoane et al. 2007, paper 1, §3–4; spec T1
+//! One layer of the clip stack, as bookkeeping (Seoane et al. 2007, paper 1, §3–4:
 //! steps 2–5): its window of `n × n` subtiles around the centre of detail, the toroidal slot each
 //! subtile of the window lives in, the state of every slot, the update order (concentric rings
 //! from the centre) and the coverage handed to the shader.

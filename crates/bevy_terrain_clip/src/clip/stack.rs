@@ -1,4 +1,4 @@
-//! The clip stack of one virtual texture, as bookkeeping (spec T1): layer t_0 is the base level
+//! The clip stack of one virtual texture, as bookkeeping: layer t_0 is the base level
 //! `l_b = log2 c` with its full mip chain (always resident, so every coarser level is too);
 //! layers t_1… cache `c × c` windows of levels `l_b + 1 …` around the centre of detail.
 //!

@@ -1,5 +1,5 @@
 //! Terrain geometry from seamless patches (Livny, Kogan and El-Sana, "Seamless patches for
-//! GPU-based terrain rendering", paper 4 of the collected proceedings; spec T2), in plain Rust:
+//! GPU-based terrain rendering", paper 4 of the collected proceedings), in plain Rust:
 //!
 //! - [`patch`]: the implicit patch hierarchy over the terrain square, the per-frame selection —
 //!   top-down traversal, edge error ε = ρ·l/d (eq. 1), hierarchical frustum culling — and each

@@ -8,7 +8,7 @@
 //! diagonal and the grid line one column in) as its own stitching strip, which joins its grid to
 //! the half-diagonal's shared vertices — the coarser tile's spacing, `min(n_a, n_b)/2` segments
 //! ([`SelectedPatch::diagonal`]). Strips and rows are triangulated by merging two parallel
-//! polylines along their common direction ([`zip`]), so every triangle has vertices on two
+//! polylines along their common direction (`zip`), so every triangle has vertices on two
 //! distinct parallel lines: none is degenerate, and the mesh needs no T-junctions.
 //!
 //! Coordinates are integers: within a patch, units of `1/r_high` of its side (the *unit* tile
