@@ -7,7 +7,7 @@
 //! the resident heights ahead. It starts over the data wherever the pyramid lies (its manifest's
 //! origin), lower and slower over small pyramids; beyond the data the ground shows
 //! `ClipmapSettings::no_data_color`. `--flat` draws the flat ground instead (the default with
-//! `--pyramid` and no `--heights`).
+//! `--pyramid` and no `--heights`); `--no-culling` turns the patches' frustum culling off.
 //!
 //! ```text
 //! cargo run --release --example terrain            # windowed: the panel shows terrain/* counters
@@ -47,6 +47,10 @@ struct Terrain {
 #[derive(Component)]
 struct Heights;
 
+/// Whether the patch selection culls by the view frustum (`--no-culling`: not).
+#[derive(Resource)]
+struct Culling(bool);
+
 /// The flight's smoothed altitude (m).
 #[derive(Resource, Default)]
 struct Altitude(Option<f64>);
@@ -60,6 +64,7 @@ fn main() -> AppExit {
     let mut pyramid = None;
     let mut dem = None;
     let mut flat = false;
+    let mut culling = true;
     let mut budget = UpdateBudget::Subtiles(16);
     let mut rest = Vec::new();
     let mut args = std::env::args().skip(1);
@@ -70,6 +75,8 @@ fn main() -> AppExit {
             dem = Some(args.next().unwrap_or_default());
         } else if arg == "--flat" {
             flat = true;
+        } else if arg == "--no-culling" {
+            culling = false;
         } else if arg == "--budget-ms" || arg == "--budget-subtiles" {
             let value = args.next().unwrap_or_default();
             budget = match (arg.as_str(), value.parse::<f32>()) {
@@ -141,7 +148,8 @@ fn main() -> AppExit {
     }
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
         eprintln!(
-            "{e} [--pyramid DIR] [--heights DIR] [--flat] [--budget-ms F | --budget-subtiles N]"
+            "{e} [--pyramid DIR] [--heights DIR] [--flat] [--no-culling] \
+             [--budget-ms F | --budget-subtiles N]"
         );
         std::process::exit(2)
     });
@@ -156,6 +164,7 @@ fn main() -> AppExit {
                 })
                 .insert_resource(terrain)
                 .init_resource::<Altitude>()
+                .insert_resource(Culling(culling))
                 .add_systems(Startup, setup)
                 .add_systems(Update, (fly, follow_patch));
         })
@@ -173,9 +182,11 @@ fn altitude_and_speed(mapping: &TextureMapping) -> (f64, f64) {
     (altitude, altitude * 250.0 / 300.0)
 }
 
+#[allow(clippy::too_many_arguments)]
 fn setup(
     mut commands: Commands,
     terrain: Res<Terrain>,
+    culling: Res<Culling>,
     settings: Res<ClipmapSettings>,
     mut images: ResMut<Assets<Image>>,
     mut materials: ResMut<Assets<ClipmapMaterial>>,
@@ -212,6 +223,7 @@ fn setup(
             Name::new("terrain"),
             TerrainGeometry {
                 height_range: *range,
+                culling: culling.0,
                 ..TerrainGeometry::new(heights, material)
             },
         ));
@@ -232,6 +244,12 @@ fn setup(
     });
     commands.spawn((
         Camera3d::default(),
+        // Bevy culls at the projection's far plane, and so does the patch selection: the ground
+        // to 60 km.
+        Projection::Perspective(PerspectiveProjection {
+            far: 60_000.0,
+            ..default()
+        }),
         Transform::from_xyz(center.x as f32, altitude as f32, center.y as f32),
     ));
 }
