@@ -24,7 +24,7 @@ use bevy_nature::terrain_clip::source::{
     DiskTileSource, ProceduralTileSource, TileSource, imagery_texel, relief_texel,
 };
 use bevy_nature::terrain_clip::stack_gpu::{ClipStackTexture, TextureMapping};
-use bevy_nature::terrain_clip::terrain::TerrainGeometry;
+use bevy_nature::terrain_clip::terrain::{TerrainGeometry, TerrainPrecision};
 use bevy_nature::terrain_clip::{ClipmapSettings, UpdateBudget};
 use bevy_nature_harness::{ExampleArgs, ExampleRunner};
 use std::sync::Arc;
@@ -224,6 +224,10 @@ fn setup(
             TerrainGeometry {
                 height_range: *range,
                 culling: culling.0,
+                // Vertices 3 px apart on screen: 60 km of ground stays interactive on a software
+                // rasteriser too. (The default, 1.1 px, keeps the silhouette within a pixel of the
+                // full mesh, at up to (3 / 1.1)² ≈ 7× the triangles.)
+                precision: TerrainPrecision::VertexPixels(3.0),
                 ..TerrainGeometry::new(heights, material)
             },
         ));

@@ -44,8 +44,8 @@ pub struct TerrainGeometry {
     /// Depth of the patch hierarchy; `None`: as deep as the height pyramid, so the finest
     /// patches' vertices are one finest height texel apart (capped at the 2^24 lattice).
     pub max_level: Option<u8>,
-    /// ρ of eq. 1 (`ε = ρ·l/d`): larger gives finer meshes.
-    pub precision: f32,
+    /// How fine the mesh is (ρ of eq. 1, set from the screen by default).
+    pub precision: TerrainPrecision,
     /// Hierarchical frustum culling of the patches.
     pub culling: bool,
     /// The lowest and highest terrain heights (m): patch bounds and edge distances.
@@ -54,16 +54,52 @@ pub struct TerrainGeometry {
 
 impl TerrainGeometry {
     /// A terrain over the height stack on `heights`, coloured by `material`, with defaults:
-    /// 16 segments an edge, ρ = 6, culling on, heights within ±2 km.
+    /// 16 segments an edge, vertices at most [`DEFAULT_VERTEX_PIXELS`] apart on screen, culling
+    /// on, heights within ±2 km.
     pub fn new(heights: Entity, material: Handle<ClipmapMaterial>) -> Self {
         Self {
             heights,
             material,
             resolution: 16,
             max_level: None,
-            precision: 6.0,
+            precision: TerrainPrecision::VertexPixels(DEFAULT_VERTEX_PIXELS),
             culling: true,
             height_range: (-2000.0, 2000.0),
+        }
+    }
+}
+
+/// How fine the terrain mesh is.
+#[derive(Clone, Copy, Debug, PartialEq, Reflect)]
+pub enum TerrainPrecision {
+    /// ρ of eq. 1 set each frame from the camera so that where a patch edge reaches ε = 1 its
+    /// vertices (at the high resolution) are this many pixels apart on screen: the mesh keeps
+    /// its on-screen density at any resolution and field of view. (Orthographic views, where
+    /// eq. 1's distance does not set the size on screen, use ρ = 6.)
+    VertexPixels(f32),
+    /// ρ of eq. 1 as given (`ε = ρ·l/d`; the paper's precision factor): larger gives finer
+    /// meshes.
+    Rho(f32),
+}
+
+/// The default on-screen vertex spacing (px). Measured against the full-resolution mesh in the
+/// same run (`tests/terrain_relief.rs`, rough relief of 10 m bumps over 1 m heights): the
+/// silhouette stays within a pixel of it; twice the spacing (a quarter of the triangles) moves
+/// it by up to 3 px.
+pub const DEFAULT_VERTEX_PIXELS: f32 = 1.1;
+
+impl TerrainPrecision {
+    /// ρ for a perspective view `pixels_per_radian` pixels per unit of tangent (the viewport's
+    /// height over `2·tan(fov/2)`; `None` for orthographic) and patches of `resolution`
+    /// segments an edge.
+    pub fn rho(self, pixels_per_radian: Option<f32>, resolution: u32) -> f32 {
+        match self {
+            Self::Rho(rho) => rho.max(1e-3),
+            Self::VertexPixels(px) => match pixels_per_radian {
+                // ε = ρ·l/d = 1 where the edge spans l/d·P pixels, its vertices l/d·P/r apart.
+                Some(p) => (p / (resolution as f32 * px.max(0.05))).max(1e-3),
+                None => 6.0,
+            },
         }
     }
 }
@@ -211,7 +247,10 @@ fn unit_mesh(r: u32, e: usize, n: u32, d0: u32, d1: u32) -> (Mesh, usize) {
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn draw_terrain(
     mut commands: Commands,
-    cameras: Query<(&Camera, &GlobalTransform, &Frustum), (With<Camera3d>, Without<TerrainTile>)>,
+    cameras: Query<
+        (&Camera, &GlobalTransform, &Frustum, Option<&Projection>),
+        (With<Camera3d>, Without<TerrainTile>),
+    >,
     mut terrains: Query<(
         Entity,
         &TerrainGeometry,
@@ -234,7 +273,7 @@ fn draw_terrain(
     mut diagnostics: Diagnostics,
     mut warned: Local<bevy::platform::collections::HashSet<Entity>>,
 ) {
-    let Some((_, camera, frustum)) = cameras
+    let Some((camera_settings, camera, frustum, projection)) = cameras
         .iter()
         .filter(|(c, ..)| c.is_active)
         .min_by_key(|(c, ..)| c.order)
@@ -256,9 +295,15 @@ fn draw_terrain(
             }
             continue;
         };
+        let pixels_per_radian = match projection {
+            Some(Projection::Perspective(p)) => camera_settings
+                .physical_viewport_size()
+                .map(|size| size.y as f32 / (2.0 * (p.fov * 0.5).tan())),
+            _ => None,
+        };
         let view = PatchView {
             eye: camera.translation(),
-            precision: geometry.precision.max(1e-3),
+            precision: geometry.precision.rho(pixels_per_radian, grid.r_high),
             frustum: geometry
                 .culling
                 .then(|| frustum.half_spaces.map(|h| h.normal_d())),

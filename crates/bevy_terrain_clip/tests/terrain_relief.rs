@@ -23,7 +23,9 @@ use bevy_terrain_clip::geometry::tile::patch_mesh;
 use bevy_terrain_clip::material::ClipmapMaterial;
 use bevy_terrain_clip::source::ProceduralTileSource;
 use bevy_terrain_clip::stack_gpu::{ClipStackTexture, TextureMapping};
-use bevy_terrain_clip::terrain::{TerrainGeometry, TerrainPatches};
+use bevy_terrain_clip::terrain::{
+    DEFAULT_VERTEX_PIXELS, TerrainGeometry, TerrainPatches, TerrainPrecision,
+};
 use bevy_terrain_clip::{ClipmapSettings, TerrainClipPlugin, UpdateBudget};
 use std::sync::Arc;
 
@@ -63,6 +65,19 @@ fn relief_harness(
     height: fn(u32, u64, u64) -> f32,
     camera: impl Bundle,
 ) -> Option<(RenderHarness, Entity)> {
+    relief_harness_over(test, w, h, height, camera, TERRAIN_M, 6)
+}
+
+/// [`relief_harness`] over a terrain `terrain_m` wide of `levels` pyramid levels of 64² tiles.
+fn relief_harness_over(
+    test: &str,
+    w: u32,
+    h: u32,
+    height: fn(u32, u64, u64) -> f32,
+    camera: impl Bundle,
+    terrain_m: f64,
+    levels: u32,
+) -> Option<(RenderHarness, Entity)> {
     let mut harness = RenderHarness::for_test(test, w, h)?;
     harness.app_mut().add_plugins(TerrainClipPlugin);
     let settings = ClipmapSettings {
@@ -74,7 +89,7 @@ fn relief_harness(
     };
     let mapping = TextureMapping {
         origin_m: DVec2::ZERO,
-        size_m: TERRAIN_M,
+        size_m: terrain_m,
     };
     let terrain = {
         let world = harness.world_mut();
@@ -82,14 +97,14 @@ fn relief_harness(
         let (heights, colour) = {
             let mut images = world.resource_mut::<Assets<Image>>();
             let mut heights = ClipStackTexture::heights(
-                Arc::new(ProceduralTileSource::heights(64, 6, height)),
+                Arc::new(ProceduralTileSource::heights(64, levels, height)),
                 &settings,
                 [0.5, 0.5],
                 &mut images,
             );
             heights.mapping = Some(mapping);
             let mut colour = ClipStackTexture::from_settings(
-                Arc::new(ProceduralTileSource::new(64, 6, |_, _, _| [255; 4])),
+                Arc::new(ProceduralTileSource::new(64, levels, |_, _, _| [255; 4])),
                 &settings,
                 [0.5, 0.5],
                 &mut images,
@@ -335,4 +350,105 @@ fn a_grazing_view_over_the_relief_shows_no_cracks() {
     );
     assert!(terrain_pixels as u32 > W * H / 3);
     assert_eq!(holes, 0, "cracks");
+}
+
+/// Screen-space geometric error at the default precision: a grazing perspective view over a
+/// 512 m terrain of 1 m heights, drawn at the default precision, at twice its vertex spacing,
+/// and at full resolution (every patch at the finest level: vertices on every height texel) in
+/// the same run; per pixel column, how far the terrain's top (its silhouette against the
+/// background) is from the full mesh's.
+#[test]
+fn the_default_precision_keeps_the_silhouette_within_a_pixel_of_the_full_mesh() {
+    const W: u32 = 320;
+    const H: u32 = 180;
+    let camera = (
+        Camera3d::default(),
+        Msaa::Off,
+        Tonemapping::None,
+        DebandDither::Disabled,
+        Transform::from_xyz(80.0, 95.0, 60.0).looking_at(Vec3::new(300.0, 30.0, 380.0), Vec3::Y),
+    );
+    // 4 pyramid levels of 64² tiles: 512 texels of 1 m.
+    let Some((mut harness, terrain)) = relief_harness_over(
+        "terrain_relief_error",
+        W,
+        H,
+        terrain_height,
+        camera,
+        512.0,
+        4,
+    ) else {
+        return;
+    };
+    let mut render_at = |precision: TerrainPrecision| {
+        harness
+            .world_mut()
+            .get_mut::<TerrainGeometry>(terrain)
+            .unwrap()
+            .precision = precision;
+        harness.run_frames(3).unwrap();
+        let image = harness.render().unwrap();
+        let patches = harness
+            .world_mut()
+            .get::<TerrainPatches>(terrain)
+            .unwrap()
+            .clone();
+        (image, patches)
+    };
+    let (default_image, default) = render_at(TerrainPrecision::VertexPixels(DEFAULT_VERTEX_PIXELS));
+    let (coarse_image, coarse) =
+        render_at(TerrainPrecision::VertexPixels(2.0 * DEFAULT_VERTEX_PIXELS));
+    let (full_image, full) = render_at(TerrainPrecision::Rho(1.0e6));
+    let grid = full.grid.unwrap();
+    assert!(
+        full.selection
+            .patches
+            .iter()
+            .all(|p| p.id.level == grid.max_level),
+        "full resolution: every patch at the finest level"
+    );
+    strip(&[&coarse_image, &default_image, &full_image])
+        .save_png(bevy_nature_harness::artifacts_dir().join("terrain_relief_error.png"))
+        .ok();
+    let reference = silhouette(&full_image);
+    let error = |image: &RgbaImage| {
+        let (mut worst, mut total) = (0u32, 0u32);
+        for (x, y) in silhouette(image).iter().zip(&reference) {
+            let (x, y) = (
+                x.expect("terrain in every column"),
+                y.expect("terrain in every column"),
+            );
+            worst = worst.max(x.abs_diff(y));
+            total += x.abs_diff(y);
+        }
+        (worst, total as f32 / W as f32)
+    };
+    let (worst, mean) = error(&default_image);
+    let (coarse_worst, coarse_mean) = error(&coarse_image);
+    println!(
+        "full resolution: {} triangles; default ({DEFAULT_VERTEX_PIXELS} px between vertices): {} \
+         triangles, silhouette within {worst} px ({mean:.2} px on average); twice as coarse: {} \
+         triangles, within {coarse_worst} px ({coarse_mean:.2} px)",
+        full.triangles, default.triangles, coarse.triangles
+    );
+    assert!(default.triangles < full.triangles && coarse.triangles < default.triangles);
+    assert!(
+        worst <= 1,
+        "the default mesh's silhouette is {worst} px off the full mesh's"
+    );
+}
+
+/// Images side by side.
+fn strip(images: &[&RgbaImage]) -> RgbaImage {
+    let (w, h) = (images[0].width, images[0].height);
+    let mut data = vec![0u8; (w * h * 4) as usize * images.len()];
+    for (k, image) in images.iter().enumerate() {
+        for y in 0..h {
+            let src = (y * w * 4) as usize;
+            let dst = ((y * w * images.len() as u32 + k as u32 * w) * 4) as usize;
+            data[dst..dst + (w * 4) as usize]
+                .copy_from_slice(&image.data[src..src + (w * 4) as usize]);
+        }
+    }
+    RgbaImage::new(w * images.len() as u32, h, data)
 }
