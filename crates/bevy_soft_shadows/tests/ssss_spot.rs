@@ -14,11 +14,8 @@ mod common;
 
 use bevy::prelude::*;
 use bevy::render::RenderApp;
-use bevy_nature_harness::compare::RgbaImage;
-use bevy_nature_harness::{RenderHarness, artifacts_dir};
-use bevy_soft_shadows::reference::{
-    LinearAverage, disk_rise_fraction, jittered_positions, linear_to_srgb,
-};
+use bevy_nature_harness::RenderHarness;
+use bevy_soft_shadows::reference::{LinearAverage, disk_rise_fraction, jittered_positions};
 use bevy_soft_shadows::ssss::distance::{CoarseMap, FineMap, SpotProjection, spot_penumbra_width};
 use bevy_soft_shadows::ssss::min_filter::{
     DepthConvention, coarse_dilate, coarse_radius_of, dilation_block, spot_fine_reach,
@@ -125,24 +122,7 @@ fn spot_scene(test: &str, neighbours: bool) -> Option<(RenderHarness, Entity, Ve
 
     // The light alone (blocker hidden): the spot light's falloff varies over the view, so
     // visibility is each pixel over this.
-    let blocker = {
-        let world = harness.world_mut();
-        world
-            .query_filtered::<Entity, With<Blocker>>()
-            .single(world)
-            .unwrap()
-    };
-    harness
-        .world_mut()
-        .entity_mut(blocker)
-        .insert(Visibility::Hidden);
-    harness.render().unwrap();
-    let unshadowed = to_linear(&harness.render().unwrap());
-    harness
-        .world_mut()
-        .entity_mut(blocker)
-        .insert(Visibility::Inherited);
-    harness.render().unwrap();
+    let unshadowed = render_without_blocker(&mut harness);
     Some((harness, lamp, unshadowed))
 }
 
@@ -192,47 +172,16 @@ fn ssss_softens_spot_light_shadows_as_eq_6_1_predicts() {
         light.soft_shadows_enabled = radius.is_some();
         light.radius = radius.unwrap_or(0.0);
     };
-    let mut pcss = (f32::INFINITY, 0.0, Vec::new());
-    for scale in [1.0f32, 10.0, 20.0, 30.0, 45.0, 60.0, 100.0] {
-        set_pcss(&mut harness, Some(scale * 0.5 * DIAMETER));
-        // Two frames: the light uniform of the first may still be the previous one.
-        harness.render().unwrap();
-        let image = to_linear(&harness.render().unwrap());
-        let e = rmse(&image, &reference);
-        println!(
-            "PCSS radius {:.2} m ({scale}× the lamp's): RMSE {e:.4}",
-            scale * 0.5 * DIAMETER
-        );
-        if e < pcss.0 {
-            pcss = (e, scale, image);
-        }
-    }
-    let (e_pcss, pcss_scale, pcss) = pcss;
-    set_pcss(&mut harness, None);
+    let radii = [1.0f32, 10.0, 20.0, 30.0, 45.0, 60.0, 100.0].map(|k| k * 0.5 * DIAMETER);
+    let (e_pcss, pcss_radius, pcss) = best_local_pcss(&mut harness, set_pcss, &radii, &reference);
+    let pcss_scale = pcss_radius / (0.5 * DIAMETER);
 
     harness.world_mut().entity_mut(lamp).insert(settings());
     let ssss = render_until(&mut harness, &hard, |img| rmse(img, &hard) > 0.003);
     harness.run_frames(1).unwrap();
 
-    let dir = artifacts_dir().join("ssss_spot");
-    std::fs::create_dir_all(&dir).ok();
-    let save = |name: &str, linear: &[f32]| {
-        RgbaImage::new(
-            SIZE,
-            SIZE,
-            linear.iter().map(|&v| linear_to_srgb(v)).collect(),
-        )
-        .save_png(dir.join(name))
-        .ok();
-    };
-    save("hard.png", &hard);
-    save("reference.png", &reference);
-    save("pcss.png", &pcss);
-    save("ssss.png", &ssss);
     // Hard | Bevy's best spot PCSS | SSSS | area-light reference (docs/images/ssss_spot.png).
-    strip(&[&hard, &pcss, &ssss, &reference])
-        .save_png(dir.join("comparison.png"))
-        .ok();
+    save_comparison("ssss_spot", &hard, &pcss, &ssss, &reference);
 
     // 1. The spot light's dilated map (layer 0: no directional cascades, no point lights)
     //    against the CPU reference at exactly the radius the settings give.

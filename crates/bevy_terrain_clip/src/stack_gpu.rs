@@ -214,20 +214,36 @@ impl ClipStackTexture {
         center_uv: [f64; 2],
         images: &mut Assets<Image>,
     ) -> Self {
+        Self::sized_by(source, settings, center_uv, TexelKind::Height, images)
+    }
+
+    /// A stack of `kind` sized by `settings` (heights: one mip a layer, read texel by texel).
+    fn sized_by(
+        source: Arc<dyn TileSource>,
+        settings: &ClipmapSettings,
+        center_uv: [f64; 2],
+        kind: TexelKind,
+        images: &mut Assets<Image>,
+    ) -> Self {
         let (settings, fixes) = settings.sanitized();
         for fix in fixes {
             warn!("ClipmapSettings: {fix}");
         }
+        let mips = match kind {
+            TexelKind::Color => settings.layer_mips,
+            TexelKind::Height => 1,
+        };
         let mut clip = Self::build(
             source,
-            [settings.clip_size, settings.subtile_size, 1],
+            [settings.clip_size, settings.subtile_size, mips],
             settings.cache_tiles as usize,
             center_uv,
-            TexelKind::Height,
+            kind,
             images,
         );
         clip.budget = settings.budget;
-        clip.linear_filtering = false;
+        clip.no_data_color = settings.no_data_color;
+        clip.linear_filtering = kind == TexelKind::Color;
         clip
     }
 
@@ -328,22 +344,7 @@ impl ClipStackTexture {
         center_uv: [f64; 2],
         images: &mut Assets<Image>,
     ) -> Self {
-        let (settings, fixes) = settings.sanitized();
-        for fix in fixes {
-            warn!("ClipmapSettings: {fix}");
-        }
-        let mut clip = Self::new_with_mips(
-            source,
-            settings.clip_size,
-            settings.subtile_size,
-            settings.cache_tiles as usize,
-            center_uv,
-            settings.layer_mips,
-            images,
-        );
-        clip.budget = settings.budget;
-        clip.no_data_color = settings.no_data_color;
-        clip
+        Self::sized_by(source, settings, center_uv, TexelKind::Color, images)
     }
 
     /// A terrain material drawing this stack (its coverage is kept current by the plugin);

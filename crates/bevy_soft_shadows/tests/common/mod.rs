@@ -468,3 +468,80 @@ pub fn width_at(visibility: &[f32], x: f32) -> f32 {
         * VIEW_M
         / SIZE as f32
 }
+
+/// The scene rendered with its blocker hidden (each pixel's light, for [`visibility`]); the
+/// blocker is shown again afterwards.
+pub fn render_without_blocker(harness: &mut RenderHarness) -> Vec<f32> {
+    let blocker = {
+        let world = harness.world_mut();
+        world
+            .query_filtered::<Entity, With<Blocker>>()
+            .single(world)
+            .unwrap()
+    };
+    harness
+        .world_mut()
+        .entity_mut(blocker)
+        .insert(Visibility::Hidden);
+    harness.render().unwrap();
+    let unshadowed = to_linear(&harness.render().unwrap());
+    harness
+        .world_mut()
+        .entity_mut(blocker)
+        .insert(Visibility::Inherited);
+    harness.render().unwrap();
+    unshadowed
+}
+
+/// Bevy's PCSS on a local light at the best of a sweep of its `radius` (`set` switches it on
+/// with a radius, or off with `None`; off again afterwards): (RMSE against `reference`, the
+/// radius, the image). Bevy's local-light PCSS kernel is in units of a fixed texel size times an
+/// empirical factor, not metres, so the light's true radius is only where the sweep starts.
+pub fn best_local_pcss(
+    harness: &mut RenderHarness,
+    set: impl Fn(&mut RenderHarness, Option<f32>),
+    radii: &[f32],
+    reference: &[f32],
+) -> (f32, f32, Vec<f32>) {
+    let mut best = (f32::INFINITY, 0.0, Vec::new());
+    for &radius in radii {
+        set(harness, Some(radius));
+        // Two frames: the light uniform of the first may still be the previous one.
+        harness.render().unwrap();
+        let image = to_linear(&harness.render().unwrap());
+        let e = rmse(&image, reference);
+        println!("PCSS radius {radius:.2} m: RMSE {e:.4}");
+        if e < best.0 {
+            best = (e, radius, image);
+        }
+    }
+    set(harness, None);
+    best
+}
+
+/// Saves hard, Bevy's PCSS, SSSS and the reference (linear light) under `artifacts/<test>/`, and
+/// the four side by side as `comparison.png`.
+pub fn save_comparison(test: &str, hard: &[f32], pcss: &[f32], ssss: &[f32], reference: &[f32]) {
+    let dir = bevy_nature_harness::artifacts_dir().join(test);
+    std::fs::create_dir_all(&dir).ok();
+    for (name, linear) in [
+        ("hard.png", hard),
+        ("reference.png", reference),
+        ("pcss.png", pcss),
+        ("ssss.png", ssss),
+    ] {
+        RgbaImage::new(
+            SIZE,
+            SIZE,
+            linear
+                .iter()
+                .map(|&v| bevy_soft_shadows::reference::linear_to_srgb(v))
+                .collect(),
+        )
+        .save_png(dir.join(name))
+        .ok();
+    }
+    strip(&[hard, pcss, ssss, reference])
+        .save_png(dir.join("comparison.png"))
+        .ok();
+}
