@@ -36,6 +36,11 @@ impl<V> LruCache<V> {
         }
     }
 
+    /// Entries it holds at most.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
     /// Entries held.
     pub fn len(&self) -> usize {
         self.entries.len()

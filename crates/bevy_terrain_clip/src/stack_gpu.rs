@@ -933,6 +933,88 @@ pub fn clipmap_params(clip: &ClipStackTexture) -> ClipmapParams {
 }
 
 /// Keeps every stack's materials' coverage current.
+/// Edits to [`ClipmapSettings`] after start-up apply to the live stacks: the budget at once, the
+/// sizes (clip, subtile, layer mips, cached tiles) by rebuilding each stack — new textures, the
+/// same source, centre, mapping and materials, streaming again from the base level. Only the
+/// fields edited change: a stack made with sizes of its own keeps the others.
+pub fn apply_live_settings(
+    settings: Option<Res<ClipmapSettings>>,
+    mut last: Local<Option<ClipmapSettings>>,
+    mut stacks: Query<&mut ClipStackTexture>,
+    mut images: ResMut<Assets<Image>>,
+    mut materials: ResMut<Assets<ClipmapMaterial>>,
+) {
+    let Some(settings) = settings else {
+        return;
+    };
+    let (settings, _) = settings.sanitized();
+    let Some(before) = last.replace(settings.clone()) else {
+        return;
+    };
+    if before == settings {
+        return;
+    }
+    for mut clip in &mut stacks {
+        if settings.budget != before.budget {
+            clip.budget = settings.budget;
+        }
+        let pick = |now: u32, then: u32, own: u32| if now != then { now } else { own };
+        let clip_size = pick(settings.clip_size, before.clip_size, clip.stack.clip_size);
+        let subtile = pick(
+            settings.subtile_size,
+            before.subtile_size,
+            clip.stack.subtile_size,
+        )
+        .min(clip_size / 2);
+        let mips = match clip.texels {
+            TexelKind::Height => 1,
+            TexelKind::Color => pick(settings.layer_mips, before.layer_mips, clip.layer_mips),
+        };
+        let cache = pick(
+            settings.cache_tiles,
+            before.cache_tiles,
+            clip.cache.capacity() as u32,
+        );
+        if (clip_size, subtile, mips, cache)
+            == (
+                clip.stack.clip_size,
+                clip.stack.subtile_size,
+                clip.layer_mips,
+                clip.cache.capacity() as u32,
+            )
+        {
+            continue;
+        }
+        let mut rebuilt = ClipStackTexture::build(
+            clip.cache.source().clone(),
+            [clip_size, subtile, mips],
+            cache as usize,
+            clip.center_uv,
+            clip.texels,
+            &mut images,
+        );
+        rebuilt.budget = clip.budget;
+        rebuilt.mapping = clip.mapping;
+        rebuilt.no_data_color = clip.no_data_color;
+        rebuilt.stack.grid_shift = clip.stack.grid_shift;
+        rebuilt.set_linear_filtering(clip.linear_filtering, &mut images);
+        // The materials drawing the old stack now draw the new one.
+        rebuilt.materials = std::mem::take(&mut clip.materials);
+        for handle in &rebuilt.materials {
+            if let Some(mut material) = materials.get_mut(handle) {
+                material.extension.layers = rebuilt.layers.clone();
+                material.extension.base = rebuilt.base.clone();
+                material.extension.params = clipmap_params(&rebuilt);
+            }
+        }
+        info!(
+            "ClipmapSettings: a clip stack rebuilt with clip {clip_size}, subtile {subtile}, \
+             {mips} mips a layer, {cache} cached tiles"
+        );
+        *clip = rebuilt;
+    }
+}
+
 pub fn update_clipmap_materials(
     mut stacks: Query<&mut ClipStackTexture>,
     settings: Option<Res<ClipmapSettings>>,
@@ -973,7 +1055,12 @@ pub(crate) fn build(app: &mut App) {
     }
     app.add_systems(
         PostUpdate,
-        (follow_camera, stream_clip_stacks, update_clipmap_materials)
+        (
+            apply_live_settings,
+            follow_camera,
+            stream_clip_stacks,
+            update_clipmap_materials,
+        )
             .chain()
             .after(bevy::transform::TransformSystems::Propagate),
     );

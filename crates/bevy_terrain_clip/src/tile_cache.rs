@@ -73,6 +73,11 @@ impl TileCache {
         }
     }
 
+    /// Tiles it holds at most.
+    pub fn capacity(&self) -> usize {
+        self.tiles.capacity()
+    }
+
     /// The source.
     pub fn source(&self) -> &Arc<dyn TileSource> {
         &self.source

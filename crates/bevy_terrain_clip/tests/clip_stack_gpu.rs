@@ -349,6 +349,98 @@ fn height_layers_hold_the_pyramid_heights_exactly() {
     }
 }
 
+/// Editing `ClipmapSettings` at run time (the examples' panel does) applies to the live stacks:
+/// the budget at once; a size by rebuilding the stack with it — and only with the fields edited,
+/// so a stack made with a clip size of its own keeps it — its material then drawing the new
+/// textures, streaming to completion again.
+#[test]
+fn edited_settings_apply_to_live_stacks() {
+    let Some(mut harness) = RenderHarness::for_test("clip_stack_gpu_live_settings", 16, 16) else {
+        return;
+    };
+    harness.app_mut().add_plugins(TerrainClipPlugin);
+    let (entity, material) = {
+        let world = harness.world_mut();
+        let mut clip = {
+            let mut images = world.resource_mut::<Assets<Image>>();
+            ClipStackTexture::from_settings(
+                Arc::new(ProceduralTileSource::new(64, 6, address_texel)),
+                &ClipmapSettings {
+                    clip_size: CLIP,
+                    subtile_size: SUBTILE,
+                    cache_tiles: 64,
+                    budget: UpdateBudget::Subtiles(16),
+                    ..default()
+                },
+                [0.37, 0.61],
+                &mut images,
+            )
+        };
+        let material = clip.material(
+            StandardMaterial::default(),
+            &mut world.resource_mut::<Assets<bevy_terrain_clip::material::ClipmapMaterial>>(),
+        );
+        (world.spawn(clip).id(), material)
+    };
+    harness.world_mut().spawn(Camera3d::default());
+    harness.wait_until_ready().unwrap();
+    harness.run_frames(5).unwrap();
+    let old_layers = harness
+        .world_mut()
+        .get::<ClipStackTexture>(entity)
+        .unwrap()
+        .layers
+        .clone();
+    {
+        let mut settings = harness.world_mut().resource_mut::<ClipmapSettings>();
+        settings.subtile_size = 16;
+        settings.budget = UpdateBudget::Subtiles(7);
+    }
+    harness.run_frames(2).unwrap();
+    let (layers, budget, clip_size, subtile) = {
+        let clip = harness.world_mut().get::<ClipStackTexture>(entity).unwrap();
+        (
+            clip.layers.clone(),
+            clip.budget,
+            clip.stack.clip_size,
+            clip.stack.subtile_size,
+        )
+    };
+    assert_eq!(budget, UpdateBudget::Subtiles(7));
+    assert_eq!(
+        (clip_size, subtile),
+        (CLIP, 16),
+        "the clip size is the stack's own"
+    );
+    assert_ne!(layers, old_layers, "new textures");
+    let extension = harness
+        .world_mut()
+        .resource::<Assets<bevy_terrain_clip::material::ClipmapMaterial>>()
+        .get(&material)
+        .unwrap()
+        .extension
+        .clone();
+    assert_eq!(extension.layers, layers, "the material draws the new stack");
+    // It streams to completion again, in 16-texel subtiles.
+    let (mut frames, mut largest) = (0, 0);
+    loop {
+        harness.step();
+        frames += 1;
+        let clip = harness.world_mut().get::<ClipStackTexture>(entity).unwrap();
+        largest = clip
+            .writes()
+            .iter()
+            .filter(|w| w.mip == 0)
+            .map(|w| w.size)
+            .fold(largest, u32::max);
+        if clip.stack.layers.iter().all(|l| l.complete()) && clip.writes().is_empty() {
+            break;
+        }
+        assert!(frames < 600, "the rebuilt stack never completed");
+    }
+    assert_eq!(largest, 16, "subtiles of the edited size");
+}
+
 /// A second virtual texture (e.g. an overlay map) with texels of its own.
 fn overlay_texel(level: u32, x: u64, y: u64) -> [u8; 4] {
     let a = address_texel(level, x, y);
