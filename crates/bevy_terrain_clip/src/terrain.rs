@@ -27,9 +27,12 @@ use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 
-/// Draws a terrain with relief over a height clip stack.
+/// Draws a terrain with relief over a height clip stack. Its tiles are children of its entity
+/// (despawning it despawns them); the heights are in world space, so the entity's transform stays
+/// the identity.
 #[derive(Component, Clone, Debug, Reflect)]
 #[reflect(Component)]
+#[require(Transform, Visibility)]
 pub struct TerrainGeometry {
     /// The entity holding the height stack ([`ClipStackTexture::heights`]); its
     /// [`mapping`](ClipStackTexture::mapping) places the terrain square in the world.
@@ -350,13 +353,14 @@ fn draw_terrain(
             owned_tiles.push(
                 commands
                     .spawn((
+                        ChildOf(entity),
                         TerrainTile,
                         Mesh3d(placed[owned_tiles.len()].0.clone()),
                         MeshMaterial3d(geometry.material.clone()),
                         placed[owned_tiles.len()].1,
                         // Set here too: this runs after transform propagation.
                         GlobalTransform::from(placed[owned_tiles.len()].1),
-                        Visibility::Visible,
+                        Visibility::Inherited,
                         // The patches are culled by the selection; Bevy's culling would use the
                         // flat mesh's bounds.
                         NoFrustumCulling,
@@ -383,8 +387,8 @@ fn draw_terrain(
                         *transform = *place;
                         *global = GlobalTransform::from(*place);
                     }
-                    if *visibility != Visibility::Visible {
-                        *visibility = Visibility::Visible;
+                    if *visibility != Visibility::Inherited {
+                        *visibility = Visibility::Inherited;
                     }
                 }
                 None => {

@@ -24,7 +24,7 @@ use bevy_terrain_clip::material::ClipmapMaterial;
 use bevy_terrain_clip::source::ProceduralTileSource;
 use bevy_terrain_clip::stack_gpu::{ClipStackTexture, TextureMapping};
 use bevy_terrain_clip::terrain::{
-    DEFAULT_VERTEX_PIXELS, TerrainGeometry, TerrainPatches, TerrainPrecision,
+    DEFAULT_VERTEX_PIXELS, TerrainGeometry, TerrainPatches, TerrainPrecision, TerrainTile,
 };
 use bevy_terrain_clip::{ClipmapSettings, TerrainClipPlugin, UpdateBudget};
 use std::sync::Arc;
@@ -290,6 +290,23 @@ fn the_silhouette_of_the_relief_is_where_the_cpu_puts_its_vertices() {
     assert!(
         differing <= W / 64,
         "{differing} columns differ from the CPU's"
+    );
+    // The tiles are the terrain's children: despawning it leaves none behind.
+    let world = harness.world_mut();
+    let tiles = world
+        .query_filtered::<(), With<TerrainTile>>()
+        .iter(world)
+        .count();
+    assert_eq!(tiles, 4 * patches.selection.patches.len());
+    world.despawn(terrain);
+    harness.run_frames(1).unwrap();
+    let world = harness.world_mut();
+    assert_eq!(
+        world
+            .query_filtered::<(), With<TerrainTile>>()
+            .iter(world)
+            .count(),
+        0
     );
 }
 
