@@ -32,8 +32,8 @@ use std::sync::Arc;
 /// Side of the terrain patch drawn around the camera (m), rebuilt as the camera moves on.
 const PATCH_M: f64 = 24_000.0;
 
-/// An elevation source, where it lies, and its lowest and highest heights (m).
-type Relief = (Arc<dyn TileSource>, TextureMapping, (f32, f32));
+/// An elevation source and where it lies.
+type Relief = (Arc<dyn TileSource>, TextureMapping);
 
 #[derive(Resource, Clone)]
 struct Terrain {
@@ -96,8 +96,6 @@ fn main() -> AppExit {
             Ok(source) => Some((
                 TextureMapping::from_manifest(&source.manifest),
                 Arc::new(source) as Arc<dyn TileSource>,
-                // Sea floor to Everest: the patches' bounds.
-                (-500.0, 9000.0),
             )),
             Err(e) => {
                 eprintln!("{e}");
@@ -135,13 +133,12 @@ fn main() -> AppExit {
                         relief_texel(l, x, y, size_m)
                     })),
                     mapping,
-                    (-600.0, 600.0),
                 )),
             }
         }
     };
-    if let Some((mapping, source, range)) = heights {
-        terrain.heights = Some((source, mapping, range));
+    if let Some((mapping, source)) = heights {
+        terrain.heights = Some((source, mapping));
     }
     if flat {
         terrain.heights = None;
@@ -211,7 +208,7 @@ fn setup(
     );
     commands.spawn((Name::new("clip stack"), clip));
     let mapping = terrain.mapping;
-    if let Some((source, height_mapping, range)) = &terrain.heights {
+    if let Some((source, height_mapping)) = &terrain.heights {
         let uv = height_mapping.uv_of(center);
         let mut heights =
             ClipStackTexture::heights(source.clone(), &settings, [uv.x, uv.y], &mut images);
@@ -222,7 +219,6 @@ fn setup(
         commands.spawn((
             Name::new("terrain"),
             TerrainGeometry {
-                height_range: *range,
                 culling: culling.0,
                 // Vertices 3 px apart on screen: 60 km of ground stays interactive on a software
                 // rasteriser too. (The default, 1.1 px, keeps the silhouette within a pixel of the

@@ -155,6 +155,8 @@ pub struct ClipStackTexture {
     base_written: Arc<AtomicBool>,
     /// Running mean of the main world's cost of cutting one subtile and its mips (ms).
     prepare_ms_per_subtile: f64,
+    /// For a height stack, the lowest and highest heights sent to the GPU so far.
+    height_range: Option<(f32, f32)>,
 }
 
 impl ClipStackTexture {
@@ -334,6 +336,7 @@ impl ClipStackTexture {
             base_writes: Vec::new(),
             base_written: Arc::new(AtomicBool::new(false)),
             prepare_ms_per_subtile: 0.0,
+            height_range: None,
         }
     }
 
@@ -394,6 +397,32 @@ impl ClipStackTexture {
     /// The uploads queued this frame.
     pub fn writes(&self) -> &[SubtileWrite] {
         &self.writes
+    }
+
+    /// For a height stack: the lowest and highest heights (m) sent to the GPU so far — bounds on
+    /// what the vertex stage can read, as it reads resident data only (`None` before any).
+    pub fn height_range(&self) -> Option<(f32, f32)> {
+        self.height_range
+    }
+
+    /// Widens [`height_range`](Self::height_range) by the heights of `texels` (f32 a texel).
+    fn observe_heights(&mut self, texels: &[u8]) {
+        if self.texels != TexelKind::Height {
+            return;
+        }
+        let (mut low, mut high) = self
+            .height_range
+            .unwrap_or((f32::INFINITY, f32::NEG_INFINITY));
+        for h in texels.chunks_exact(4) {
+            let h = f32::from_le_bytes([h[0], h[1], h[2], h[3]]);
+            if h.is_finite() {
+                low = low.min(h);
+                high = high.max(h);
+            }
+        }
+        if low <= high {
+            self.height_range = Some((low, high));
+        }
     }
 
     /// For a height stack with a [`mapping`](Self::mapping): the ground's height (m) at world
@@ -636,6 +665,8 @@ pub fn stream_clip_stacks(
             .and_then(bevy::tasks::futures::check_ready)
         {
             clip.base_task = None;
+            let mip0 = (clip.stack.clip_size * clip.stack.clip_size * 4) as usize;
+            clip.observe_heights(&data[..mip0.min(data.len())]);
             let (mut offset, mut size) = (0usize, clip.stack.clip_size);
             for mip in 0.. {
                 let bytes = (size * size * 4) as usize;
@@ -736,6 +767,7 @@ pub fn stream_clip_stacks(
                 upload.subtile[0].rem_euclid(n as i64) as u32,
                 upload.subtile[1].rem_euclid(n as i64) as u32,
             ];
+            clip.observe_heights(&texels);
             // Mip 0, then each mip the 2×2 box filter of the one before.
             let (mut texels, mut size) = (texels, s);
             for mip in 0..clip.layer_mips {

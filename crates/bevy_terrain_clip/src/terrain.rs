@@ -51,14 +51,16 @@ pub struct TerrainGeometry {
     pub precision: TerrainPrecision,
     /// Hierarchical frustum culling of the patches.
     pub culling: bool,
-    /// The lowest and highest terrain heights (m): patch bounds and edge distances.
-    pub height_range: (f32, f32),
+    /// The lowest and highest terrain heights (m): patch bounds and edge distances. `None`
+    /// (the default): those of the heights streamed so far
+    /// ([`ClipStackTexture::height_range`]), which bound what the vertex stage reads.
+    pub height_range: Option<(f32, f32)>,
 }
 
 impl TerrainGeometry {
     /// A terrain over the height stack on `heights`, coloured by `material`, with defaults:
     /// 16 segments an edge, vertices at most [`DEFAULT_VERTEX_PIXELS`] apart on screen, culling
-    /// on, heights within ±2 km.
+    /// on, the height range of the heights streamed.
     pub fn new(heights: Entity, material: Handle<ClipmapMaterial>) -> Self {
         Self {
             heights,
@@ -67,7 +69,7 @@ impl TerrainGeometry {
             max_level: None,
             precision: TerrainPrecision::VertexPixels(DEFAULT_VERTEX_PIXELS),
             culling: true,
-            height_range: (-2000.0, 2000.0),
+            height_range: None,
         }
     }
 }
@@ -284,11 +286,8 @@ fn draw_terrain(
         return;
     };
     for (entity, geometry, patches, owned) in &mut terrains {
-        let Some(grid) = stacks
-            .get(geometry.heights)
-            .ok()
-            .and_then(|h| patch_grid(geometry, h))
-        else {
+        let height_stack = stacks.get(geometry.heights).ok();
+        let Some(grid) = height_stack.and_then(|h| patch_grid(geometry, h)) else {
             if warned.insert(entity) {
                 warn!(
                     "TerrainGeometry on {entity}: {:?} holds no height stack with a mapping \
@@ -310,10 +309,13 @@ fn draw_terrain(
             frustum: geometry
                 .culling
                 .then(|| frustum.half_spaces.map(|h| h.normal_d())),
-            heights: (
-                geometry.height_range.0.min(geometry.height_range.1),
-                geometry.height_range.0.max(geometry.height_range.1),
-            ),
+            heights: {
+                let (a, b) = geometry
+                    .height_range
+                    .or_else(|| height_stack.and_then(|h| h.height_range()))
+                    .unwrap_or((0.0, 0.0));
+                (a.min(b), a.max(b))
+            },
         };
         let started = std::time::Instant::now();
         let selection = select_patches(&grid, &view);

@@ -251,6 +251,36 @@ fn address_height(level: u32, x: u64, y: u64) -> f32 {
     level as f32 * 1000.0 + (x % 251) as f32 * 3.25 + (y % 241) as f32 * 0.0625 - 400.0
 }
 
+/// The lowest and highest heights of a height stack's valid slots (`address_height`).
+#[inline(never)]
+fn valid_height_range(clip: &ClipStackTexture) -> (f32, f32) {
+    let heights: Vec<f32> = clip
+        .stack
+        .layers
+        .iter()
+        .flat_map(|layer| {
+            layer
+                .slots()
+                .iter()
+                .filter(|s| s.state == bevy_terrain_clip::clip::layer::SlotState::Valid)
+                .flat_map(move |slot| {
+                    (0..(SUBTILE * SUBTILE) as i64).map(move |k| {
+                        let (x, y) = (k % SUBTILE as i64, k / SUBTILE as i64);
+                        address_height(
+                            layer.level,
+                            (slot.subtile[0] * SUBTILE as i64 + x) as u64,
+                            (slot.subtile[1] * SUBTILE as i64 + y) as u64,
+                        )
+                    })
+                })
+        })
+        .collect();
+    (
+        heights.iter().copied().fold(f32::INFINITY, f32::min),
+        heights.iter().copied().fold(f32::NEG_INFINITY, f32::max),
+    )
+}
+
 /// Heights stream into an R32Float stack texel for texel: every valid slot of every layer read
 /// back equals the source's heights exactly; a source of the wrong kind is refused and streams
 /// nothing.
@@ -333,6 +363,14 @@ fn height_layers_hold_the_pyramid_heights_exactly() {
         clip.resident_height(bevy::math::DVec2::new(-5.0, 10.0)),
         None
     );
+    // The range of the heights sent holds every valid texel's (the patches' bounds).
+    let (low, high) = clip.height_range().expect("heights were sent");
+    let (valid_low, valid_high) = valid_height_range(&clip);
+    assert!(
+        low <= valid_low && high >= valid_high,
+        "{low}..{high} vs {valid_low}..{valid_high}"
+    );
+    assert!(low >= -400.0 && high <= 11.0 * 1000.0 + 250.0 * 3.25 + 240.0 * 0.0625 - 400.0);
     for refused in [imagery_as_heights, heights_as_imagery] {
         let clip = harness
             .world_mut()

@@ -124,10 +124,8 @@ fn relief_harness_over(
         world.spawn(colour);
         world.spawn(camera);
         world
-            .spawn(TerrainGeometry {
-                height_range: (-130.0, 130.0),
-                ..TerrainGeometry::new(heights, material)
-            })
+            // The height range: what has streamed (`ClipStackTexture::height_range`).
+            .spawn(TerrainGeometry::new(heights, material))
             .id()
     };
     harness.wait_until_ready().unwrap();
