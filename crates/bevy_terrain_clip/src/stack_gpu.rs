@@ -209,7 +209,9 @@ impl ClipStackTexture {
     /// into an R32Float texture array, one mip a layer, sized by `settings` like
     /// [`from_settings`](Self::from_settings). The terrain geometry's vertex shader reads it with
     /// `textureLoad` (32-bit float textures are not filterable everywhere). A source of imagery is
-    /// refused with an error and the stack stays empty (no data), never converted.
+    /// refused with an error and the stack stays empty (no data), never converted. Where the
+    /// pyramid lacks a tile, a finer layer falls back to the coarser ones and the base level holds
+    /// 0 m (logged when the base level is read).
     pub fn heights(
         source: Arc<dyn TileSource>,
         settings: &ClipmapSettings,
