@@ -49,7 +49,7 @@
 //!     commands.spawn((
 //!         SpotLight { shadow_maps_enabled: true, outer_angle: 0.7, ..default() },
 //!         // A 30 cm lamp; blockers at least 3 m from it and up to 3 m above their receivers
-//!         // get their whole penumbra (`min_filter::spot_coarse_radius`).
+//!         // get their whole penumbra (`min_filter::spot_fine_reach`).
 //!         ScreenSpaceSoftShadows { light_size: 0.3, max_occluder_distance: 3.0, ..default() },
 //!         Transform::from_xyz(0.0, 6.0, 0.0).looking_at(Vec3::ZERO, Vec3::Z),
 //!     ));

@@ -981,6 +981,10 @@ pub fn apply_live_settings(
     let Some(settings) = settings else {
         return;
     };
+    // Nothing to do unless the settings changed since they were last seen.
+    if last.is_some() && !settings.is_changed() {
+        return;
+    }
     let (settings, _) = settings.sanitized();
     let Some(before) = last.replace(settings.clone()) else {
         return;

@@ -41,8 +41,8 @@ pub struct TerrainGeometry {
     /// [`material`](ClipStackTexture::material)); its relief bindings are filled in from the
     /// height stack.
     pub material: Handle<ClipmapMaterial>,
-    /// Segments along a patch edge at the high resolution (a power of two, at least 4); the
-    /// low resolution is half of it.
+    /// Segments along a patch edge at the high resolution (rounded up to a power of two, clamped
+    /// to 4..=1024); the low resolution is half of it.
     pub resolution: u32,
     /// Depth of the patch hierarchy; `None`: as deep as the height pyramid, so the finest
     /// patches' vertices are one finest height texel apart (capped at the 2^24 lattice).
@@ -150,7 +150,8 @@ pub const SELECTION_US: DiagnosticPath = DiagnosticPath::const_new("terrain/sele
 /// The hierarchy over a height stack's texture.
 pub fn patch_grid(geometry: &TerrainGeometry, heights: &ClipStackTexture) -> Option<PatchGrid> {
     let mapping = heights.mapping?;
-    let r = geometry.resolution.max(4).next_power_of_two();
+    // Absurd resolutions are clamped (a patch edge of 4 to 1,024 segments), never a panic.
+    let r = geometry.resolution.clamp(4, 1024).next_power_of_two();
     let finest = heights
         .stack
         .layers
@@ -434,4 +435,45 @@ pub(crate) fn build(app: &mut App) {
                 .after(bevy::camera::visibility::VisibilitySystems::UpdateFrusta)
                 .before(bevy::camera::visibility::VisibilitySystems::CheckVisibility),
         );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::source::ProceduralTileSource;
+    use crate::stack_gpu::TextureMapping;
+
+    /// The hierarchy follows the height pyramid's depth, and absurd resolutions are clamped
+    /// rather than overflowing the lattice.
+    #[test]
+    fn the_patch_grid_follows_the_heights_and_clamps_absurd_settings() {
+        let mut images = Assets::<Image>::default();
+        let mut heights = ClipStackTexture::heights(
+            std::sync::Arc::new(ProceduralTileSource::heights(64, 6, |_, _, _| 0.0)),
+            &default(),
+            [0.5, 0.5],
+            &mut images,
+        );
+        let geometry = TerrainGeometry::new(Entity::PLACEHOLDER, Handle::default());
+        assert_eq!(patch_grid(&geometry, &heights), None, "no mapping, no grid");
+        heights.mapping = Some(TextureMapping {
+            origin_m: bevy::math::DVec2::new(-100.0, 50.0),
+            size_m: 2048.0,
+        });
+        // 11 virtual levels below 64² tiles × 6: finest level 11; 16 segments: level 7 patches.
+        let grid = patch_grid(&geometry, &heights).unwrap();
+        assert_eq!((grid.max_level, grid.r_high), (7, 16));
+        assert_eq!(grid.origin, Vec2::new(-100.0, 50.0));
+        for resolution in [0, 3, 1 << 25, u32::MAX] {
+            let g = patch_grid(
+                &TerrainGeometry {
+                    resolution,
+                    ..geometry.clone()
+                },
+                &heights,
+            )
+            .unwrap();
+            assert!((4..=1024).contains(&g.r_high) && g.r_high.is_power_of_two());
+        }
+    }
 }
