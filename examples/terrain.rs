@@ -14,9 +14,19 @@
 //! cargo run --example terrain -- --headless --frames 60 --stats terrain.json
 //! cargo run --example terrain -- --pyramid path/to/imagery --heights path/to/dem
 //! cargo run --example terrain -- --headless --budget-ms 1 --stats t.json  # time budget
+//! cargo run --release --example terrain -- --bench [--frames N] [--size WxH] [--stats FILE]
 //! ```
+//!
+//! `--bench` measures the GPU's triangle rate over the relief and what the patches' frustum
+//! culling saves (paper 4, table 1): at five stations along the flight, once the stacks have
+//! streamed, for vertices 3 px and 1.1 px apart (the default), with culling on and off, the
+//! whole frame's GPU time (timestamps around everything it submits: shadow map, prepass, main
+//! pass; median of N frames), the triangles and patches drawn, and the CPU time of the
+//! selection. Without GPU timestamp queries it says so and exits non-zero. `--stats FILE` writes
+//! `{"rows": [{"station", "vertex_px", "culling", "triangles", "patches", "culled",
+//! "gpu_frame_ms", "mtris_per_s", "selection_us"}], "timing": "timestamps"}`.
 
-use bevy::math::DVec2;
+use bevy::math::{DVec2, DVec3};
 use bevy::prelude::*;
 use bevy_nature::terrain_clip::dem::DiskHeightSource;
 use bevy_nature::terrain_clip::material::{ClipmapMaterial, flat_patch_mesh};
@@ -25,7 +35,7 @@ use bevy_nature::terrain_clip::source::{
 };
 use bevy_nature::terrain_clip::stack_gpu::{ClipStackTexture, TextureMapping};
 use bevy_nature::terrain_clip::terrain::{TerrainGeometry, TerrainPrecision};
-use bevy_nature::terrain_clip::{ClipmapSettings, UpdateBudget};
+use bevy_nature::terrain_clip::{ClipmapSettings, RenderOrigin, UpdateBudget};
 use bevy_nature_harness::{ExampleArgs, ExampleRunner};
 use std::sync::Arc;
 
@@ -65,6 +75,7 @@ fn main() -> AppExit {
     let mut dem = None;
     let mut flat = false;
     let mut culling = true;
+    let mut bench = false;
     let mut budget = UpdateBudget::Subtiles(16);
     let mut rest = Vec::new();
     let mut args = std::env::args().skip(1);
@@ -77,6 +88,8 @@ fn main() -> AppExit {
             flat = true;
         } else if arg == "--no-culling" {
             culling = false;
+        } else if arg == "--bench" {
+            bench = true;
         } else if arg == "--budget-ms" || arg == "--budget-subtiles" {
             let value = args.next().unwrap_or_default();
             budget = match (arg.as_str(), value.parse::<f32>()) {
@@ -146,10 +159,13 @@ fn main() -> AppExit {
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
         eprintln!(
             "{e} [--pyramid DIR] [--heights DIR] [--flat] [--no-culling] \
-             [--budget-ms F | --budget-subtiles N]"
+             [--budget-ms F | --budget-subtiles N] [--bench]"
         );
         std::process::exit(2)
     });
+    if bench {
+        return run_bench(&args, terrain, budget);
+    }
     ExampleRunner::with_args("terrain", args)
         .inspect_resource::<ClipmapSettings>()
         .run(move |app| {
@@ -165,6 +181,17 @@ fn main() -> AppExit {
                 .add_systems(Startup, setup)
                 .add_systems(Update, (fly, follow_patch));
         })
+}
+
+/// Render space follows the camera in steps of this many metres (a floating origin,
+/// [`RenderOrigin`]): pyramids placed in real-world coordinates (UTM, 10^6 m and more from the
+/// origin) draw as sharply as ones at the origin.
+const ORIGIN_STEP_M: f64 = 4096.0;
+
+/// The render origin for a camera at world `p`.
+fn floating_origin(p: DVec2) -> RenderOrigin {
+    let snapped = (p / ORIGIN_STEP_M).round() * ORIGIN_STEP_M;
+    RenderOrigin(DVec3::new(snapped.x, 0.0, snapped.y))
 }
 
 /// Where the flight starts: a quarter into the data, wherever the pyramid lies in the world.
@@ -190,6 +217,8 @@ fn setup(
     mut meshes: ResMut<Assets<Mesh>>,
 ) {
     let center = start(&terrain.mapping);
+    let origin = floating_origin(center);
+    commands.insert_resource(origin);
     let (altitude, _) = altitude_and_speed(&terrain.mapping);
     let uv = terrain.mapping.uv_of(center);
     let mut clip = ClipStackTexture::from_settings(
@@ -228,7 +257,7 @@ fn setup(
             },
         ));
     } else {
-        spawn_flat_ground(&mut commands, &mut meshes, material, center, mapping);
+        spawn_flat_ground(&mut commands, &mut meshes, material, center, mapping, &origin);
     }
     commands.spawn((
         DirectionalLight {
@@ -250,7 +279,9 @@ fn setup(
             far: 60_000.0,
             ..default()
         }),
-        Transform::from_xyz(center.x as f32, altitude as f32, center.y as f32),
+        Transform::from_translation(
+            origin.render_of(DVec3::new(center.x, altitude, center.y)),
+        ),
     ));
 }
 
@@ -261,7 +292,9 @@ fn spawn_flat_ground(
     material: Handle<ClipmapMaterial>,
     center: DVec2,
     mapping: TextureMapping,
+    origin: &RenderOrigin,
 ) {
+    let at = origin.render_xz(center);
     commands.spawn((
         Name::new("terrain patch"),
         Patch { center },
@@ -273,7 +306,7 @@ fn spawn_flat_ground(
             move |p| mapping.uv_of(p),
         ))),
         MeshMaterial3d(material),
-        Transform::from_xyz(center.x as f32, 0.0, center.y as f32),
+        Transform::from_xyz(at.x, 0.0, at.y),
     ));
 }
 
@@ -286,6 +319,7 @@ fn fly(
     mut altitude: ResMut<Altitude>,
     mut heights: Query<&mut ClipStackTexture, With<Heights>>,
     mut cameras: Query<&mut Transform, With<Camera3d>>,
+    mut origin: ResMut<RenderOrigin>,
 ) {
     let (base_altitude, speed) = altitude_and_speed(&terrain.mapping);
     let direction = DVec2::new(1.0, 1.0).normalize();
@@ -309,8 +343,9 @@ fn fly(
         None => target,
     };
     altitude.0 = Some(eased);
+    origin.set_if_neq(floating_origin(p));
     for mut t in &mut cameras {
-        *t = Transform::from_xyz(p.x as f32, eased as f32, p.y as f32)
+        *t = Transform::from_translation(origin.render_of(DVec3::new(p.x, eased, p.y)))
             .looking_to(Vec3::new(0.7, -0.35, 0.7), Vec3::Y);
     }
 }
@@ -318,6 +353,7 @@ fn fly(
 /// Rebuilds the patch around the camera once it is a kilometre off centre.
 fn follow_patch(
     terrain: Res<Terrain>,
+    origin: Res<RenderOrigin>,
     cameras: Query<&Transform, With<Camera3d>>,
     mut patches: Query<(&mut Patch, &mut Mesh3d, &mut Transform), Without<Camera3d>>,
     mut meshes: ResMut<Assets<Mesh>>,
@@ -325,8 +361,11 @@ fn follow_patch(
     let Some(camera) = cameras.iter().next() else {
         return;
     };
-    let here = DVec2::new(camera.translation.x as f64, camera.translation.z as f64);
+    let here = origin.world_xz(camera.translation);
     for (mut patch, mut mesh, mut transform) in &mut patches {
+        // Placed under the render origin, which moves with the camera.
+        let at = origin.render_xz(patch.center);
+        transform.set_if_neq(Transform::from_xyz(at.x, 0.0, at.y));
         if patch.center.distance(here) < 1000.0 {
             continue;
         }
@@ -339,6 +378,203 @@ fn follow_patch(
             here,
             move |p| mapping.uv_of(p),
         ));
-        *transform = Transform::from_xyz(here.x as f32, 0.0, here.y as f32);
+        let at = origin.render_xz(here);
+        *transform = Transform::from_xyz(at.x, 0.0, at.y);
     }
+}
+
+/// One measured configuration of `--bench`.
+struct BenchRow {
+    station: usize,
+    vertex_px: f32,
+    culling: bool,
+    triangles: f64,
+    patches: f64,
+    culled: f64,
+    gpu_frame_ms: f64,
+    selection_us: f64,
+}
+
+/// `--bench`: see the module docs.
+fn run_bench(args: &ExampleArgs, terrain: Terrain, budget: UpdateBudget) -> AppExit {
+    use bevy_nature::terrain_clip::terrain::{DEFAULT_VERTEX_PIXELS, TRIANGLES, TerrainPatches};
+    use bevy_nature_harness::headless::HarnessConfig;
+    use bevy_nature_harness::{RenderHarness, require_adapter};
+    let Some(adapter) = require_adapter("terrain --bench") else {
+        return AppExit::error();
+    };
+    if !adapter.timestamp_queries {
+        eprintln!(
+            "terrain --bench: the adapter '{}' has no GPU timestamp queries, so GPU times cannot \
+             be measured; no figures are reported",
+            adapter.name
+        );
+        return AppExit::error();
+    }
+    if terrain.heights.is_none() {
+        eprintln!("terrain --bench measures the relief: drop --flat, or give --heights DIR");
+        return AppExit::error();
+    }
+    let frames = args.frames.unwrap_or(8);
+    let size = args.size.unwrap_or(UVec2::new(640, 360));
+    let run = || -> Result<Vec<BenchRow>, String> {
+        let mut harness =
+            RenderHarness::new(HarnessConfig::sized(size.x, size.y)).map_err(|e| e.to_string())?;
+        let mapping = terrain.mapping;
+        harness
+            .app_mut()
+            .add_plugins(bevy_nature::NaturePlugins)
+            .insert_resource(ClearColor(Color::srgb(0.62, 0.74, 0.9)))
+            .insert_resource(ClipmapSettings {
+                budget,
+                ..default()
+            })
+            .insert_resource(terrain.clone())
+            .init_resource::<Altitude>()
+            .insert_resource(Culling(true))
+            .add_systems(Startup, setup);
+        harness.wait_until_ready().map_err(|e| e.to_string())?;
+        let (altitude, _) = altitude_and_speed(&mapping);
+        let direction = DVec2::new(1.0, 1.0).normalize();
+        let mut rows = Vec::new();
+        for station in 0..5 {
+            // 20 s of flight apart.
+            let p = start(&mapping) + direction * (altitude * 250.0 / 300.0) * 20.0 * station as f64;
+            let world = harness.world_mut();
+            let origin = floating_origin(p);
+            world.insert_resource(origin);
+            let mut cameras = world.query_filtered::<&mut Transform, With<Camera3d>>();
+            let mut place = |world: &mut World, altitude: f64| {
+                for mut t in cameras.iter_mut(world) {
+                    *t = Transform::from_translation(origin.render_of(DVec3::new(p.x, altitude, p.y)))
+                        .looking_to(Vec3::new(0.7, -0.35, 0.7), Vec3::Y);
+                }
+            };
+            place(world, altitude);
+            // Stream around the station, then keep 150 m above the ground there.
+            let settle = |harness: &mut RenderHarness| -> Result<(), String> {
+                for _ in 0..400 {
+                    harness.run_frames(1).map_err(|e| e.to_string())?;
+                    let world = harness.world_mut();
+                    let mut stacks = world.query::<&ClipStackTexture>();
+                    if stacks.iter(world).all(|c| {
+                        c.base_ready()
+                            && c.writes().is_empty()
+                            && c.stack.layers.iter().all(|l| l.complete())
+                    }) {
+                        return Ok(());
+                    }
+                }
+                Err("the stacks did not settle in 400 frames".into())
+            };
+            settle(&mut harness)?;
+            let world = harness.world_mut();
+            let mut heights = world.query_filtered::<&mut ClipStackTexture, With<Heights>>();
+            let ground = heights
+                .single_mut(world)
+                .ok()
+                .and_then(|mut h| h.resident_height(p))
+                .map_or(0.0, |(h, _)| h as f64);
+            place(world, ground + 150.0);
+            settle(&mut harness)?;
+            for vertex_px in [3.0, DEFAULT_VERTEX_PIXELS] {
+                for culling in [true, false] {
+                    let world = harness.world_mut();
+                    let mut geometry = world.query::<&mut TerrainGeometry>();
+                    for mut g in geometry.iter_mut(world) {
+                        g.precision = TerrainPrecision::VertexPixels(vertex_px);
+                        g.culling = culling;
+                    }
+                    harness.run_frames(4).map_err(|e| e.to_string())?;
+                    harness.reset_timing();
+                    // Whole-frame timestamps are read back a frame or two late.
+                    harness.run_frames(frames + 2).map_err(|e| e.to_string())?;
+                    let gpu_frame_ms = harness.gpu_frame_time_ms()?;
+                    let triangles = harness.diagnostic(&TRIANGLES).unwrap_or(0.0);
+                    let world = harness.world_mut();
+                    let mut patches = world.query::<&TerrainPatches>();
+                    let p = patches
+                        .single(world)
+                        .map_err(|e| format!("terrain patches: {e}"))?;
+                    let row = BenchRow {
+                        station,
+                        vertex_px,
+                        culling,
+                        triangles,
+                        patches: p.selection.patches.len() as f64,
+                        culled: p.selection.stats.culled as f64,
+                        gpu_frame_ms,
+                        selection_us: p.selection_us,
+                    };
+                    eprintln!(
+                        "terrain --bench: station {station}, vertices {vertex_px} px apart, culling \
+                         {}: {:.0} triangles, {:.0} patches ({:.0} culled), GPU frame {:.2} ms \
+                         ({:.1} M triangles/s), selection {:.0} µs",
+                        if culling { "on" } else { "off" },
+                        row.triangles,
+                        row.patches,
+                        row.culled,
+                        row.gpu_frame_ms,
+                        row.triangles / row.gpu_frame_ms / 1000.0,
+                        row.selection_us
+                    );
+                    rows.push(row);
+                }
+            }
+        }
+        Ok(rows)
+    };
+    let rows = match run() {
+        Ok(rows) => rows,
+        Err(e) => {
+            eprintln!("terrain --bench: {e}");
+            return AppExit::error();
+        }
+    };
+    // The headline: the triangle rate at the default precision with culling, and culling's
+    // frame-time ratio per precision (paper: culling doubles to triples the frame rate).
+    for vertex_px in [3.0, DEFAULT_VERTEX_PIXELS] {
+        let sum = |culling: bool, f: fn(&BenchRow) -> f64| -> f64 {
+            rows.iter()
+                .filter(|r| r.vertex_px == vertex_px && r.culling == culling)
+                .map(f)
+                .sum()
+        };
+        let (on, off) = (sum(true, |r| r.gpu_frame_ms), sum(false, |r| r.gpu_frame_ms));
+        let rate = sum(true, |r| r.triangles) / on / 1000.0;
+        println!(
+            "terrain --bench ({}, {}x{}, GPU timestamps): vertices {vertex_px} px apart: \
+             {rate:.1} M triangles/s with culling; culling speeds the frame up {:.2}x \
+             ({:.2} ms vs {:.2} ms a frame over {} stations)",
+            adapter.name,
+            size.x,
+            size.y,
+            off / on,
+            on / 5.0,
+            off / 5.0,
+            5
+        );
+    }
+    if let Some(path) = &args.stats {
+        let json = serde_json::json!({
+            "rows": rows.iter().map(|r| serde_json::json!({
+                "station": r.station,
+                "vertex_px": r.vertex_px,
+                "culling": r.culling,
+                "triangles": r.triangles,
+                "patches": r.patches,
+                "culled": r.culled,
+                "gpu_frame_ms": r.gpu_frame_ms,
+                "mtris_per_s": r.triangles / r.gpu_frame_ms / 1000.0,
+                "selection_us": r.selection_us,
+            })).collect::<Vec<_>>(),
+            "timing": "timestamps",
+            "adapter": adapter.name,
+        });
+        if let Err(e) = std::fs::write(path, serde_json::to_string_pretty(&json).unwrap()) {
+            eprintln!("terrain --bench: cannot write {path:?}: {e}");
+            return AppExit::error();
+        }
+    }
+    AppExit::Success
 }

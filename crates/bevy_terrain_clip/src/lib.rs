@@ -28,6 +28,7 @@ pub mod dem;
 pub mod flight;
 pub mod geometry;
 pub mod material;
+pub mod origin;
 pub mod pyramid;
 pub mod settings;
 pub mod source;
@@ -35,6 +36,7 @@ pub mod stack_gpu;
 pub mod terrain;
 pub mod tile_cache;
 
+pub use origin::RenderOrigin;
 pub use settings::{ClipmapSettings, UpdateBudget};
 
 /// The terrain clipmap plugin: registers the settings and keeps them valid.
@@ -44,7 +46,9 @@ pub struct TerrainClipPlugin;
 impl Plugin for TerrainClipPlugin {
     fn build(&self, app: &mut App) {
         app.register_type::<ClipmapSettings>()
+            .register_type::<RenderOrigin>()
             .init_resource::<ClipmapSettings>()
+            .init_resource::<RenderOrigin>()
             .add_systems(
                 PreUpdate,
                 settings::sanitize_clipmap_settings.run_if(resource_changed::<ClipmapSettings>),
@@ -60,5 +64,5 @@ impl Plugin for TerrainClipPlugin {
 
 /// Everything a game usually imports.
 pub mod prelude {
-    pub use crate::{ClipmapSettings, TerrainClipPlugin, UpdateBudget};
+    pub use crate::{ClipmapSettings, RenderOrigin, TerrainClipPlugin, UpdateBudget};
 }

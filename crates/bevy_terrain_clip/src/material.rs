@@ -1,8 +1,10 @@
 //! The terrain material: Bevy's `StandardMaterial` (lighting, shadows) whose base colour is
-//! sampled from a clip stack by the mesh's virtual-texture coordinates — the finest layer that
-//! covers the point, falling back to coarser ones and to the resident base level
-//! (`clipmap.wgsl`). Make one with [`ClipStackTexture::material`](crate::stack_gpu::ClipStackTexture::material); build meshes whose texture
-//! coordinates are virtual-texture coordinates computed in f64 with [`flat_patch_mesh`].
+//! sampled from a clip stack — the finest layer that covers the point, falling back to coarser
+//! ones and to the resident base level (`clipmap.wgsl`). A stack with a world
+//! [`mapping`](crate::stack_gpu::ClipStackTexture::mapping) is sampled at each fragment's
+//! position (straight down onto the texture); one without, at the mesh's texture coordinates
+//! (virtual-texture coordinates, which [`flat_patch_mesh`] computes in f64). Make one with
+//! [`ClipStackTexture::material`](crate::stack_gpu::ClipStackTexture::material).
 
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::math::{DVec2, Vec2, Vec4};
@@ -16,10 +18,28 @@ use bevy::shader::ShaderRef;
 pub const MAX_LAYERS: usize = 16;
 
 /// What the fragment stage needs to know about the stack.
+///
+/// It samples at a point of its *sampling space*: the fragment's render-space (x, z) for a stack
+/// with a world [`mapping`](crate::stack_gpu::ClipStackTexture::mapping), the mesh's texture
+/// coordinates otherwise. Each layer's valid rectangle is given by where its corner lies in that
+/// space (computed in f64 on the CPU) and its size in level texels, so the level texel a
+/// fragment falls in is its short offset from a nearby corner over the texel size — exact to
+/// f32's precision near the camera even 2^20 texels from the texture's corner, where absolute
+/// texture coordinates would keep only an eighth of a texel.
 #[derive(Clone, Copy, Debug, PartialEq, ShaderType, Reflect)]
 pub struct ClipmapParams {
-    /// Per windowed layer, the valid level texels `[min.xy, max.xy)` (empty when none).
-    pub coverage: [Vec4; MAX_LAYERS],
+    /// Per windowed layer: xy where its valid rectangle's min corner lies in sampling space, zw
+    /// the rectangle's size in level texels (zero when none).
+    pub windows: [Vec4; MAX_LAYERS],
+    /// Per windowed layer: xy the corner's level texel modulo c (its toroidal slot), z the
+    /// level's texel size in sampling space.
+    pub slots: [Vec4; MAX_LAYERS],
+    /// Where the texture's (0, 0) lies in sampling space.
+    pub texture_origin: Vec2,
+    /// The texture's side in sampling space.
+    pub texture_size: f32,
+    /// 1: sampling space is render space (x, z); 0: the mesh's texture coordinates.
+    pub by_position: u32,
     /// Base level l_b.
     pub base_level: u32,
     /// Windowed layers.
@@ -35,7 +55,11 @@ pub struct ClipmapParams {
 impl Default for ClipmapParams {
     fn default() -> Self {
         Self {
-            coverage: [Vec4::ZERO; MAX_LAYERS],
+            windows: [Vec4::ZERO; MAX_LAYERS],
+            slots: [Vec4::ZERO; MAX_LAYERS],
+            texture_origin: Vec2::ZERO,
+            texture_size: 1.0,
+            by_position: 0,
             base_level: 0,
             layer_count: 0,
             clip_size: 1.0,
@@ -57,12 +81,20 @@ pub struct ReliefParams {
     pub layer_count: u32,
     /// Its clip size c.
     pub clip_size: f32,
-    /// World side of the height texture (m).
-    pub size: f32,
-    /// World (x, z) of the height texture's (0, 0).
-    pub origin: Vec2,
-    /// World (x, z) of the colour texture's (0, 0): the vertex stage gives the fragment stage
-    /// the colour stack's coordinates.
+    /// Lattice steps along the height texture's side (the terrain's
+    /// [`PatchGrid::lattice_side`](crate::geometry::patch::PatchGrid::lattice_side), a power
+    /// of two).
+    pub lattice_side: f32,
+    /// The lattice point the tiles are placed relative to ([`PatchGrid::anchor`](crate::geometry::patch::PatchGrid::anchor)).
+    pub anchor: Vec2,
+    /// Render-space (x, z) of the anchor (computed in f64).
+    pub anchor_render: Vec2,
+    /// Metres per lattice step.
+    pub lattice_step: f32,
+    /// Render-space y of height 0: minus the [`RenderOrigin`](crate::RenderOrigin)'s y.
+    pub height_offset: f32,
+    /// Render-space (x, z) of the colour texture's (0, 0): the vertex stage gives the fragment
+    /// stage of a colour stack without a world mapping its texture coordinates.
     pub color_origin: Vec2,
     /// World side of the colour texture (m).
     pub color_size: f32,
@@ -75,8 +107,11 @@ impl Default for ReliefParams {
             base_level: 0,
             layer_count: 0,
             clip_size: 1.0,
-            size: 1.0,
-            origin: Vec2::ZERO,
+            lattice_side: 1.0,
+            anchor: Vec2::ZERO,
+            anchor_render: Vec2::ZERO,
+            lattice_step: 1.0,
+            height_offset: 0.0,
             color_origin: Vec2::ZERO,
             color_size: 1.0,
         }
@@ -92,8 +127,8 @@ impl ReliefParams {
                 .map(|c| c.to_array())
                 .collect(),
             base_level: self.base_level,
-            origin: self.origin,
-            size: self.size,
+            lattice_side: self.lattice_side,
+            lattice_step: self.lattice_step,
         }
     }
 }

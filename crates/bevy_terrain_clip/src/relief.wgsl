@@ -2,7 +2,14 @@
 // in the vertex shader). CPU reference: `geometry::relief` (`height_level`, `height_at`,
 // `normal_at`).
 //
-// A vertex at world (x, z) takes the height of the finest windowed layer whose valid rectangle
+// Positions are points of the patch lattice (`geometry::patch::PatchGrid`): the tile meshes are
+// placed in lattice steps relative to an anchor lattice point near the camera, so a vertex's
+// lattice point and its level texel coordinates are exact in f32 (the lattice side is a power of
+// two below 2^24), and its render-space position is the anchor's (computed in f64 on the CPU)
+// plus a short offset — exact enough 10^6 m from the world's origin, and a function of the
+// lattice point alone, so vertices shared by two patches land on the same spot.
+//
+// A vertex at lattice point (x, z) takes the height of the finest windowed layer whose valid rectangle
 // holds the 2 × 2 level texels around it, bilinear between their centres (`textureLoad`: R32Float
 // is not filterable everywhere), else of the resident base level clamped at the texture's edges.
 // It depends on the position alone, so vertices shared by two patches get one height.
@@ -14,11 +21,17 @@ struct ReliefParams {
     base_level: u32,
     layer_count: u32,
     clip_size: f32,
-    // World side of the height texture (m).
-    size: f32,
-    // World (x, z) of the height texture's (0, 0).
-    origin: vec2<f32>,
-    // World (x, z) of the colour texture's (0, 0), and its side: the fragment stage's uv.
+    // Lattice steps along the height texture's side (a power of two).
+    lattice_side: f32,
+    // The anchor lattice point the tiles are placed relative to, and its render-space (x, z).
+    anchor: vec2<f32>,
+    anchor_render: vec2<f32>,
+    // Metres per lattice step.
+    lattice_step: f32,
+    // Render-space y of height 0 (minus the render origin's world y).
+    height_offset: f32,
+    // Render-space (x, z) of the colour texture's (0, 0), and its side: the mesh uv a colour
+    // stack without a world mapping is sampled by.
     color_origin: vec2<f32>,
     color_size: f32,
 }
@@ -28,7 +41,7 @@ struct ReliefParams {
 @group(#{MATERIAL_BIND_GROUP}) @binding(108) var<uniform> relief: ReliefParams;
 
 fn level_texel(xz: vec2<f32>, level: u32) -> vec2<f32> {
-    return (xz - relief.origin) / relief.size * exp2(f32(level)) - 0.5;
+    return xz * (exp2(f32(level)) / relief.lattice_side) - 0.5;
 }
 
 fn lerp(a: f32, b: f32, f: f32) -> f32 {
@@ -80,13 +93,26 @@ fn relief_height(xz: vec2<f32>) -> f32 {
 
 // `normal_at`: central differences over one texel of the level at `xz`.
 fn relief_normal(xz: vec2<f32>) -> vec3<f32> {
-    let e = relief.size / exp2(f32(relief.base_level + height_layer(xz)));
+    let e = relief.lattice_side / exp2(f32(relief.base_level + height_layer(xz)));
     let dx = relief_height(xz + vec2(e, 0.0)) - relief_height(xz - vec2(e, 0.0));
     let dz = relief_height(xz + vec2(0.0, e)) - relief_height(xz - vec2(0.0, e));
-    return normalize(vec3(-dx, 2.0 * e, -dz));
+    return normalize(vec3(-dx, 2.0 * e * relief.lattice_step, -dz));
 }
 
-// The colour stack's texture coordinates at `xz`.
+// The lattice point of a tile vertex placed relative to the anchor (exact integers, or halves).
+fn lattice_point(relative: vec2<f32>) -> vec2<f32> {
+    return relative + relief.anchor;
+}
+
+// Render-space (x, y, z) of a vertex placed at `relative` lattice steps from the anchor, at
+// height `height`.
+fn render_position(relative: vec2<f32>, height: f32) -> vec3<f32> {
+    let xz = relief.anchor_render + relative * relief.lattice_step;
+    return vec3(xz.x, height + relief.height_offset, xz.y);
+}
+
+// The colour stack's texture coordinates at render-space `xz` (for a colour stack without a
+// world mapping).
 fn color_uv(xz: vec2<f32>) -> vec2<f32> {
     return (xz - relief.color_origin) / relief.color_size;
 }

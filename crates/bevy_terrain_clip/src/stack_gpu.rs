@@ -93,11 +93,13 @@ impl TextureMapping {
 }
 
 /// Moves every mapped stack's centre of detail under the active 3D camera (the camera's point
-/// straight below, on the texture).
+/// straight below, on the texture; its world position under the [`RenderOrigin`](crate::RenderOrigin)).
 pub fn follow_camera(
     cameras: Query<(&Camera, &GlobalTransform), With<Camera3d>>,
     mut stacks: Query<&mut ClipStackTexture>,
+    origin: Option<Res<crate::RenderOrigin>>,
 ) {
+    let origin = origin.as_deref().copied().unwrap_or_default();
     let Some((_, camera)) = cameras
         .iter()
         .filter(|(c, _)| c.is_active)
@@ -111,7 +113,7 @@ pub fn follow_camera(
     }
     for mut clip in &mut stacks {
         if let Some(mapping) = clip.mapping {
-            let uv = mapping.uv_of(bevy::math::DVec2::new(p.x as f64, p.z as f64));
+            let uv = mapping.uv_of(origin.world_xz(p));
             let uv = [uv.x.clamp(0.0, 1.0), uv.y.clamp(0.0, 1.0)];
             if clip.center_uv != uv {
                 clip.center_uv = uv;
@@ -364,7 +366,7 @@ impl ClipStackTexture {
             extension: ClipmapExtension {
                 layers: self.layers.clone(),
                 base: self.base.clone(),
-                params: clipmap_params(self),
+                params: clipmap_params(self, &crate::RenderOrigin::default()),
                 soft_visibility: None,
                 ..default()
             },
@@ -473,6 +475,25 @@ impl ClipStackTexture {
             }
         }
         None
+    }
+
+    /// For a height stack with a [`mapping`](Self::mapping): the ground's unit normal at world
+    /// `(x, z)` from the tiles in RAM — central differences of [`resident_height`](Self::resident_height)
+    /// one texel of the finest level resident there apart — or `None` where that has no answer.
+    pub fn resident_normal(&mut self, world: bevy::math::DVec2) -> Option<Vec3> {
+        let mapping = self.mapping?;
+        let (_, level) = self.resident_height(world)?;
+        let e = mapping.size_m / 2f64.powi(level as i32);
+        let mut at = |dx: f64, dz: f64| {
+            self.resident_height(world + bevy::math::DVec2::new(dx, dz))
+                .map(|(h, _)| h as f64)
+        };
+        let (x0, x1, z0, z1) = (at(-e, 0.0)?, at(e, 0.0)?, at(0.0, -e)?, at(0.0, e)?);
+        Some(
+            bevy::math::DVec3::new(x0 - x1, 2.0 * e, z0 - z1)
+                .normalize()
+                .as_vec3(),
+        )
     }
 }
 
@@ -930,10 +951,21 @@ fn write_subtiles(
         .store(subtiles as u64, Ordering::Relaxed);
 }
 
-/// The material parameters of a stack: each layer's coverage, shrunk by one texel when the
-/// layers are filtered linearly (so a bilinear footprint never reaches an invalid texel).
-pub fn clipmap_params(clip: &ClipStackTexture) -> ClipmapParams {
+/// The material parameters of a stack: each layer's valid rectangle, shrunk by one texel when
+/// the layers are filtered linearly (so a bilinear footprint never reaches an invalid texel),
+/// placed in the sampling space of [`ClipmapParams`] — render space under `origin` for a stack
+/// with a mapping, computed in f64.
+pub fn clipmap_params(clip: &ClipStackTexture, origin: &crate::RenderOrigin) -> ClipmapParams {
+    use bevy::math::DVec2;
+    // Sampling space: texture (0, 0) at `corner`, `side` across.
+    let (corner, side) = match clip.mapping {
+        Some(m) => (m.origin_m - DVec2::new(origin.0.x, origin.0.z), m.size_m),
+        None => (DVec2::ZERO, 1.0),
+    };
     let mut params = ClipmapParams {
+        texture_origin: corner.as_vec2(),
+        texture_size: side as f32,
+        by_position: clip.mapping.is_some() as u32,
         base_level: clip.stack.base_level,
         layer_count: clip.stack.layers.len().min(MAX_LAYERS) as u32,
         clip_size: clip.stack.clip_size as f32,
@@ -945,23 +977,34 @@ pub fn clipmap_params(clip: &ClipStackTexture) -> ClipmapParams {
         no_data: Vec4::from(clip.no_data_color.to_linear().to_f32_array()),
         ..default()
     };
-    let shrink = if clip.linear_filtering { 1.0 } else { 0.0 };
-    for (i, coverage) in clip
+    let shrink = if clip.linear_filtering { 1 } else { 0 };
+    let c = clip.stack.clip_size as i64;
+    for (i, (coverage, layer)) in clip
         .stack
         .coverage()
         .into_iter()
+        .zip(&clip.stack.layers)
         .take(MAX_LAYERS)
         .enumerate()
     {
-        params.coverage[i] = match coverage {
-            Some((min, max)) => Vec4::new(
-                min[0] as f32 + shrink,
-                min[1] as f32 + shrink,
-                max[0] as f32 - shrink,
-                max[1] as f32 - shrink,
-            ),
-            None => Vec4::ZERO,
+        let texel = side / 2f64.powi(layer.level as i32);
+        let Some((min, max)) = coverage else {
+            params.slots[i].z = texel as f32;
+            continue;
         };
+        let min = [min[0] + shrink, min[1] + shrink];
+        let size = [
+            (max[0] - shrink - min[0]).max(0),
+            (max[1] - shrink - min[1]).max(0),
+        ];
+        let at = corner + DVec2::new(min[0] as f64, min[1] as f64) * texel;
+        params.windows[i] = Vec4::new(at.x as f32, at.y as f32, size[0] as f32, size[1] as f32);
+        params.slots[i] = Vec4::new(
+            min[0].rem_euclid(c) as f32,
+            min[1].rem_euclid(c) as f32,
+            texel as f32,
+            0.0,
+        );
     }
     params
 }
@@ -977,6 +1020,7 @@ pub fn apply_live_settings(
     mut stacks: Query<&mut ClipStackTexture>,
     mut images: ResMut<Assets<Image>>,
     mut materials: ResMut<Assets<ClipmapMaterial>>,
+    origin: Option<Res<crate::RenderOrigin>>,
 ) {
     let Some(settings) = settings else {
         return;
@@ -1042,7 +1086,8 @@ pub fn apply_live_settings(
             if let Some(mut material) = materials.get_mut(handle) {
                 material.extension.layers = rebuilt.layers.clone();
                 material.extension.base = rebuilt.base.clone();
-                material.extension.params = clipmap_params(&rebuilt);
+                material.extension.params =
+                    clipmap_params(&rebuilt, &origin.as_deref().copied().unwrap_or_default());
             }
         }
         info!(
@@ -1056,6 +1101,7 @@ pub fn apply_live_settings(
 pub fn update_clipmap_materials(
     mut stacks: Query<&mut ClipStackTexture>,
     settings: Option<Res<ClipmapSettings>>,
+    origin: Option<Res<crate::RenderOrigin>>,
     mut materials: ResMut<Assets<ClipmapMaterial>>,
 ) {
     for mut clip in &mut stacks {
@@ -1065,7 +1111,7 @@ pub fn update_clipmap_materials(
         {
             clip.no_data_color = settings.no_data_color;
         }
-        let params = clipmap_params(&clip);
+        let params = clipmap_params(&clip, &origin.as_deref().copied().unwrap_or_default());
         for handle in clip.materials() {
             let Some(material) = materials.get(handle) else {
                 continue;

@@ -14,10 +14,11 @@
 //! # }
 //! ```
 
+use crate::RenderOrigin;
 use crate::geometry::patch::{PatchGrid, PatchView, Selection, select_patches};
 use crate::geometry::tile::unit_tile;
 use crate::material::{ClipmapMaterial, MAX_LAYERS, ReliefParams};
-use crate::stack_gpu::{ClipStackTexture, clipmap_params};
+use crate::stack_gpu::ClipStackTexture;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::primitives::Frustum;
 use bevy::camera::visibility::NoFrustumCulling;
@@ -147,8 +148,20 @@ pub const TRIANGLES: DiagnosticPath = DiagnosticPath::const_new("terrain/triangl
 /// CPU time of the patch selection (µs).
 pub const SELECTION_US: DiagnosticPath = DiagnosticPath::const_new("terrain/selection_us");
 
-/// The hierarchy over a height stack's texture.
-pub fn patch_grid(geometry: &TerrainGeometry, heights: &ClipStackTexture) -> Option<PatchGrid> {
+/// Lattice steps between the anchors a terrain's tiles may be placed relative to: the anchor
+/// stays put while the camera moves within a few thousand steps (the material is not rewritten
+/// every frame), and a vertex's offset from it stays short enough to be exact to a fraction of a
+/// millimetre in f32.
+pub const ANCHOR_CELL: u32 = 4096;
+
+/// The hierarchy over a height stack's texture, in render space, its positions taken relative
+/// to the lattice point nearest `eye` (render space) on a grid of [`ANCHOR_CELL`] steps.
+pub fn patch_grid(
+    geometry: &TerrainGeometry,
+    heights: &ClipStackTexture,
+    origin: &RenderOrigin,
+    eye: Vec3,
+) -> Option<PatchGrid> {
     let mapping = heights.mapping?;
     // Absurd resolutions are clamped (a patch edge of 4 to 1,024 segments), never a panic.
     let r = geometry.resolution.clamp(4, 1024).next_power_of_two();
@@ -162,54 +175,90 @@ pub fn patch_grid(geometry: &TerrainGeometry, heights: &ClipStackTexture) -> Opt
         .max_level
         .map_or(finest.saturating_sub(r.trailing_zeros()), u32::from)
         .min(lattice_bits) as u8;
-    PatchGrid::new(
-        Vec2::new(mapping.origin_m.x as f32, mapping.origin_m.y as f32),
+    let grid = PatchGrid::new(
+        origin.render_xz(mapping.origin_m),
         mapping.size_m as f32,
         max_level,
         r,
     )
-    .ok()
+    .ok()?;
+    // In f64: the eye's lattice point, snapped to the anchor grid, and its render position.
+    let side = grid.lattice_side() as f64;
+    let step = mapping.size_m / side;
+    let eye_world = if eye.is_finite() {
+        origin.world_xz(eye)
+    } else {
+        mapping.origin_m
+    };
+    let cell = ANCHOR_CELL as f64;
+    let anchor = ((eye_world - mapping.origin_m) / step / cell)
+        .round()
+        .clamp(
+            bevy::math::DVec2::ZERO,
+            bevy::math::DVec2::splat(side / cell).floor(),
+        )
+        * cell;
+    let anchor = [anchor.x as u32, anchor.y as u32];
+    let at = mapping.origin_m + bevy::math::DVec2::new(anchor[0] as f64, anchor[1] as f64) * step;
+    Some(grid.anchored(anchor, origin.render_xz(at)))
 }
 
-/// The relief parameters of a height stack, with the colour texture's place.
-pub fn relief_params(heights: &ClipStackTexture, color: Option<&ClipStackTexture>) -> ReliefParams {
-    let p = clipmap_params(heights);
+/// The relief parameters of a height stack drawn on `grid` (the one its tiles were placed on),
+/// with the colour texture's place.
+pub fn relief_params(
+    heights: &ClipStackTexture,
+    color: Option<&ClipStackTexture>,
+    grid: &PatchGrid,
+    origin: &RenderOrigin,
+) -> ReliefParams {
     let mapping = heights.mapping.unwrap_or(crate::stack_gpu::TextureMapping {
         origin_m: default(),
         size_m: 1.0,
     });
     let color_mapping = color.and_then(|c| c.mapping).unwrap_or(mapping);
     let mut coverage = [Vec4::ZERO; MAX_LAYERS];
-    coverage.copy_from_slice(&p.coverage);
+    for (i, c) in heights
+        .stack
+        .coverage()
+        .into_iter()
+        .take(MAX_LAYERS)
+        .enumerate()
+    {
+        if let Some((min, max)) = c {
+            coverage[i] = Vec4::new(min[0] as f32, min[1] as f32, max[0] as f32, max[1] as f32);
+        }
+    }
     ReliefParams {
         coverage,
-        base_level: p.base_level,
-        layer_count: p.layer_count,
-        clip_size: p.clip_size,
-        size: mapping.size_m as f32,
-        origin: Vec2::new(mapping.origin_m.x as f32, mapping.origin_m.y as f32),
-        color_origin: Vec2::new(
-            color_mapping.origin_m.x as f32,
-            color_mapping.origin_m.y as f32,
-        ),
+        base_level: heights.stack.base_level,
+        layer_count: heights.stack.layers.len().min(MAX_LAYERS) as u32,
+        clip_size: heights.stack.clip_size as f32,
+        lattice_side: grid.lattice_side() as f32,
+        anchor: Vec2::new(grid.anchor[0] as f32, grid.anchor[1] as f32),
+        anchor_render: grid.origin,
+        lattice_step: (mapping.size_m / grid.lattice_side() as f64) as f32,
+        height_offset: -origin.0.y as f32,
+        color_origin: origin.render_xz(color_mapping.origin_m),
         color_size: color_mapping.size_m as f32,
     }
 }
 
 /// Fills in each terrain material's height stack and keeps its coverage current.
 fn update_relief(
-    terrains: Query<&TerrainGeometry>,
+    terrains: Query<(&TerrainGeometry, &TerrainPatches)>,
     stacks: Query<&ClipStackTexture>,
+    origin: Res<RenderOrigin>,
     mut materials: ResMut<Assets<ClipmapMaterial>>,
 ) {
-    for geometry in &terrains {
-        let Ok(heights) = stacks.get(geometry.heights) else {
+    for (geometry, patches) in &terrains {
+        let (Ok(heights), Some(grid)) = (stacks.get(geometry.heights), patches.grid.as_ref())
+        else {
             continue;
         };
         let color = stacks
             .iter()
             .find(|c| c.materials().contains(&geometry.material));
-        let relief = relief_params(heights, color);
+        let relief = relief_params(heights, color, grid, &origin);
         let Some(material) = materials.get(&geometry.material) else {
             continue;
         };
@@ -276,6 +325,7 @@ fn draw_terrain(
     >,
     mut meshes: ResMut<Assets<Mesh>>,
     mut unit_meshes: ResMut<UnitTileMeshes>,
+    origin: Res<RenderOrigin>,
     mut diagnostics: Diagnostics,
     mut warned: Local<bevy::platform::collections::HashSet<Entity>>,
 ) {
@@ -288,7 +338,9 @@ fn draw_terrain(
     };
     for (entity, geometry, patches, owned) in &mut terrains {
         let height_stack = stacks.get(geometry.heights).ok();
-        let Some(grid) = height_stack.and_then(|h| patch_grid(geometry, h)) else {
+        let Some(grid) =
+            height_stack.and_then(|h| patch_grid(geometry, h, &origin, camera.translation()))
+        else {
             if warned.insert(entity) {
                 warn!(
                     "TerrainGeometry on {entity}: {:?} holds no height stack with a mapping \
@@ -325,8 +377,10 @@ fn draw_terrain(
         let mut placed = Vec::with_capacity(selection.patches.len() * 4);
         let mut triangles = 0;
         for patch in &selection.patches {
-            let corner = grid.world(patch.id.corner(&grid));
-            let unit = patch.id.side(&grid) as f32 / grid.r_high as f32 * grid.lattice_step();
+            // In lattice steps from the anchor (integers: exact); the vertex stage maps them to
+            // render space (`relief.wgsl`).
+            let corner = grid.relative(patch.id.corner(&grid));
+            let unit = (patch.id.side(&grid) / grid.r_high) as f32;
             for e in 0..4 {
                 let key = (
                     grid.r_high,
@@ -455,15 +509,21 @@ mod tests {
             &mut images,
         );
         let geometry = TerrainGeometry::new(Entity::PLACEHOLDER, Handle::default());
-        assert_eq!(patch_grid(&geometry, &heights), None, "no mapping, no grid");
+        let here = RenderOrigin::default();
+        assert_eq!(
+            patch_grid(&geometry, &heights, &here, Vec3::ZERO),
+            None,
+            "no mapping, no grid"
+        );
         heights.mapping = Some(TextureMapping {
             origin_m: bevy::math::DVec2::new(-100.0, 50.0),
             size_m: 2048.0,
         });
         // 11 virtual levels below 64² tiles × 6: finest level 11; 16 segments: level 7 patches.
-        let grid = patch_grid(&geometry, &heights).unwrap();
+        let grid = patch_grid(&geometry, &heights, &here, Vec3::ZERO).unwrap();
         assert_eq!((grid.max_level, grid.r_high), (7, 16));
         assert_eq!(grid.origin, Vec2::new(-100.0, 50.0));
+        assert_eq!(grid.anchor, [0, 0], "a lattice smaller than an anchor cell");
         for resolution in [0, 3, 1 << 25, u32::MAX] {
             let g = patch_grid(
                 &TerrainGeometry {
@@ -471,9 +531,46 @@ mod tests {
                     ..geometry.clone()
                 },
                 &heights,
+                &here,
+                Vec3::ZERO,
             )
             .unwrap();
             assert!((4..=1024).contains(&g.r_high) && g.r_high.is_power_of_two());
         }
+    }
+
+    /// Far from the world's origin the grid is anchored at the lattice point of the anchor grid
+    /// nearest the eye, whose render position is computed in f64: lattice points near the eye
+    /// land where they are, to a millimetre, 10^5 m out.
+    #[test]
+    fn the_patch_grid_is_anchored_near_the_eye_in_render_space() {
+        let mut images = Assets::<Image>::default();
+        let mut heights = ClipStackTexture::heights(
+            std::sync::Arc::new(ProceduralTileSource::heights(64, 6, |_, _, _| 0.0)),
+            &default(),
+            [0.5, 0.5],
+            &mut images,
+        );
+        // 2^18 lattice steps of 1 m.
+        heights.mapping = Some(TextureMapping {
+            origin_m: bevy::math::DVec2::new(-100.0, 50.0),
+            size_m: 262_144.0,
+        });
+        let geometry = TerrainGeometry {
+            max_level: Some(14),
+            ..TerrainGeometry::new(Entity::PLACEHOLDER, Handle::default())
+        };
+        let origin = RenderOrigin(bevy::math::DVec3::new(100_000.25, 0.0, 200_000.0));
+        let eye = Vec3::new(3.0, 10.0, -2.0);
+        let grid = patch_grid(&geometry, &heights, &origin, eye).unwrap();
+        assert_eq!(grid.lattice_side(), 1 << 18);
+        // The eye's lattice point (100,103.25, 199,948) rounds to cell (24, 49) of 4,096 steps.
+        assert_eq!(grid.anchor, [24 * 4096, 49 * 4096]);
+        assert_eq!(grid.origin, Vec2::new(-1796.25, 754.0));
+        let near = grid.world([100_103, 199_948]);
+        assert!(
+            (near - Vec2::new(2.75, -2.0)).abs().max_element() < 1e-3,
+            "{near}"
+        );
     }
 }

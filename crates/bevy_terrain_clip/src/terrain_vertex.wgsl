@@ -1,7 +1,8 @@
 // The terrain's vertex stage with relief, for the main pass and the prepass (depth, normals,
-// motion vectors, shadow maps): the tile meshes are flat at y = 0 in the patch's frame; the
-// vertex takes the height of the terrain under it (`relief.wgsl`), the normal from the heights,
-// and the colour stack's coordinates from its world position. Bevy's `mesh.wgsl` and
+// motion vectors, shadow maps): the tile meshes are flat at y = 0, placed by their transform in
+// lattice steps relative to the anchor lattice point (`relief.wgsl`); the vertex takes the
+// height of the terrain at its lattice point, the normal from the heights, and its render-space
+// position from the anchor's. Bevy's `mesh.wgsl` and
 // `prepass.wgsl` otherwise, for meshes with positions, normals and uvs (no skins, morphs,
 // tangents or colours).
 #import bevy_pbr::{mesh_functions, view_transformations::position_world_to_clip}
@@ -10,14 +11,16 @@
 #else
 #import bevy_pbr::forward_io::{Vertex, VertexOutput}
 #endif
-#import bevy_terrain_clip::relief::{relief_height, relief_normal, color_uv}
+#import bevy_terrain_clip::relief::{relief_height, relief_normal, color_uv, lattice_point, render_position}
 
 @vertex
 fn vertex(vertex: Vertex) -> VertexOutput {
     var out: VertexOutput;
     let world_from_local = mesh_functions::get_world_from_local(vertex.instance_index);
-    var world = mesh_functions::mesh_position_local_to_world(world_from_local, vec4(vertex.position, 1.0));
-    world.y = relief_height(world.xz);
+    // Lattice steps from the anchor: integer scale and translation, so exact.
+    let relative = mesh_functions::mesh_position_local_to_world(world_from_local, vec4(vertex.position, 1.0)).xz;
+    let lattice = lattice_point(relative);
+    let world = vec4(render_position(relative, relief_height(lattice)), 1.0);
     out.world_position = world;
     out.position = position_world_to_clip(world.xyz);
 #ifdef UNCLIPPED_DEPTH_ORTHO_EMULATION
@@ -29,14 +32,14 @@ fn vertex(vertex: Vertex) -> VertexOutput {
 #endif
 #ifdef PREPASS_PIPELINE
 #ifdef NORMAL_PREPASS_OR_DEFERRED_PREPASS
-    out.world_normal = relief_normal(world.xz);
+    out.world_normal = relief_normal(lattice);
 #endif
 #ifdef MOTION_VECTOR_PREPASS
     // The ground does not move.
     out.previous_world_position = world;
 #endif
 #else
-    out.world_normal = relief_normal(world.xz);
+    out.world_normal = relief_normal(lattice);
 #endif
 #ifdef VERTEX_OUTPUT_INSTANCE_INDEX
     out.instance_index = vertex.instance_index;

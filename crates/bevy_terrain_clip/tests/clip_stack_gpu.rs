@@ -363,6 +363,16 @@ fn height_layers_hold_the_pyramid_heights_exactly() {
         clip.resident_height(bevy::math::DVec2::new(-5.0, 10.0)),
         None
     );
+    // The normal of the plane the heights make there (3.25 m per metre along x, 1/16 along z).
+    let n = clip
+        .resident_normal(bevy::math::DVec2::new(861.3, 1126.8))
+        .expect("resident");
+    let want = Vec3::new(-3.25, 1.0, -0.0625).normalize();
+    assert!(n.distance(want) < 1e-4, "{n} vs {want}");
+    assert_eq!(
+        clip.resident_normal(bevy::math::DVec2::new(-5.0, 10.0)),
+        None
+    );
     // The range of the heights sent holds every valid texel's (the patches' bounds).
     let (low, high) = clip.height_range().expect("heights were sent");
     let (valid_low, valid_high) = valid_height_range(&clip);

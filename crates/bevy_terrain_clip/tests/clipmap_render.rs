@@ -1,37 +1,49 @@
 //! The terrain material against its CPU reference: a flat terrain textured from a streamed clip
 //! stack, seen from above, and for every pixel the texel the CPU reference sampler picks (finest
-//! covering layer, else the base level) at that pixel's world point. The view spans several
-//! layers' boundaries and the toroidal wrap of each layer; it is rendered near the world origin
-//! and again 10^6 m away from it (texture coordinates computed in f64 on the CPU).
+//! covering layer, else the base level) at that pixel's world point.
+//!
+//! The virtual texture is 2^20 texels of 1 m a side (levels 8 to 20 windowed), seen through
+//! views from 24 m wide (a finest texel over 4 × 4 pixels) to 5.4 km (many layers' rings), from a
+//! camera 10^6 m from the world's origin — kept near render space's origin by the
+//! [`RenderOrigin`] — and from the same camera relative to the texture with the texture moved so
+//! that the camera is at the world's origin: both images match the CPU layer by layer and each
+//! other.
 
 use bevy::camera::{OrthographicProjection, Projection, ScalingMode};
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
-use bevy::math::DVec2;
+use bevy::math::{DVec2, DVec3};
 use bevy::prelude::*;
 use bevy_nature_harness::RenderHarness;
 use bevy_nature_harness::compare::RgbaImage;
-use bevy_terrain_clip::TerrainClipPlugin;
 use bevy_terrain_clip::clip::stack::finest_covering_layer;
 use bevy_terrain_clip::material::{ClipmapMaterial, flat_patch_mesh};
-use bevy_terrain_clip::source::{ProceduralTileSource, address_texel};
-use bevy_terrain_clip::stack_gpu::ClipStackTexture;
+use bevy_terrain_clip::source::ProceduralTileSource;
+use bevy_terrain_clip::stack_gpu::{ClipStackTexture, TextureMapping};
+use bevy_terrain_clip::{RenderOrigin, TerrainClipPlugin};
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 const SIZE: u32 = 96;
-/// World size of the virtual texture (m): level 11 (2048 texels) has 2 m texels.
-const TEXTURE_M: f64 = 4096.0;
-/// World width of the view (m): wider than the coarsest window (level 8, 128 texels of 16 m),
-/// so the base level shows at the edges.
-const VIEW_M: f64 = 3000.0;
 
 /// The harness's image assets.
 fn images_of(harness: &mut RenderHarness) -> Mut<'_, Assets<Image>> {
     harness.world_mut().resource_mut::<Assets<Image>>()
 }
 
-/// Spawns `clip` (nearest filtering) under an unlit flat patch `2·half_m` wide around `center`
-/// and an orthographic camera looking straight down at it, `view_m` wide (image right = +x,
-/// up = −z); returns the stack's entity.
+/// An orthographic projection `view_m` wide, looking straight down.
+fn top_down(view_m: f64) -> Projection {
+    Projection::Orthographic(OrthographicProjection {
+        scaling_mode: ScalingMode::Fixed {
+            width: view_m as f32,
+            height: view_m as f32,
+        },
+        ..OrthographicProjection::default_3d()
+    })
+}
+
+/// Spawns `clip` (nearest filtering) under an unlit flat patch `2·half_m` wide around render
+/// point `center` and an orthographic camera looking straight down at it, `view_m` wide (image
+/// right = +x, up = −z); returns the stack's and the camera's entities.
 fn spawn_top_down_view(
     harness: &mut RenderHarness,
     mut clip: ClipStackTexture,
@@ -39,7 +51,7 @@ fn spawn_top_down_view(
     half_m: f64,
     view_m: f64,
     uv_of: impl Fn(DVec2) -> DVec2,
-) -> Entity {
+) -> (Entity, Entity) {
     let world = harness.world_mut();
     clip.set_linear_filtering(false, &mut world.resource_mut::<Assets<Image>>());
     let material = clip.material(
@@ -61,37 +73,80 @@ fn spawn_top_down_view(
         MeshMaterial3d(material),
         Transform::from_xyz(center.x as f32, 0.0, center.y as f32),
     ));
-    world.spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Tonemapping::None,
-        DebandDither::Disabled,
-        Projection::Orthographic(OrthographicProjection {
-            scaling_mode: ScalingMode::Fixed {
-                width: view_m as f32,
-                height: view_m as f32,
-            },
-            ..OrthographicProjection::default_3d()
-        }),
-        Transform::from_xyz(center.x as f32, 50.0, center.y as f32).looking_at(
-            Vec3::new(center.x as f32, 0.0, center.y as f32),
-            Vec3::NEG_Z,
-        ),
-    ));
-    world.spawn(clip).id()
+    let camera = world
+        .spawn((
+            Camera3d::default(),
+            Msaa::Off,
+            Tonemapping::None,
+            DebandDither::Disabled,
+            top_down(view_m),
+            Transform::from_xyz(center.x as f32, 50.0, center.y as f32).looking_at(
+                Vec3::new(center.x as f32, 0.0, center.y as f32),
+                Vec3::NEG_Z,
+            ),
+        ))
+        .id();
+    (world.spawn(clip).id(), camera)
 }
 
-fn render_and_compare(origin: DVec2) -> Option<(f64, usize)> {
+/// A texel that says where it was sampled, neighbours far apart in colour (a texel off by one
+/// differs by at least 7 in red or green, well past the comparison's rounding tolerance of 2).
+fn scrambled_texel(level: u32, x: u64, y: u64) -> [u8; 4] {
+    [
+        (x.wrapping_mul(97).wrapping_add(y.wrapping_mul(13)) & 255) as u8,
+        (y.wrapping_mul(89).wrapping_add(x.wrapping_mul(7)) & 255) as u8,
+        ((level & 15) * 16 + ((x >> 8) & 15) as u32) as u8,
+        255,
+    ]
+}
+
+/// World side of the virtual texture (m): 2^20 texels of 1 m at level 20.
+const TEXTURE_M: f64 = 1_048_576.0;
+/// The views' widths (m).
+const VIEWS: [f64; 4] = [24.0, 150.0, 900.0, 5400.0];
+
+/// Per-layer tallies: pixels, pixels matching the CPU.
+type LayerTally = BTreeMap<usize, (usize, usize)>;
+
+/// Renders the 2^20-texel texture through every view, the camera at render point
+/// `camera_render` with the texture's corner at world `texture_origin` under `render_origin`;
+/// returns the images and the per-layer tallies against the CPU reference.
+fn render_views(
+    texture_origin: DVec2,
+    render_origin: DVec3,
+    camera_render: DVec2,
+    tag: &str,
+) -> Option<(Vec<RgbaImage>, LayerTally)> {
     let mut harness = RenderHarness::for_test("clipmap_render", SIZE, SIZE)?;
     harness.app_mut().add_plugins(TerrainClipPlugin);
-    let source = Arc::new(ProceduralTileSource::new(64, 6, address_texel));
-    let center_uv = [0.37, 0.61];
-    let center = origin + DVec2::new(center_uv[0], center_uv[1]) * TEXTURE_M;
-    let uv_of = move |p: DVec2| (p - origin) / TEXTURE_M;
-    let clip = ClipStackTexture::new(source, 128, 32, 64, center_uv, &mut images_of(&mut harness));
-    let entity = spawn_top_down_view(&mut harness, clip, center, 1800.0, VIEW_M, uv_of);
+    let origin = RenderOrigin(render_origin);
+    harness.world_mut().insert_resource(origin);
+    let source = Arc::new(ProceduralTileSource::new(64, 15, scrambled_texel));
+    let mapping = TextureMapping {
+        origin_m: texture_origin,
+        size_m: TEXTURE_M,
+    };
+    let world_of = move |render: DVec2| render + DVec2::new(render_origin.x, render_origin.z);
+    let mut clip = ClipStackTexture::new(
+        source,
+        128,
+        32,
+        64,
+        mapping.uv_of(world_of(camera_render)).to_array(),
+        &mut images_of(&mut harness),
+    );
+    clip.mapping = Some(mapping);
+    let half = VIEWS[VIEWS.len() - 1] * 0.6;
+    let (entity, camera) = spawn_top_down_view(
+        &mut harness,
+        clip,
+        camera_render,
+        half,
+        VIEWS[0],
+        move |p| mapping.uv_of(world_of(p)),
+    );
     harness.wait_until_ready().unwrap();
-    for _ in 0..200 {
+    for _ in 0..300 {
         harness.step();
         let clip = harness.world_mut().get::<ClipStackTexture>(entity).unwrap();
         // Every layer streamed, and the base level read (off the main thread) and written.
@@ -102,57 +157,101 @@ fn render_and_compare(origin: DVec2) -> Option<(f64, usize)> {
     for _ in 0..3 {
         harness.step();
     }
-    let image = harness.render().unwrap();
-    let clip = harness.world_mut().get::<ClipStackTexture>(entity).unwrap();
-    // Camera: right = +x, up = −z; pixel (px, py) centre is at this world point.
-    let mut matching = 0usize;
-    let mut layers_seen = std::collections::BTreeSet::new();
-    let mut expected = RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]);
-    for py in 0..SIZE {
-        for px in 0..SIZE {
-            let world = center
-                + DVec2::new(
-                    ((px as f64 + 0.5) / SIZE as f64 - 0.5) * VIEW_M,
-                    ((py as f64 + 0.5) / SIZE as f64 - 0.5) * VIEW_M,
-                );
-            let uv = uv_of(world);
-            let (layer, level, texel) = finest_covering_layer(&clip.stack, [uv.x, uv.y]);
-            layers_seen.insert(layer);
-            let want = address_texel(level, texel[0] as u64, texel[1] as u64);
-            expected.set_pixel(px, py, want);
-            let got = image.pixel(px, py);
-            if (0..3).all(|c| (got[c] as i32 - want[c] as i32).abs() <= 2) {
-                matching += 1;
+    let mut images = Vec::new();
+    let mut tally = LayerTally::new();
+    let dir = bevy_nature_harness::artifacts_dir().join("clipmap_render");
+    for view_m in VIEWS {
+        *harness.world_mut().get_mut::<Projection>(camera).unwrap() = top_down(view_m);
+        harness.run_frames(2).unwrap();
+        let image = harness.render().unwrap();
+        let clip = harness.world_mut().get::<ClipStackTexture>(entity).unwrap();
+        assert!(clip.stack.layers.iter().all(|l| l.complete()));
+        let mut expected = RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]);
+        for py in 0..SIZE {
+            for px in 0..SIZE {
+                // Camera: right = +x, up = −z; pixel (px, py) centre is at this world point.
+                let world = world_of(camera_render)
+                    + DVec2::new(
+                        ((px as f64 + 0.5) / SIZE as f64 - 0.5) * view_m,
+                        ((py as f64 + 0.5) / SIZE as f64 - 0.5) * view_m,
+                    );
+                let uv = mapping.uv_of(world);
+                let (layer, level, texel) = finest_covering_layer(&clip.stack, [uv.x, uv.y]);
+                let want = scrambled_texel(level, texel[0] as u64, texel[1] as u64);
+                expected.set_pixel(px, py, want);
+                let got = image.pixel(px, py);
+                let entry = tally.entry(layer).or_default();
+                entry.0 += 1;
+                entry.1 += (0..3).all(|c| (got[c] as i32 - want[c] as i32).abs() <= 2) as usize;
             }
         }
+        image
+            .save_png(dir.join(format!("gpu_{tag}_{view_m}.png")))
+            .ok();
+        expected
+            .save_png(dir.join(format!("cpu_{tag}_{view_m}.png")))
+            .ok();
+        images.push(image);
     }
-    let dir = bevy_nature_harness::artifacts_dir().join("clipmap_render");
-    image
-        .save_png(dir.join(format!("gpu_{}.png", origin.x as u64)))
-        .ok();
-    expected
-        .save_png(dir.join(format!("cpu_{}.png", origin.x as u64)))
-        .ok();
-    let fraction = matching as f64 / (SIZE * SIZE) as f64;
-    eprintln!(
-        "origin {origin:?}: {:.2} % of pixels match the CPU reference; layers in view {layers_seen:?}",
-        fraction * 100.0
-    );
-    Some((fraction, layers_seen.len()))
+    eprintln!("{tag}: per layer (index: pixels, matching) {tally:?}");
+    Some((images, tally))
 }
 
 #[test]
-fn terrain_material_samples_what_the_cpu_reference_picks() {
-    let Some((near_origin, layers)) = render_and_compare(DVec2::ZERO) else {
+fn a_2_20_texel_texture_10_6_m_out_samples_what_the_cpu_picks_as_at_the_origin() {
+    // The same camera relative to the texture: 10^6 m from the world's origin (render space
+    // follows it), and at the origin with the texture moved.
+    let relative = DVec2::new(1.0e6 + 0.37, 1.0e6 + 0.61);
+    let camera_render = DVec2::new(0.37, 0.61);
+    let Some((far, far_tally)) = render_views(
+        DVec2::ZERO,
+        DVec3::new(1.0e6, 0.0, 1.0e6),
+        camera_render,
+        "far",
+    ) else {
         return;
     };
+    let (near, near_tally) = render_views(
+        camera_render - relative,
+        DVec3::ZERO,
+        camera_render,
+        "origin",
+    )
+    .unwrap();
+    for (tag, tally) in [("10^6 m out", &far_tally), ("at the origin", &near_tally)] {
+        // The finest layer (level 20, 1 m texels) fills the 24 m view.
+        let finest = tally.keys().max().copied().unwrap();
+        assert!(
+            finest == 13 && tally[&finest].0 >= (SIZE * SIZE) as usize,
+            "{tag}: the finest layer covers the narrow view: {tally:?}"
+        );
+        let seen: Vec<_> = tally.iter().filter(|(_, (n, _))| *n >= 100).collect();
+        assert!(seen.len() >= 6, "{tag}: layers in view {tally:?}");
+        for (layer, (pixels, matching)) in seen {
+            let fraction = *matching as f64 / *pixels as f64;
+            assert!(
+                fraction >= 0.99,
+                "{tag}: layer {layer}: {matching} of {pixels} pixels match the CPU"
+            );
+        }
+    }
+    // And the two renders are the same image.
+    let differing: usize = far
+        .iter()
+        .zip(&near)
+        .map(|(a, b)| {
+            a.data
+                .chunks(4)
+                .zip(b.data.chunks(4))
+                .filter(|(p, q)| (0..3).any(|c| (p[c] as i32 - q[c] as i32).abs() > 2))
+                .count()
+        })
+        .sum();
+    eprintln!("{differing} pixels differ between the two renders");
     assert!(
-        layers >= 3,
-        "the view should cross layer boundaries ({layers} layers)"
+        differing * 1000 <= far.len() * (SIZE * SIZE) as usize,
+        "{differing} pixels differ between the render 10^6 m out and the one at the origin"
     );
-    assert!(near_origin >= 0.99, "{:.4} of pixels match", near_origin);
-    let (far, _) = render_and_compare(DVec2::new(1.0e6, 1.0e6)).unwrap();
-    assert!(far >= 0.99, "{far:.4} of pixels match at 10^6 m");
 }
 
 /// A pyramid much smaller than the clip (32 texels across under a 128-texel clip; users' partial
@@ -189,7 +288,7 @@ fn a_small_pyramid_renders_inside_its_extent_and_no_data_around_it() {
         [0.5, 0.5],
         &mut images_of(&mut harness),
     );
-    let entity = spawn_top_down_view(&mut harness, clip, center, VIEW, VIEW, uv_of);
+    let (entity, _) = spawn_top_down_view(&mut harness, clip, center, VIEW, VIEW, uv_of);
     harness.wait_until_ready().unwrap();
     // The base level (all there is of this pyramid) is read off the main thread.
     for _ in 0..200 {

@@ -14,7 +14,7 @@
 
 use bevy::camera::{OrthographicProjection, Projection, ScalingMode};
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
-use bevy::math::{DVec2, Vec2};
+use bevy::math::{DVec2, DVec3, Vec2};
 use bevy::prelude::*;
 use bevy_nature_harness::RenderHarness;
 use bevy_nature_harness::compare::RgbaImage;
@@ -26,7 +26,7 @@ use bevy_terrain_clip::stack_gpu::{ClipStackTexture, TextureMapping};
 use bevy_terrain_clip::terrain::{
     DEFAULT_VERTEX_PIXELS, TerrainGeometry, TerrainPatches, TerrainPrecision, TerrainTile,
 };
-use bevy_terrain_clip::{ClipmapSettings, TerrainClipPlugin, UpdateBudget};
+use bevy_terrain_clip::{ClipmapSettings, RenderOrigin, TerrainClipPlugin, UpdateBudget};
 use std::sync::Arc;
 
 /// World side of the terrain (m); 64-texel tiles, 6 pyramid levels: level 11 (2048 texels) is
@@ -78,8 +78,38 @@ fn relief_harness_over(
     terrain_m: f64,
     levels: u32,
 ) -> Option<(RenderHarness, Entity)> {
+    relief_harness_placed(
+        test,
+        w,
+        h,
+        height,
+        camera,
+        terrain_m,
+        levels,
+        |_, _, _| [255; 4],
+        DVec2::ZERO,
+        RenderOrigin::default(),
+    )
+}
+
+/// [`relief_harness_over`] coloured by `colour` (level texels), with the textures' corner at world
+/// `texture_origin` and render space under `render_origin`.
+#[allow(clippy::too_many_arguments)]
+fn relief_harness_placed(
+    test: &str,
+    w: u32,
+    h: u32,
+    height: fn(u32, u64, u64) -> f32,
+    camera: impl Bundle,
+    terrain_m: f64,
+    levels: u32,
+    colour: fn(u32, u64, u64) -> [u8; 4],
+    texture_origin: DVec2,
+    render_origin: RenderOrigin,
+) -> Option<(RenderHarness, Entity)> {
     let mut harness = RenderHarness::for_test(test, w, h)?;
     harness.app_mut().add_plugins(TerrainClipPlugin);
+    harness.world_mut().insert_resource(render_origin);
     let settings = ClipmapSettings {
         clip_size: 128,
         subtile_size: 32,
@@ -88,7 +118,7 @@ fn relief_harness_over(
         ..default()
     };
     let mapping = TextureMapping {
-        origin_m: DVec2::ZERO,
+        origin_m: texture_origin,
         size_m: terrain_m,
     };
     let terrain = {
@@ -104,7 +134,7 @@ fn relief_harness_over(
             );
             heights.mapping = Some(mapping);
             let mut colour = ClipStackTexture::from_settings(
-                Arc::new(ProceduralTileSource::new(64, levels, |_, _, _| [255; 4])),
+                Arc::new(ProceduralTileSource::new(64, levels, colour)),
                 &settings,
                 [0.5, 0.5],
                 &mut images,
@@ -227,7 +257,8 @@ fn the_silhouette_of_the_relief_is_where_the_cpu_puts_its_vertices() {
             .iter()
             .map(|&p| {
                 let xz = grid.world(p);
-                Vec3::new(xz.x, height_at(&layers, texel, xz), xz.y)
+                let lattice = Vec2::new(p[0] as f32, p[1] as f32);
+                Vec3::new(xz.x, height_at(&layers, texel, lattice), xz.y)
             })
             .collect();
         for t in &mesh.triangles {
@@ -450,6 +481,117 @@ fn the_default_precision_keeps_the_silhouette_within_a_pixel_of_the_full_mesh() 
     assert!(
         worst <= 1,
         "the default mesh's silhouette is {worst} px off the full mesh's"
+    );
+}
+
+/// Heights over a 2^20 m texture of 1 m texels (level 20): ridges and bumps tens of metres across,
+/// as a function of the texel centre's metres from the texture's corner.
+fn far_height(level: u32, x: u64, y: u64) -> f32 {
+    let texel_m = (1u64 << (20 - level)) as f64;
+    let (u, v) = ((x as f64 + 0.5) * texel_m, (y as f64 + 0.5) * texel_m);
+    (18.0 * (u / 23.0).sin() * (v / 31.0).cos()
+        + 9.0 * ((u + v) / 11.0).sin()
+        + 12.0 * (u / 97.0 + v / 131.0).sin()) as f32
+}
+
+/// 4 m squares of two colours each way over a 2^20 m texture (level 20: 1 m texels), so that a
+/// vertex or a texel out of place shows.
+fn far_colour(level: u32, x: u64, y: u64) -> [u8; 4] {
+    let texel_m = 1u64 << (20 - level);
+    let (u, v) = (x * texel_m / 4, y * texel_m / 4);
+    [
+        60 + 150 * (u & 1) as u8,
+        60 + 150 * (v & 1) as u8,
+        (40 + (u * 37 + v * 11) % 180) as u8,
+        255,
+    ]
+}
+
+/// Precision far from the origin: a view over relief 10^6 m from the world's origin on
+/// a 2^20-texel height texture (render space following the camera, [`RenderOrigin`]) and the
+/// same camera relative to the terrain with the terrain moved so that the camera is at the
+/// world's origin give the same image.
+#[test]
+fn relief_10_6_m_from_the_origin_draws_as_at_the_origin() {
+    const W: u32 = 160;
+    const H: u32 = 96;
+    let camera = || {
+        (
+            Camera3d::default(),
+            Msaa::Off,
+            Tonemapping::None,
+            DebandDither::Disabled,
+            Transform::from_xyz(0.3, 45.0, 0.7).looking_at(Vec3::new(40.0, 0.0, 60.0), Vec3::Y),
+        )
+    };
+    // The camera's world position 10^6 m out, relative to the texture's corner.
+    let relative = DVec2::new(1.0e6 + 0.3, 1.0e6 + 0.7);
+    let render = |texture_origin: DVec2, render_origin: DVec3, tag: &str| {
+        let (mut harness, terrain) = relief_harness_placed(
+            &format!("terrain_relief_far_{tag}"),
+            W,
+            H,
+            far_height,
+            camera(),
+            1_048_576.0,
+            15,
+            far_colour,
+            texture_origin,
+            RenderOrigin(render_origin),
+        )?;
+        let image = harness.render().unwrap();
+        image
+            .save_png(
+                bevy_nature_harness::artifacts_dir().join(format!("terrain_relief_far_{tag}.png")),
+            )
+            .ok();
+        let patches = harness
+            .world_mut()
+            .get::<TerrainPatches>(terrain)
+            .unwrap()
+            .clone();
+        Some((image, patches))
+    };
+    let Some((far, far_patches)) = render(DVec2::ZERO, DVec3::new(1.0e6, 0.0, 1.0e6), "10e6")
+    else {
+        return;
+    };
+    let (near, near_patches) =
+        render(DVec2::new(0.3, 0.7) - relative, DVec3::ZERO, "origin").unwrap();
+    let terrain = (0..W * H)
+        .filter(|i| !is_background(&far, i % W, i / W))
+        .count();
+    let colours: std::collections::HashSet<&[u8]> = far.data.chunks(4).collect();
+    let differing = far
+        .data
+        .chunks(4)
+        .zip(near.data.chunks(4))
+        .filter(|(p, q)| (0..3).any(|c| (p[c] as i32 - q[c] as i32).abs() > 2))
+        .count();
+    println!(
+        "{} patches, {terrain} terrain pixels; {differing} pixels differ between the terrain \
+         10^6 m out and at the origin",
+        far_patches.selection.patches.len()
+    );
+    strip(&[&far, &near])
+        .save_png(bevy_nature_harness::artifacts_dir().join("terrain_relief_far.png"))
+        .ok();
+    assert_eq!(
+        far_patches.selection.patches.len(),
+        near_patches.selection.patches.len()
+    );
+    assert!(
+        terrain as u32 * 10 >= W * H * 9,
+        "the terrain fills the view"
+    );
+    assert!(
+        colours.len() >= 8,
+        "the squares show: {} colours",
+        colours.len()
+    );
+    assert!(
+        differing * 1000 <= (W * H) as usize,
+        "{differing} pixels differ"
     );
 }
 

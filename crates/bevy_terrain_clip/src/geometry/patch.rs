@@ -30,8 +30,13 @@ use std::collections::{HashMap, HashSet};
 /// The implicit patch hierarchy over a square terrain.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PatchGrid {
-    /// World (x, z) of the root patch's corner with the smallest coordinates.
+    /// World (x, z) of lattice point [`anchor`](Self::anchor) (the root patch's corner with the
+    /// smallest coordinates by default).
     pub origin: Vec2,
+    /// The lattice point at `origin`: world positions are taken relative to it, so with an
+    /// anchor near the camera they stay exact to f32's precision near the camera however far
+    /// the terrain's corner is (a terrain 10^6 m across).
+    pub anchor: [u32; 2],
     /// Side of the root patch (m).
     pub size: f32,
     /// Depth of the hierarchy: patches of level `max_level` are the finest, `size / 2^max_level`
@@ -99,6 +104,7 @@ impl PatchGrid {
         }
         Ok(Self {
             origin,
+            anchor: [0, 0],
             size,
             max_level,
             r_high,
@@ -120,9 +126,28 @@ impl PatchGrid {
         self.size / self.lattice_side() as f32
     }
 
+    /// The same grid with its positions taken relative to lattice point `anchor` (clamped to
+    /// the lattice), which lies at world `origin`.
+    pub fn anchored(self, anchor: [u32; 2], origin: Vec2) -> Self {
+        let last = self.lattice_side();
+        Self {
+            anchor: anchor.map(|a| a.min(last)),
+            origin,
+            ..self
+        }
+    }
+
+    /// Lattice point `p` relative to the anchor (exact: both are below 2^24).
+    pub fn relative(&self, p: [u32; 2]) -> Vec2 {
+        Vec2::new(
+            (p[0] as i64 - self.anchor[0] as i64) as f32,
+            (p[1] as i64 - self.anchor[1] as i64) as f32,
+        )
+    }
+
     /// World (x, z) of a lattice point.
     pub fn world(&self, p: [u32; 2]) -> Vec2 {
-        self.origin + Vec2::new(p[0] as f32, p[1] as f32) * self.lattice_step()
+        self.origin + self.relative(p) * self.lattice_step()
     }
 }
 

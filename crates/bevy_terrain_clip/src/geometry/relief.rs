@@ -1,7 +1,12 @@
 //! The heights the terrain's vertex stage reads from a height clip stack (`relief.wgsl`), on the
 //! CPU: its reference, and what tests build the expected mesh from.
 //!
-//! A vertex at world (x, z) takes the height of the finest windowed layer whose valid rectangle
+//! Positions are points of the terrain's patch lattice ([`super::patch::PatchGrid`]), not world
+//! metres: the lattice side is a power of two, so a level's texel coordinates are the lattice
+//! coordinates times a power of two — exact in f32 for every vertex even 2^20 texels from the
+//! texture's corner, where world metres would have lost the texel's fraction.
+//!
+//! A vertex at lattice point p takes the height of the finest windowed layer whose valid rectangle
 //! holds the 2 × 2 level texels around it, bilinear between their centres; the resident base
 //! level otherwise (clamped at the texture's edges). The height is a function of the position
 //! alone — not of the patch or tile the vertex belongs to — so the vertices two patches share get
@@ -21,22 +26,22 @@ pub struct HeightLayers {
     pub coverage: Vec<[f32; 4]>,
     /// The base level `l_b` (always resident).
     pub base_level: u32,
-    /// World (x, z) of height-texture coordinates (0, 0).
-    pub origin: Vec2,
-    /// World side of the whole height texture (m).
-    pub size: f32,
+    /// Lattice steps along the height texture's side (a power of two).
+    pub lattice_side: f32,
+    /// Metres per lattice step.
+    pub lattice_step: f32,
 }
 
-/// Where `xz` falls among level `level`'s texels, texel centres at integers.
-pub fn level_texel(layers: &HeightLayers, xz: Vec2, level: u32) -> Vec2 {
-    (xz - layers.origin) / layers.size * (level as f32).exp2() - 0.5
+/// Where lattice point `p` falls among level `level`'s texels, texel centres at integers.
+pub fn level_texel(layers: &HeightLayers, p: Vec2, level: u32) -> Vec2 {
+    p * ((level as f32).exp2() / layers.lattice_side) - 0.5
 }
 
 fn lerp(a: f32, b: f32, f: f32) -> f32 {
     a + (b - a) * f
 }
 
-/// Which level the height at `xz` comes from: the finest windowed layer holding the 2 × 2 texels
+/// Which level the height at lattice point `xz` comes from: the finest windowed layer holding the 2 × 2 texels
 /// around it, else the base level.
 pub fn height_level(layers: &HeightLayers, xz: Vec2) -> u32 {
     for (i, c) in layers.coverage.iter().enumerate().rev() {
@@ -49,7 +54,7 @@ pub fn height_level(layers: &HeightLayers, xz: Vec2) -> u32 {
     layers.base_level
 }
 
-/// The height (m) at world `xz`: bilinear between the texel centres of [`height_level`]'s
+/// The height (m) at lattice point `xz`: bilinear between the texel centres of [`height_level`]'s
 /// texels, `texel(level, x, y)` giving a level's heights (clamped to the texture at the base
 /// level).
 pub fn height_at(layers: &HeightLayers, texel: impl Fn(u32, i64, i64) -> f32, xz: Vec2) -> f32 {
@@ -73,14 +78,14 @@ pub fn height_at(layers: &HeightLayers, texel: impl Fn(u32, i64, i64) -> f32, xz
     )
 }
 
-/// The surface normal at `xz`: central differences of [`height_at`] over one texel of the level
-/// there.
+/// The surface normal (world axes) at lattice point `xz`: central differences of
+/// [`height_at`] over one texel of the level there.
 pub fn normal_at(layers: &HeightLayers, texel: impl Fn(u32, i64, i64) -> f32, xz: Vec2) -> Vec3 {
-    let e = layers.size / (height_level(layers, xz) as f32).exp2();
+    let e = layers.lattice_side / (height_level(layers, xz) as f32).exp2();
     let h = |d: Vec2| height_at(layers, &texel, xz + d);
     let dx = h(Vec2::new(e, 0.0)) - h(Vec2::new(-e, 0.0));
     let dz = h(Vec2::new(0.0, e)) - h(Vec2::new(0.0, -e));
-    Vec3::new(-dx, 2.0 * e, -dz).normalize()
+    Vec3::new(-dx, 2.0 * e * layers.lattice_step, -dz).normalize()
 }
 
 #[cfg(test)]
@@ -92,8 +97,9 @@ mod tests {
             // Level 5 covers texels 4..12 along both axes; level 6 nothing.
             coverage: vec![[4.0, 4.0, 12.0, 12.0], [0.0, 0.0, 0.0, 0.0]],
             base_level: 4,
-            origin: Vec2::new(100.0, -50.0),
-            size: 64.0,
+            // A 64 m texture of 2^7 lattice steps (0.5 m).
+            lattice_side: 128.0,
+            lattice_step: 0.5,
         }
     }
 
@@ -102,18 +108,18 @@ mod tests {
         let l = layers();
         // A plane in level texels, different per level: bilinear reproduces a plane exactly.
         let texel = |level: u32, x: i64, y: i64| level as f32 * 100.0 + x as f32 * 2.0 - y as f32;
-        // Level 5 texels are 2 m; (x, z) = origin + 2·(8.5, 6.25) m is level texel (8, 5.75).
-        let xz = l.origin + 2.0 * Vec2::new(8.5, 6.25);
+        // Level 5 texels are 4 lattice steps (2 m); lattice 4·(8.5, 6.25) is level texel (8, 5.75).
+        let xz = 4.0 * Vec2::new(8.5, 6.25);
         assert_eq!(height_level(&l, xz), 5);
         assert!((height_at(&l, texel, xz) - (500.0 + 8.0 * 2.0 - 5.75)).abs() < 1e-4);
         // Outside level 5's rectangle: the base level (4 m texels), clamped at the texture's edge.
-        let far = l.origin + Vec2::new(60.0, 62.0);
+        let far = Vec2::new(120.0, 124.0);
         assert_eq!(height_level(&l, far), 4);
         let t = level_texel(&l, far, 4);
         assert!((height_at(&l, texel, far) - (400.0 + t.x * 2.0 - 15.0)).abs() < 1e-3);
         // The texel rectangle must hold both texels around the point: at texel 11.5 the right
         // neighbour (12) is outside, so the base level answers.
-        let edge = l.origin + 2.0 * Vec2::new(12.0, 8.5);
+        let edge = 4.0 * Vec2::new(12.0, 8.5);
         assert_eq!(height_level(&l, edge), 4);
         // The normal of a plane rising 1 m per metre along x (level 5: 2 m texels, 2 per texel).
         let n = normal_at(&l, texel, xz);
