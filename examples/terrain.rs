@@ -257,7 +257,14 @@ fn setup(
             },
         ));
     } else {
-        spawn_flat_ground(&mut commands, &mut meshes, material, center, mapping, &origin);
+        spawn_flat_ground(
+            &mut commands,
+            &mut meshes,
+            material,
+            center,
+            mapping,
+            &origin,
+        );
     }
     commands.spawn((
         DirectionalLight {
@@ -279,9 +286,7 @@ fn setup(
             far: 60_000.0,
             ..default()
         }),
-        Transform::from_translation(
-            origin.render_of(DVec3::new(center.x, altitude, center.y)),
-        ),
+        Transform::from_translation(origin.render_of(DVec3::new(center.x, altitude, center.y))),
     ));
 }
 
@@ -439,15 +444,18 @@ fn run_bench(args: &ExampleArgs, terrain: Terrain, budget: UpdateBudget) -> AppE
         let mut rows = Vec::new();
         for station in 0..5 {
             // 20 s of flight apart.
-            let p = start(&mapping) + direction * (altitude * 250.0 / 300.0) * 20.0 * station as f64;
+            let p =
+                start(&mapping) + direction * (altitude * 250.0 / 300.0) * 20.0 * station as f64;
             let world = harness.world_mut();
             let origin = floating_origin(p);
             world.insert_resource(origin);
             let mut cameras = world.query_filtered::<&mut Transform, With<Camera3d>>();
             let mut place = |world: &mut World, altitude: f64| {
                 for mut t in cameras.iter_mut(world) {
-                    *t = Transform::from_translation(origin.render_of(DVec3::new(p.x, altitude, p.y)))
-                        .looking_to(Vec3::new(0.7, -0.35, 0.7), Vec3::Y);
+                    *t = Transform::from_translation(
+                        origin.render_of(DVec3::new(p.x, altitude, p.y)),
+                    )
+                    .looking_to(Vec3::new(0.7, -0.35, 0.7), Vec3::Y);
                 }
             };
             place(world, altitude);
@@ -540,7 +548,10 @@ fn run_bench(args: &ExampleArgs, terrain: Terrain, budget: UpdateBudget) -> AppE
                 .map(f)
                 .sum()
         };
-        let (on, off) = (sum(true, |r| r.gpu_frame_ms), sum(false, |r| r.gpu_frame_ms));
+        let (on, off) = (
+            sum(true, |r| r.gpu_frame_ms),
+            sum(false, |r| r.gpu_frame_ms),
+        );
         let rate = sum(true, |r| r.triangles) / on / 1000.0;
         println!(
             "terrain --bench ({}, {}x{}, GPU timestamps): vertices {vertex_px} px apart: \

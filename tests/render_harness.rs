@@ -247,9 +247,10 @@ fn showcase_has_screen_space_soft_shadows() {
     assert_eq!(standard, 0, "no StandardMaterial left unconverted");
 }
 
-/// With the clipmap-textured ground (the README's scene), the terrain and leaf materials receive
-/// the soft shadows too: their soft-shadow fragment stages compile and render, and every clipmap
-/// and leaf material holds the SSSS visibility texture.
+/// With the clipmap-textured ground with relief (the README's scene), the terrain and leaf
+/// materials receive the soft shadows too: their soft-shadow fragment stages (with the relief
+/// vertex stage) compile and render, every clipmap material holds the SSSS visibility texture,
+/// and the ground is drawn as relief patches whose material reads the height stack.
 #[test]
 fn showcase_terrain_receives_soft_shadows() {
     use bevy_nature::soft_shadows::ssss::receiver::SsssTextures;
@@ -275,6 +276,22 @@ fn showcase_terrain_receives_soft_shadows() {
             Some(&visibility)
         );
     }
+    use bevy_nature::terrain_clip::terrain::{TerrainGeometry, TerrainPatches};
+    let (handle, patches, triangles) = {
+        let (geometry, patches) = world
+            .query::<(&TerrainGeometry, &TerrainPatches)>()
+            .single(world)
+            .expect("the ground is a terrain with relief");
+        (
+            geometry.material.clone(),
+            patches.selection.patches.len(),
+            patches.triangles,
+        )
+    };
+    assert!(patches > 0 && triangles > 0, "{patches} patches drawn");
+    let materials = world.resource::<Assets<ClipmapMaterial>>();
+    let material = &materials.get(&handle).unwrap().extension;
+    assert!(material.height_layers.is_some() && material.height_base.is_some());
 }
 
 /// The main scene's distant backdrop trees are drawn by their billboard clouds: once the bakes
