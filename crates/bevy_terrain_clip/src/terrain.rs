@@ -497,28 +497,37 @@ mod tests {
     use crate::source::ProceduralTileSource;
     use crate::stack_gpu::TextureMapping;
 
+    /// A flat height stack of 6 levels of 64² tiles (finest level 11) mapped onto a square
+    /// `size_m` wide whose corner is at (−100, 50).
+    fn heights_over(size_m: f64, images: &mut Assets<Image>) -> ClipStackTexture {
+        let mut heights = ClipStackTexture::heights(
+            std::sync::Arc::new(ProceduralTileSource::heights(64, 6, |_, _, _| 0.0)),
+            &default(),
+            [0.5, 0.5],
+            images,
+        );
+        heights.mapping = Some(TextureMapping {
+            origin_m: bevy::math::DVec2::new(-100.0, 50.0),
+            size_m,
+        });
+        heights
+    }
+
     /// The hierarchy follows the height pyramid's depth, and absurd resolutions are clamped
     /// rather than overflowing the lattice.
     #[test]
     fn the_patch_grid_follows_the_heights_and_clamps_absurd_settings() {
         let mut images = Assets::<Image>::default();
-        let mut heights = ClipStackTexture::heights(
-            std::sync::Arc::new(ProceduralTileSource::heights(64, 6, |_, _, _| 0.0)),
-            &default(),
-            [0.5, 0.5],
-            &mut images,
-        );
+        let mut heights = heights_over(2048.0, &mut images);
         let geometry = TerrainGeometry::new(Entity::PLACEHOLDER, Handle::default());
         let here = RenderOrigin::default();
+        let mapping = heights.mapping.take();
         assert_eq!(
             patch_grid(&geometry, &heights, &here, Vec3::ZERO),
             None,
             "no mapping, no grid"
         );
-        heights.mapping = Some(TextureMapping {
-            origin_m: bevy::math::DVec2::new(-100.0, 50.0),
-            size_m: 2048.0,
-        });
+        heights.mapping = mapping;
         // 11 virtual levels below 64² tiles × 6: finest level 11; 16 segments: level 7 patches.
         let grid = patch_grid(&geometry, &heights, &here, Vec3::ZERO).unwrap();
         assert_eq!((grid.max_level, grid.r_high), (7, 16));
@@ -545,17 +554,8 @@ mod tests {
     #[test]
     fn the_patch_grid_is_anchored_near_the_eye_in_render_space() {
         let mut images = Assets::<Image>::default();
-        let mut heights = ClipStackTexture::heights(
-            std::sync::Arc::new(ProceduralTileSource::heights(64, 6, |_, _, _| 0.0)),
-            &default(),
-            [0.5, 0.5],
-            &mut images,
-        );
         // 2^18 lattice steps of 1 m.
-        heights.mapping = Some(TextureMapping {
-            origin_m: bevy::math::DVec2::new(-100.0, 50.0),
-            size_m: 262_144.0,
-        });
+        let heights = heights_over(262_144.0, &mut images);
         let geometry = TerrainGeometry {
             max_level: Some(14),
             ..TerrainGeometry::new(Entity::PLACEHOLDER, Handle::default())

@@ -56,57 +56,49 @@ fn rough_height(level: u32, x: u64, y: u64) -> f32 {
     terrain_height(level, x, y) + (30.0 * (tau * 97.0 * u).sin() * (tau * 101.0 * v).cos()) as f32
 }
 
-/// The harness with a white unlit terrain over `height` and `camera`; returns the terrain
-/// entity once the height stack has settled.
+/// The ground a test draws: heights and colours (level texels) of pyramids of `levels` levels of
+/// 64² tiles over a square `terrain_m` wide whose corner is at world `texture_origin`, with render
+/// space under `render_origin`.
+struct Ground {
+    height: fn(u32, u64, u64) -> f32,
+    colour: fn(u32, u64, u64) -> [u8; 4],
+    terrain_m: f64,
+    levels: u32,
+    texture_origin: DVec2,
+    render_origin: RenderOrigin,
+}
+
+impl Ground {
+    /// White ground of `height` over [`TERRAIN_M`], at the origin.
+    fn white(height: fn(u32, u64, u64) -> f32) -> Self {
+        Self {
+            height,
+            colour: |_, _, _| [255; 4],
+            terrain_m: TERRAIN_M,
+            levels: 6,
+            texture_origin: DVec2::ZERO,
+            render_origin: RenderOrigin::default(),
+        }
+    }
+}
+
+/// The harness with `ground` (unlit) and `camera`; returns the terrain entity once the height
+/// stack has settled.
 fn relief_harness(
     test: &str,
     w: u32,
     h: u32,
-    height: fn(u32, u64, u64) -> f32,
+    ground: Ground,
     camera: impl Bundle,
 ) -> Option<(RenderHarness, Entity)> {
-    relief_harness_over(test, w, h, height, camera, TERRAIN_M, 6)
-}
-
-/// [`relief_harness`] over a terrain `terrain_m` wide of `levels` pyramid levels of 64² tiles.
-fn relief_harness_over(
-    test: &str,
-    w: u32,
-    h: u32,
-    height: fn(u32, u64, u64) -> f32,
-    camera: impl Bundle,
-    terrain_m: f64,
-    levels: u32,
-) -> Option<(RenderHarness, Entity)> {
-    relief_harness_placed(
-        test,
-        w,
-        h,
+    let Ground {
         height,
-        camera,
+        colour,
         terrain_m,
         levels,
-        |_, _, _| [255; 4],
-        DVec2::ZERO,
-        RenderOrigin::default(),
-    )
-}
-
-/// [`relief_harness_over`] coloured by `colour` (level texels), with the textures' corner at world
-/// `texture_origin` and render space under `render_origin`.
-#[allow(clippy::too_many_arguments)]
-fn relief_harness_placed(
-    test: &str,
-    w: u32,
-    h: u32,
-    height: fn(u32, u64, u64) -> f32,
-    camera: impl Bundle,
-    terrain_m: f64,
-    levels: u32,
-    colour: fn(u32, u64, u64) -> [u8; 4],
-    texture_origin: DVec2,
-    render_origin: RenderOrigin,
-) -> Option<(RenderHarness, Entity)> {
+        texture_origin,
+        render_origin,
+    } = ground;
     let mut harness = RenderHarness::for_test(test, w, h)?;
     harness.app_mut().add_plugins(TerrainClipPlugin);
     harness.world_mut().insert_resource(render_origin);
@@ -214,9 +206,13 @@ fn the_silhouette_of_the_relief_is_where_the_cpu_puts_its_vertices() {
         }),
         Transform::from_translation(eye).looking_to(Vec3::Z, Vec3::Y),
     );
-    let Some((mut harness, terrain)) =
-        relief_harness("terrain_relief_silhouette", W, H, terrain_height, camera)
-    else {
+    let Some((mut harness, terrain)) = relief_harness(
+        "terrain_relief_silhouette",
+        W,
+        H,
+        Ground::white(terrain_height),
+        camera,
+    ) else {
         return;
     };
     let image = harness.render().unwrap();
@@ -351,9 +347,13 @@ fn a_grazing_view_over_the_relief_shows_no_cracks() {
         Transform::from_xyz(700.0, 110.0, 500.0)
             .looking_at(Vec3::new(1100.0, 40.0, 1300.0), Vec3::Y),
     );
-    let Some((mut harness, terrain)) =
-        relief_harness("terrain_relief_cracks", W, H, rough_height, camera)
-    else {
+    let Some((mut harness, terrain)) = relief_harness(
+        "terrain_relief_cracks",
+        W,
+        H,
+        Ground::white(rough_height),
+        camera,
+    ) else {
         return;
     };
     let image = harness.render().unwrap();
@@ -415,14 +415,16 @@ fn the_default_precision_keeps_the_silhouette_within_a_pixel_of_the_full_mesh() 
         Transform::from_xyz(80.0, 95.0, 60.0).looking_at(Vec3::new(300.0, 30.0, 380.0), Vec3::Y),
     );
     // 4 pyramid levels of 64² tiles: 512 texels of 1 m.
-    let Some((mut harness, terrain)) = relief_harness_over(
+    let Some((mut harness, terrain)) = relief_harness(
         "terrain_relief_error",
         W,
         H,
-        terrain_height,
+        Ground {
+            terrain_m: 512.0,
+            levels: 4,
+            ..Ground::white(terrain_height)
+        },
         camera,
-        512.0,
-        4,
     ) else {
         return;
     };
@@ -527,17 +529,19 @@ fn relief_10_6_m_from_the_origin_draws_as_at_the_origin() {
     // The camera's world position 10^6 m out, relative to the texture's corner.
     let relative = DVec2::new(1.0e6 + 0.3, 1.0e6 + 0.7);
     let render = |texture_origin: DVec2, render_origin: DVec3, tag: &str| {
-        let (mut harness, terrain) = relief_harness_placed(
+        let (mut harness, terrain) = relief_harness(
             &format!("terrain_relief_far_{tag}"),
             W,
             H,
-            far_height,
+            Ground {
+                height: far_height,
+                colour: far_colour,
+                terrain_m: 1_048_576.0,
+                levels: 15,
+                texture_origin,
+                render_origin: RenderOrigin(render_origin),
+            },
             camera(),
-            1_048_576.0,
-            15,
-            far_colour,
-            texture_origin,
-            RenderOrigin(render_origin),
         )?;
         let image = harness.render().unwrap();
         image
