@@ -34,6 +34,7 @@ use bevy::prelude::*;
 pub mod corpus;
 pub mod distance;
 pub mod forest;
+pub mod grass;
 pub mod impostor;
 pub mod meshes;
 pub mod pruning;

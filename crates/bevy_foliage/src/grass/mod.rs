@@ -1,0 +1,15 @@
+//! Grass to the horizon (Boulanger 2008, thesis ch. 4): one small base patch of blades repeated
+//! over the ground in four mirrored versions, drawn near as blade geometry, at middle distance as
+//! volume slices with baked lighting, and far as a horizontal slice, with transitions that keep
+//! the coverage whole.
+//!
+//! This module holds the plain-Rust core so far: [`patch`] (the base patch, its stratified roots
+//! and density thresholds, the mirrored versions of eq. 4.9, blade strips along a ballistic
+//! curve), [`density`] (density maps), [`transition`] (the weights of eq. 4.3–4.5 and 4.14 and the
+//! complementary opacities of algorithm 1 and eq. 4.6) and [`slice_mip`] (the slices' custom mip
+//! filter). The slice bake, the render passes and the `GrassPlugin` come next.
+
+pub mod density;
+pub mod patch;
+pub mod slice_mip;
+pub mod transition;
