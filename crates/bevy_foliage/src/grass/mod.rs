@@ -5,11 +5,13 @@
 //!
 //! This module holds the plain-Rust core so far: [`patch`] (the base patch, its stratified roots
 //! and density thresholds, the mirrored versions of eq. 4.9, blade strips along a ballistic
-//! curve), [`density`] (density maps), [`transition`] (the weights of eq. 4.3–4.5 and 4.14 and the
+//! curve), [`quadtree`] (the implicit quadtree of cells and macro-cells walked by frustum and
+//! distance), [`density`] (density maps), [`transition`] (the weights of eq. 4.3–4.5 and 4.14 and the
 //! complementary opacities of algorithm 1 and eq. 4.6) and [`slice_mip`] (the slices' custom mip
 //! filter). The slice bake, the render passes and the `GrassPlugin` come next.
 
 pub mod density;
 pub mod patch;
+pub mod quadtree;
 pub mod slice_mip;
 pub mod transition;
