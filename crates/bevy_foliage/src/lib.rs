@@ -16,7 +16,9 @@
 //! - **billboard-cloud impostors** for distant trees (seed 001, ch. 4): each species simplified
 //!   to a few tens of planes textured from one GPU-baked atlas, drawn beyond the pruning's `far`
 //!   with a dithered handover ([`impostor`]).
-//! - grass with geometry/slice LoD and tree lighting (each in its own module as it lands).
+//! - **grass** with geometry / slice LoD (Boulanger, ch. 4): so far the plain-Rust core of
+//!   [`grass`] — base patch, density maps, seamless transitions, the cell quadtree, lighting and
+//!   ground frames — with the rendering to come; tree lighting (ch. 5) later.
 //!
 //! Add [`FoliagePlugin`]; tune [`FoliagePruningSettings`] (a reflected resource, so inspectors can
 //! edit it live).
@@ -24,7 +26,8 @@
 //! The crate is split by role: the algorithms are plain Rust modules with no render types
 //! (`pruning::{leaves, cells, visibility, mask, bake, extract, selection, appearance, format,
 //! gltf, procedural}`, `forest::{cache, feedback, lod, manager, hlod}`,
-//! `impostor::{cloud, atlas, texture, format}`, [`distance`]); the main-world ECS code lives in
+//! `impostor::{cloud, atlas, texture, format}`, `grass::{patch, density, transition, quadtree,
+//! lighting, ground, slice_mip}`, [`distance`]); the main-world ECS code lives in
 //! `components`, `systems`, `store`, `spawn`, `bake` and `assets` modules; the render-world code
 //! sits beside its WGSL (`pruning::render` with `prune.wgsl`, `pruning::material` with the leaf
 //! shaders, `impostor::bake` with `impostor_bake.wgsl`).

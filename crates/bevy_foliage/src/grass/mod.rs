@@ -7,10 +7,15 @@
 //! and density thresholds, the mirrored versions of eq. 4.9, blade strips along a ballistic
 //! curve), [`quadtree`] (the implicit quadtree of cells and macro-cells walked by frustum and
 //! distance), [`density`] (density maps), [`transition`] (the weights of eq. 4.3–4.5 and 4.14 and the
-//! complementary opacities of algorithm 1 and eq. 4.6) and [`slice_mip`] (the slices' custom mip
-//! filter). The slice bake, the render passes and the `GrassPlugin` come next.
+//! complementary opacities of algorithm 1 and eq. 4.6), [`slice_mip`] (the slices' custom mip
+//! filter), [`lighting`] (eq. 4.1, the blade ambient occlusion, the shadow mask's eq. 4.7, the
+//! spherical barycentric BTF weights of appendix A) and [`ground`] (the lift and frame of
+//! eq. 4.10–4.12 on curved ground). The slice bake, the render passes and the `GrassPlugin` come
+//! next.
 
 pub mod density;
+pub mod ground;
+pub mod lighting;
 pub mod patch;
 pub mod quadtree;
 pub mod slice_mip;

@@ -1,0 +1,167 @@
+//! Grass lighting on the CPU (Boulanger 2008, thesis §4.2.2–4.2.3, §4.2.6, appendix A): the
+//! blades' two-sided Lambert with transmission and distance attenuation (eq. 4.1), their ambient
+//! occlusion rising with height, the blade shadow mask modulated by the local density (eq. 4.7),
+//! and the spherical barycentric weights that blend the slices' five baked light directions
+//! (eq. 4.2, A.1–A.6). The shaders compute the same; these are their references.
+
+use bevy::math::Vec3;
+
+/// Eq. 4.1: radiance of a blade point of diffuse reflectance `kd`, ambient occlusion `ao`, under
+/// ambient `ia` and a light of intensity `id` at distance `d` from direction `l` (unit, from the
+/// point to the light), the blade's unit normal `n`: diffuse on the lit face, `γ` of it
+/// transmitted through to the other, attenuated by `1 + β·d²`.
+#[allow(clippy::too_many_arguments)]
+pub fn blade_radiance(
+    kd: Vec3,
+    ao: f32,
+    ia: f32,
+    n: Vec3,
+    l: Vec3,
+    gamma: f32,
+    id: f32,
+    beta: f32,
+    d: f32,
+) -> Vec3 {
+    let cos = n.dot(l);
+    let direct = cos.max(0.0) + gamma * (-cos).max(0.0);
+    kd * ao * ia + kd * direct * id / (1.0 + beta * d * d)
+}
+
+/// The ambient occlusion of a blade point `height_fraction` of the way up the blade (0 root,
+/// 1 tip): `root_ao` at the ground rising linearly to 1 at the tip (§4.2.2: neighbours occlude
+/// the bottom of a blade most).
+pub fn blade_ao(height_fraction: f32, root_ao: f32) -> f32 {
+    let h = height_fraction.clamp(0.0, 1.0);
+    root_ao + (1.0 - root_ao) * h
+}
+
+/// Eq. 4.7: the light reaching a blade point through the shadow mask's value `mask` (1 lit,
+/// 0 shadowed by the neighbour blades it stands for) where the local density is `ld`: the
+/// fewer neighbours, the less shadow.
+pub fn masked_light(mask: f32, ld: f32) -> f32 {
+    1.0 - (1.0 - mask.clamp(0.0, 1.0)) * ld.clamp(0.0, 1.0)
+}
+
+/// The slices' baked light directions, in the order of [`btf_weights`]: Y+, X+, X−, Z+, Z−.
+pub const BTF_DIRECTIONS: [Vec3; 5] = [Vec3::Y, Vec3::X, Vec3::NEG_X, Vec3::Z, Vec3::NEG_Z];
+
+/// Area of the spherical triangle with unit vertices `a`, `b`, `c` (its spherical excess, by
+/// Van Oosterom and Strackee's formula: the same value as eq. A.3's angle sum, without the
+/// arccosines' trouble near degenerate triangles).
+fn spherical_area(a: Vec3, b: Vec3, c: Vec3) -> f32 {
+    let numerator = a.dot(b.cross(c)).abs();
+    let denominator = 1.0 + a.dot(b) + b.dot(c) + c.dot(a);
+    2.0 * numerator.atan2(denominator)
+}
+
+/// Appendix A: the weights of the five baked directions ([`BTF_DIRECTIONS`]) for light from
+/// unit direction `l`: in the quadrant of the upper hemisphere holding `l`, spanned by Y+ and one
+/// of X± and one of Z±, each of the three gets the area of the spherical triangle `l` makes with
+/// the other two over the quadrant's area π/2 (eq. A.2); the other two directions get 0. The
+/// weights sum to 1, give a baked direction all its weight when `l` is it, and change
+/// continuously from one quadrant to the next. A light below the horizon is taken at the
+/// horizon (the slices were baked from above).
+pub fn btf_weights(l: Vec3) -> [f32; 5] {
+    let l = Vec3::new(l.x, l.y.max(0.0), l.z);
+    let l = if l.length_squared() > 1e-12 {
+        l.normalize()
+    } else {
+        Vec3::Y
+    };
+    let (x_index, x) = if l.x >= 0.0 {
+        (1, Vec3::X)
+    } else {
+        (2, Vec3::NEG_X)
+    };
+    let (z_index, z) = if l.z >= 0.0 {
+        (3, Vec3::Z)
+    } else {
+        (4, Vec3::NEG_Z)
+    };
+    let y = Vec3::Y;
+    let quarter = std::f32::consts::FRAC_PI_2;
+    let mut w = [0.0; 5];
+    // Each direction's weight is the triangle opposite it.
+    w[0] = spherical_area(l, x, z) / quarter;
+    w[x_index] = spherical_area(l, y, z) / quarter;
+    w[z_index] = spherical_area(l, y, x) / quarter;
+    // The three triangles partition the quadrant; rounding aside they sum to 1.
+    let sum: f32 = w.iter().sum();
+    w.map(|v| v / sum)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    #[test]
+    fn eq_4_1_lights_the_front_and_transmits_to_the_back() {
+        let kd = Vec3::new(0.2, 0.5, 0.1);
+        let n = Vec3::Z;
+        let l = Vec3::new(0.0, 0.6, 0.8);
+        let front = blade_radiance(kd, 1.0, 0.0, n, l, 0.3, 2.0, 0.0, 10.0);
+        assert!((front - kd * 0.8 * 2.0).length() < 1e-6);
+        // Seen from the other face, γ of it.
+        let back = blade_radiance(kd, 1.0, 0.0, -n, l, 0.3, 2.0, 0.0, 10.0);
+        assert!((back - kd * 0.8 * 0.3 * 2.0).length() < 1e-6);
+        // Attenuation and ambient.
+        let far = blade_radiance(kd, 0.5, 0.4, n, l, 0.3, 2.0, 0.01, 10.0);
+        assert!((far - (kd * 0.5 * 0.4 + kd * 0.8 * 2.0 / 2.0)).length() < 1e-6);
+        assert_eq!(blade_ao(0.0, 0.3), 0.3);
+        assert_eq!(blade_ao(1.0, 0.3), 1.0);
+        assert!((blade_ao(0.5, 0.3) - 0.65).abs() < 1e-6);
+        assert_eq!(masked_light(0.2, 0.0), 1.0, "no neighbours, no shadow");
+        assert!((masked_light(0.2, 0.5) - 0.6).abs() < 1e-6);
+        assert!((masked_light(0.2, 1.0) - 0.2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_btf_weights_are_spherical_barycentric() {
+        // At a baked direction, all of its weight.
+        for (i, d) in BTF_DIRECTIONS.iter().enumerate() {
+            let w = btf_weights(*d);
+            assert!((w[i] - 1.0).abs() < 1e-5, "{d}: {w:?}");
+        }
+        // Eq. A.6 itself for a light in the X+ Y+ Z+ quadrant: α_x = A(LBC)/(π/2).
+        let l = Vec3::new(0.3, 0.8, 0.5).normalize();
+        let a_lbc = (l.z / (l.z * l.z + l.x * l.x).sqrt()).acos()
+            + (l.y / (l.x * l.x + l.y * l.y).sqrt()).acos()
+            + (-l.y * l.z / ((l.z * l.z + l.x * l.x).sqrt() * (l.x * l.x + l.y * l.y).sqrt()))
+                .acos()
+            - std::f32::consts::PI;
+        let w = btf_weights(l);
+        assert!(
+            (w[1] - a_lbc / std::f32::consts::FRAC_PI_2).abs() < 1e-4,
+            "{w:?} vs {a_lbc}"
+        );
+        assert_eq!((w[2], w[4]), (0.0, 0.0));
+        // On the great circle between Y+ and X+, Z+ gets nothing and the rest splits by angle.
+        let mid = Vec3::new(1.0, 1.0, 0.0).normalize();
+        let w = btf_weights(mid);
+        assert!(w[3].abs() < 1e-5 && (w[0] - 0.5).abs() < 1e-4 && (w[1] - 0.5).abs() < 1e-4);
+        // Random lights: the weights sum to 1, lie in [0, 1], and change continuously across
+        // quadrant boundaries (x or z crossing 0).
+        let mut rng = SplitMix64::new(5);
+        for _ in 0..10_000 {
+            let l = Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(0.0, 1.0),
+                rng.range(-1.0, 1.0),
+            );
+            if l.length() < 0.1 {
+                continue;
+            }
+            let w = btf_weights(l);
+            assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+            assert!(w.iter().all(|v| (-1e-6..=1.0 + 1e-6).contains(v)));
+            let across = btf_weights(Vec3::new(-l.x.signum() * 1e-6, l.y, l.z));
+            let here = btf_weights(Vec3::new(l.x.signum() * 1e-6, l.y, l.z));
+            let jump: f32 = across.iter().zip(&here).map(|(a, b)| (a - b).abs()).sum();
+            assert!(jump < 1e-3, "{l}: {here:?} vs {across:?}");
+        }
+        // Below the horizon: as at the horizon.
+        let below = btf_weights(Vec3::new(1.0, -0.5, 0.0));
+        assert!((below[1] - 1.0).abs() < 1e-5);
+    }
+}
