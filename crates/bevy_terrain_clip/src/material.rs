@@ -238,8 +238,10 @@ impl MaterialExtension for ClipmapExtension {
 
 /// A flat terrain patch in the XZ plane: `quads × quads` cells over the world square
 /// `[world_min, world_min + size]`, positions relative to `anchor` (place the entity there), and
-/// texture coordinates `uv_of(world point)` evaluated in f64 — exact however far the patch is
-/// from the world origin.
+/// texture coordinates `uv_of(world point)` evaluated in f64. The texture coordinates are what
+/// a stack *without* a mapping is sampled by; a stack with one samples at the fragment's
+/// position, so the patch only has to lie where the ground is (in render space under the
+/// [`RenderOrigin`](crate::RenderOrigin)).
 pub fn flat_patch_mesh(
     world_min: DVec2,
     size: f64,

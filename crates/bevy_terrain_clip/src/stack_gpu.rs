@@ -144,7 +144,9 @@ pub struct ClipStackTexture {
     pub center_uv: [f64; 2],
     /// Work allowed per frame: subtiles, bytes, or milliseconds of the streaming system.
     pub budget: UpdateBudget,
-    /// Where the texture lies in the world; with one, the centre of detail follows the camera.
+    /// Where the texture lies in the world; with one, the centre of detail follows the camera
+    /// and the material samples at each fragment's position; without, at the mesh's texture
+    /// coordinates.
     pub mapping: Option<TextureMapping>,
     /// Shown where there is no data ([`ClipmapSettings::no_data_color`]).
     pub no_data_color: Color,
