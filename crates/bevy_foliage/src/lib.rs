@@ -26,7 +26,7 @@
 //! The crate is split by role: the algorithms are plain Rust modules with no render types
 //! (`pruning::{leaves, cells, visibility, mask, bake, extract, selection, appearance, format,
 //! gltf, procedural}`, `forest::{cache, feedback, lod, manager, hlod}`,
-//! `impostor::{cloud, atlas, texture, format}`, `grass::{patch, density, transition, quadtree,
+//! `impostor::{cloud, atlas, texture, format}`, `grass::{patch, mesh, density, transition, quadtree,
 //! lighting, ground, slice_mip}`, [`distance`]); the main-world ECS code lives in
 //! `components`, `systems`, `store`, `spawn`, `bake` and `assets` modules; the render-world code
 //! sits beside its WGSL (`pruning::render` with `prune.wgsl`, `pruning::material` with the leaf

@@ -5,7 +5,7 @@
 //!
 //! This module holds the plain-Rust core so far: [`patch`] (the base patch, its stratified roots
 //! and density thresholds, the mirrored versions of eq. 4.9, blade strips along a ballistic
-//! curve), [`quadtree`] (the implicit quadtree of cells and macro-cells walked by frustum and
+//! curve), [`mesh`] (the base patch as one mesh carrying each blade's threshold), [`quadtree`] (the implicit quadtree of cells and macro-cells walked by frustum and
 //! distance), [`density`] (density maps), [`transition`] (the weights of eq. 4.3–4.5 and 4.14 and the
 //! complementary opacities of algorithm 1 and eq. 4.6), [`slice_mip`] (the slices' custom mip
 //! filter), [`lighting`] (eq. 4.1, the blade ambient occlusion, the shadow mask's eq. 4.7, the
@@ -16,6 +16,7 @@
 pub mod density;
 pub mod ground;
 pub mod lighting;
+pub mod mesh;
 pub mod patch;
 pub mod quadtree;
 pub mod slice_mip;

@@ -1,0 +1,117 @@
+//! The base patch as a mesh (Boulanger 2008, thesis §4.2.2): every blade's two-sided quad strip
+//! ([`blade_strip`]) in one triangle list, instanced on the grid cells near the eye. Each vertex
+//! carries what the blade shaders need beside its position: texture coordinates across and up
+//! the blade (`UV_0`), the blade's density threshold and the vertex's height fraction (`UV_1`:
+//! the density test of §4.2.4 and the ambient occlusion rising with height), and the strip's
+//! normal (lighting is two-sided, eq. 4.1, so either face's normal will do).
+
+use super::patch::{BasePatch, blade_strip};
+use bevy::asset::RenderAssetUsages;
+use bevy::math::Vec3;
+use bevy::mesh::{Indices, Mesh, PrimitiveTopology};
+
+/// The mesh of `patch`, blades `width` wide at the root with `segments` segments each.
+pub fn patch_mesh(patch: &BasePatch, width: f32, segments: u32) -> Mesh {
+    let segments = segments.max(1);
+    let per_blade = 2 * (segments as usize + 1);
+    let n = patch.blades.len() * per_blade;
+    let (mut positions, mut normals) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let (mut uv0, mut uv1) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut indices = Vec::with_capacity(patch.blades.len() * segments as usize * 6);
+    for blade in &patch.blades {
+        let base = positions.len() as u32;
+        let strip = blade_strip(blade, width, segments);
+        let across = Vec3::new(-blade.lean.y, 0.0, blade.lean.x);
+        for (k, (p, h)) in strip.iter().enumerate() {
+            // The normal of the strip at this point: across × the curve's tangent.
+            let t = (k / 2) as f32 / segments as f32;
+            let tangent = (blade.point((t + 1e-3).min(1.0)) - blade.point((t - 1e-3).max(0.0)))
+                .normalize_or(Vec3::Y);
+            let normal = across.cross(tangent).normalize_or(Vec3::Z);
+            positions.push(p.to_array());
+            normals.push(normal.to_array());
+            uv0.push([(k % 2) as f32, *h]);
+            uv1.push([blade.threshold, *h]);
+        }
+        for s in 0..segments {
+            let a = base + 2 * s;
+            indices.extend_from_slice(&[a, a + 1, a + 2, a + 1, a + 3, a + 2]);
+        }
+    }
+    let mut mesh = Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::RENDER_WORLD | RenderAssetUsages::MAIN_WORLD,
+    );
+    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_UV_0, uv0);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_UV_1, uv1);
+    mesh.insert_indices(Indices::U32(indices));
+    mesh
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grass::patch::PatchSettings;
+    use bevy::mesh::VertexAttributeValues;
+
+    #[test]
+    fn every_blade_is_one_strip_carrying_its_threshold() {
+        let settings = PatchSettings {
+            strata: 6,
+            ..default_settings()
+        };
+        let patch = BasePatch::generate(&settings);
+        let segments = 4;
+        let mesh = patch_mesh(&patch, settings.width, segments);
+        let per_blade = 2 * (segments as usize + 1);
+        assert_eq!(mesh.count_vertices(), patch.blades.len() * per_blade);
+        let Some(VertexAttributeValues::Float32x2(uv1)) = mesh.attribute(Mesh::ATTRIBUTE_UV_1)
+        else {
+            panic!("UV_1");
+        };
+        let Some(VertexAttributeValues::Float32x3(normals)) =
+            mesh.attribute(Mesh::ATTRIBUTE_NORMAL)
+        else {
+            panic!("normals");
+        };
+        let Some(VertexAttributeValues::Float32x3(positions)) =
+            mesh.attribute(Mesh::ATTRIBUTE_POSITION)
+        else {
+            panic!("positions");
+        };
+        let Some(Indices::U32(indices)) = mesh.indices() else {
+            panic!("indices");
+        };
+        assert_eq!(indices.len(), patch.blades.len() * segments as usize * 6);
+        for triangle in indices.chunks(3) {
+            // A triangle never joins two blades, and its vertices carry that blade's threshold.
+            let blade = triangle[0] as usize / per_blade;
+            assert!(triangle.iter().all(|&i| i as usize / per_blade == blade));
+            for &i in triangle {
+                assert_eq!(uv1[i as usize][0], patch.blades[blade].threshold);
+            }
+            // Not degenerate but for the tip's (which narrows to a point).
+            let [a, b, c] = [0, 1, 2].map(|k| Vec3::from(positions[triangle[k] as usize]));
+            let area = (b - a).cross(c - a).length();
+            let at_tip = triangle
+                .iter()
+                .all(|&i| (i as usize % per_blade) >= per_blade - 4);
+            assert!(at_tip || area > 1e-8, "degenerate triangle {triangle:?}");
+        }
+        for (i, n) in normals.iter().enumerate() {
+            let n = Vec3::from(*n);
+            let blade = &patch.blades[i / per_blade];
+            let across = Vec3::new(-blade.lean.y, 0.0, blade.lean.x);
+            assert!((n.length() - 1.0).abs() < 1e-4 && n.dot(across).abs() < 1e-4);
+        }
+        // Heights from 0 at the roots to the blade's height at the tips.
+        let tallest = positions.iter().map(|p| p[1]).fold(0.0f32, f32::max);
+        assert!(tallest <= settings.height.1 + 1e-6 && tallest > settings.height.0);
+    }
+
+    fn default_settings() -> PatchSettings {
+        PatchSettings::default()
+    }
+}
