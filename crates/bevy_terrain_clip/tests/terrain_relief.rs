@@ -171,6 +171,27 @@ fn relief_harness(
     Some((harness, terrain))
 }
 
+/// Renders a frame, saves it under the artifacts as `file` (when given), and returns it with the
+/// patches the terrain drew.
+fn render_patches(
+    harness: &mut RenderHarness,
+    terrain: Entity,
+    file: Option<&str>,
+) -> (RgbaImage, TerrainPatches) {
+    let image = harness.render().unwrap();
+    if let Some(file) = file {
+        image
+            .save_png(bevy_nature_harness::artifacts_dir().join(file))
+            .ok();
+    }
+    let patches = harness
+        .world_mut()
+        .get::<TerrainPatches>(terrain)
+        .unwrap()
+        .clone();
+    (image, patches)
+}
+
 fn is_background(image: &RgbaImage, x: u32, y: u32) -> bool {
     let i = ((y * image.width + x) * 4) as usize;
     let p = &image.data[i..i + 3];
@@ -215,25 +236,21 @@ fn the_silhouette_of_the_relief_is_where_the_cpu_puts_its_vertices() {
     ) else {
         return;
     };
-    let image = harness.render().unwrap();
-    image
-        .save_png(bevy_nature_harness::artifacts_dir().join("terrain_relief_silhouette.png"))
-        .ok();
-    let (patches, material) = {
+    let (image, patches) =
+        render_patches(&mut harness, terrain, Some("terrain_relief_silhouette.png"));
+    let material = {
         let world = harness.world_mut();
-        let patches = world.get::<TerrainPatches>(terrain).unwrap().clone();
         let handle = world
             .get::<TerrainGeometry>(terrain)
             .unwrap()
             .material
             .clone();
-        let relief = world
+        world
             .resource::<Assets<ClipmapMaterial>>()
             .get(&handle)
             .unwrap()
             .extension
-            .relief;
-        (patches, relief)
+            .relief
     };
     let grid = patches.grid.unwrap();
     let layers = material.height_layers();
@@ -356,15 +373,8 @@ fn a_grazing_view_over_the_relief_shows_no_cracks() {
     ) else {
         return;
     };
-    let image = harness.render().unwrap();
-    image
-        .save_png(bevy_nature_harness::artifacts_dir().join("terrain_relief_grazing.png"))
-        .ok();
-    let patches = harness
-        .world_mut()
-        .get::<TerrainPatches>(terrain)
-        .unwrap()
-        .clone();
+    let (image, patches) =
+        render_patches(&mut harness, terrain, Some("terrain_relief_grazing.png"));
     let levels: std::collections::BTreeSet<u8> = patches
         .selection
         .patches
@@ -435,13 +445,7 @@ fn the_default_precision_keeps_the_silhouette_within_a_pixel_of_the_full_mesh() 
             .unwrap()
             .precision = precision;
         harness.run_frames(3).unwrap();
-        let image = harness.render().unwrap();
-        let patches = harness
-            .world_mut()
-            .get::<TerrainPatches>(terrain)
-            .unwrap()
-            .clone();
-        (image, patches)
+        render_patches(&mut harness, terrain, None)
     };
     let (default_image, default) = render_at(TerrainPrecision::VertexPixels(DEFAULT_VERTEX_PIXELS));
     let (coarse_image, coarse) =
@@ -543,18 +547,11 @@ fn relief_10_6_m_from_the_origin_draws_as_at_the_origin() {
             },
             camera(),
         )?;
-        let image = harness.render().unwrap();
-        image
-            .save_png(
-                bevy_nature_harness::artifacts_dir().join(format!("terrain_relief_far_{tag}.png")),
-            )
-            .ok();
-        let patches = harness
-            .world_mut()
-            .get::<TerrainPatches>(terrain)
-            .unwrap()
-            .clone();
-        Some((image, patches))
+        Some(render_patches(
+            &mut harness,
+            terrain,
+            Some(&format!("terrain_relief_far_{tag}.png")),
+        ))
     };
     let Some((far, far_patches)) = render(DVec2::ZERO, DVec3::new(1.0e6, 0.0, 1.0e6), "10e6")
     else {
