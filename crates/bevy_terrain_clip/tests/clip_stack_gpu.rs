@@ -194,18 +194,7 @@ fn gpu_layers_hold_the_pyramid_texels_of_their_toroidal_slots() {
         let world = harness.world_mut();
         let clip = {
             let mut images = world.resource_mut::<Assets<Image>>();
-            ClipStackTexture::from_settings(
-                source,
-                &ClipmapSettings {
-                    clip_size: CLIP,
-                    subtile_size: SUBTILE,
-                    cache_tiles: 64,
-                    budget: UpdateBudget::Subtiles(16),
-                    ..default()
-                },
-                [0.37, 0.61],
-                &mut images,
-            )
+            ClipStackTexture::from_settings(source, &stack_settings(), [0.37, 0.61], &mut images)
         };
         world.spawn(clip).id()
     };
@@ -242,6 +231,18 @@ fn gpu_layers_hold_the_pyramid_texels_of_their_toroidal_slots() {
     // Only the subtiles that entered the windows were uploaded, not the whole stack.
     assert!(entering > 0 && entering < 64, "{entering}");
     assert_eq!(uploaded, entering as usize);
+}
+
+/// The stacks' sizes in these tests: a `CLIP`-texel clip of `SUBTILE`-texel subtiles, 64 cached
+/// tiles, 16 subtiles a frame.
+fn stack_settings() -> ClipmapSettings {
+    ClipmapSettings {
+        clip_size: CLIP,
+        subtile_size: SUBTILE,
+        cache_tiles: 64,
+        budget: UpdateBudget::Subtiles(16),
+        ..default()
+    }
 }
 
 /// A height that says where it was sampled: a different metre value for every level and texel
@@ -290,13 +291,7 @@ fn height_layers_hold_the_pyramid_heights_exactly() {
         return;
     };
     harness.app_mut().add_plugins(TerrainClipPlugin);
-    let settings = ClipmapSettings {
-        clip_size: CLIP,
-        subtile_size: SUBTILE,
-        cache_tiles: 64,
-        budget: UpdateBudget::Subtiles(16),
-        ..default()
-    };
+    let settings = stack_settings();
     let (heights, imagery_as_heights, heights_as_imagery) = {
         let world = harness.world_mut();
         let mut images = world.resource_mut::<Assets<Image>>();
@@ -413,13 +408,7 @@ fn edited_settings_apply_to_live_stacks() {
             let mut images = world.resource_mut::<Assets<Image>>();
             ClipStackTexture::from_settings(
                 Arc::new(ProceduralTileSource::new(64, 6, address_texel)),
-                &ClipmapSettings {
-                    clip_size: CLIP,
-                    subtile_size: SUBTILE,
-                    cache_tiles: 64,
-                    budget: UpdateBudget::Subtiles(16),
-                    ..default()
-                },
+                &stack_settings(),
                 [0.37, 0.61],
                 &mut images,
             )
