@@ -26,8 +26,9 @@
 //! The crate is split by role: the algorithms are plain Rust modules with no render types
 //! (`pruning::{leaves, cells, visibility, mask, bake, extract, selection, appearance, format,
 //! gltf, procedural}`, `forest::{cache, feedback, lod, manager, hlod}`,
-//! `impostor::{cloud, atlas, texture, format}`, `grass::{patch, mesh, density, transition, quadtree,
-//! lighting, ground, slice_mip}`, [`distance`]); the main-world ECS code lives in
+//! `impostor::{cloud, atlas, texture, format}`, `grass::{patch, density, transition, quadtree,
+//! lighting, ground, slice_mip}`, [`distance`]); meshes are built from them in `meshes`,
+//! `pruning::slot_mesh` and `grass::mesh`; the main-world ECS code lives in
 //! `components`, `systems`, `store`, `spawn`, `bake` and `assets` modules; the render-world code
 //! sits beside its WGSL (`pruning::render` with `prune.wgsl`, `pruning::material` with the leaf
 //! shaders, `impostor::bake` with `impostor_bake.wgsl`).
