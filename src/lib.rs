@@ -39,6 +39,7 @@ impl PluginGroup for NaturePlugins {
     fn build(self) -> PluginGroupBuilder {
         PluginGroupBuilder::start::<Self>()
             .add(foliage::FoliagePlugin)
+            .add(foliage::grass::GrassPlugin)
             .add(terrain_clip::TerrainClipPlugin)
             .add(soft_shadows::SoftShadowsPlugin)
             .add(NatureGluePlugin)

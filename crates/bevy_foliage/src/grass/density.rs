@@ -136,6 +136,11 @@ impl DensityMap {
         Self::new(width, height, values, min, size)
     }
 
+    /// The densities, row-major (row 0 at `min.z`), each in `[0, 1]`.
+    pub fn values(&self) -> &[f32] {
+        &self.values
+    }
+
     /// Texels across and down.
     pub fn dimensions(&self) -> (u32, u32) {
         (self.width, self.height)

@@ -14,10 +14,17 @@
 //! next.
 
 pub mod density;
+pub mod field;
 pub mod ground;
 pub mod lighting;
+pub mod material;
 pub mod mesh;
 pub mod patch;
+pub mod plugin;
 pub mod quadtree;
 pub mod slice_mip;
+pub mod systems;
 pub mod transition;
+
+pub use field::{GrassField, GrassFieldError, GrassSettings, GrassSpecies};
+pub use plugin::{GrassPlugin, GrassSystems};

@@ -13,9 +13,11 @@
 
 use crate::rng::SplitMix64;
 use bevy::math::{Vec2, Vec3};
+use bevy::reflect::Reflect;
 
 /// How the base patch's blades are made.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Reflect)]
+#[reflect(Debug, PartialEq)]
 pub struct PatchSettings {
     /// Side of the square patch (m; 0.5 in the thesis' figures).
     pub size: f32,
@@ -44,6 +46,70 @@ impl Default for PatchSettings {
             segments: 4,
             seed: 4,
         }
+    }
+}
+
+impl PatchSettings {
+    /// Most strata a side: `256²` blades in one patch is already far denser than grass grows.
+    pub const MAX_STRATA: u32 = 256;
+
+    /// These settings with unusable values replaced, and what was replaced (sizes not finite or
+    /// not positive, empty ranges, strata or segments out of `1..=MAX_STRATA` / `1..=16`).
+    pub fn sanitized(&self) -> (Self, Vec<String>) {
+        let d = Self::default();
+        let mut s = *self;
+        let mut fixes = Vec::new();
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        if !positive(s.size) {
+            fixes.push(format!(
+                "patch size {} must be positive: using {}",
+                s.size, d.size
+            ));
+            s.size = d.size;
+        }
+        if !(1..=Self::MAX_STRATA).contains(&s.strata) {
+            let fixed = s.strata.clamp(1, Self::MAX_STRATA);
+            fixes.push(format!(
+                "strata {} outside 1..={}: using {fixed}",
+                s.strata,
+                Self::MAX_STRATA
+            ));
+            s.strata = fixed;
+        }
+        if !(positive(s.height.0) && positive(s.height.1) && s.height.0 <= s.height.1) {
+            fixes.push(format!(
+                "blade heights {:?} must be positive and ordered: using {:?}",
+                s.height, d.height
+            ));
+            s.height = d.height;
+        }
+        if !positive(s.width) {
+            fixes.push(format!(
+                "blade width {} must be positive: using {}",
+                s.width, d.width
+            ));
+            s.width = d.width;
+        }
+        if !(s.bend.0.is_finite()
+            && s.bend.1.is_finite()
+            && 0.0 <= s.bend.0
+            && s.bend.0 <= s.bend.1)
+        {
+            fixes.push(format!(
+                "bend {:?} must be non-negative and ordered: using {:?}",
+                s.bend, d.bend
+            ));
+            s.bend = d.bend;
+        }
+        if !(1..=16).contains(&s.segments) {
+            let fixed = s.segments.clamp(1, 16);
+            fixes.push(format!(
+                "segments {} outside 1..=16: using {fixed}",
+                s.segments
+            ));
+            s.segments = fixed;
+        }
+        (s, fixes)
     }
 }
 
@@ -307,5 +373,24 @@ mod tests {
         assert!((strip[0].0.distance(strip[1].0) - 0.02).abs() < 1e-6);
         assert!(strip[8].0.distance(strip[9].0) < 1e-6);
         assert_eq!((strip[0].1, strip[9].1), (0.0, 1.0));
+    }
+
+    #[test]
+    fn absurd_patch_settings_are_replaced_and_named() {
+        let bad = PatchSettings {
+            size: f32::NAN,
+            strata: 100_000,
+            height: (0.5, 0.1),
+            width: -1.0,
+            bend: (f32::INFINITY, 0.0),
+            segments: 0,
+            seed: 1,
+        };
+        let (fixed, fixes) = bad.sanitized();
+        assert_eq!(fixes.len(), 6, "{fixes:?}");
+        assert_eq!(fixed.strata, PatchSettings::MAX_STRATA);
+        assert_eq!(fixed.segments, 1);
+        assert_eq!(fixed.sanitized().1, Vec::<String>::new());
+        assert_eq!(PatchSettings::default().sanitized().1, Vec::<String>::new());
     }
 }

@@ -11,8 +11,11 @@
 //! blades change representation. ω narrows near the ends of the weight's range (fig. 4.13) so no
 //! blade stays semi-transparent once the transition is over.
 
+use bevy::reflect::Reflect;
+
 /// The user distances of fig. 4.11 (m) and the transition window of fig. 4.13.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Reflect)]
+#[reflect(Debug, PartialEq)]
 pub struct TransitionDistances {
     /// Geometry alone up to here.
     pub min_geom: f32,
@@ -178,6 +181,14 @@ pub fn geometry_opacity(t: &TransitionDistances, d: f32, ld: f32, dth: f32) -> f
     ((dth - (w - omega) * ld) / (2.0 * omega * ld)).clamp(0.0, 1.0)
 }
 
+/// The 4 × 4 ordered-dither threshold of pixel `(x, y)`, in ]0, 1[: a fragment of opacity `α`
+/// is kept where `α` exceeds it, so a fraction `α` of an evenly covered region's pixels stay —
+/// how the shaders turn the opacities above into coverage without sorting.
+pub fn ordered_dither(x: u32, y: u32) -> f32 {
+    const M: [u32; 16] = [0, 8, 2, 10, 12, 4, 14, 6, 3, 11, 1, 9, 15, 7, 13, 5];
+    (M[((y & 3) * 4 + (x & 3)) as usize] as f32 + 0.5) / 16.0
+}
+
 /// The opacities a blade gets from each representation at distance `d` (before the discard).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BladeOpacity {
@@ -331,5 +342,17 @@ mod tests {
             near_partial < 0.03,
             "{near_partial} of the blades semi-transparent near"
         );
+    }
+
+    #[test]
+    fn the_dither_keeps_the_opacity_s_fraction_of_every_4_by_4_block() {
+        for k in 0..=16 {
+            let alpha = k as f32 / 16.0;
+            let kept = (0..4)
+                .flat_map(|y| (0..4).map(move |x| (x, y)))
+                .filter(|&(x, y)| alpha > ordered_dither(x + 8, y + 4))
+                .count();
+            assert_eq!(kept, k, "opacity {alpha}");
+        }
     }
 }

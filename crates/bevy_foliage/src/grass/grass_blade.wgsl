@@ -1,0 +1,93 @@
+// Grass blades as geometry (Boulanger 2008, thesis §4.2.2, §4.2.4–4.2.5): the base patch's
+// strips, Bevy's PBR lighting with diffuse transmission standing for eq. 4.1's γ, ambient
+// occlusion rising with height, and each fragment kept or not by its blade's density threshold
+// and the geometry opacity of eq. 4.6, turned into coverage by an ordered dither. The prepass
+// and shadow passes run the same test, so the blades' depth and shadows match what is drawn.
+//
+// `uv_b` carries (blade threshold, height fraction) per vertex (`grass::mesh`).
+#import bevy_pbr::pbr_fragment::pbr_input_from_standard_material
+#ifdef PREPASS_PIPELINE
+#import bevy_pbr::prepass_io::{VertexOutput, FragmentOutput}
+#ifdef MOTION_VECTOR_PREPASS
+#import bevy_pbr::pbr_prepass_functions::calculate_motion_vector
+#endif
+#else
+#import bevy_pbr::forward_io::{VertexOutput, FragmentOutput}
+#import bevy_pbr::pbr_functions::{apply_pbr_lighting, main_pass_post_lighting_processing}
+#endif
+#import bevy_foliage::grass_functions as grass
+
+struct GrassBladeParams {
+    // xyz: the eye the transitions are measured from (the field's camera, so the shadow pass
+    // keeps the same blades).
+    eye: vec4<f32>,
+    // (min_geom, max_geom, min_btf, max_btf)
+    distances: vec4<f32>,
+    // (ω_max, ω₀, max_silhouettes, silhouette ε)
+    window: vec4<f32>,
+    // The density map's rectangle (min.x, min.z, size.x, size.z).
+    density_rect: vec4<f32>,
+    // rgb: root colour; w: ambient occlusion at the root.
+    root_color: vec4<f32>,
+    // rgb: tip colour.
+    tip_color: vec4<f32>,
+}
+
+@group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> blade: GrassBladeParams;
+@group(#{MATERIAL_BIND_GROUP}) @binding(101) var density_map: texture_2d<f32>;
+
+// Algorithm 1 / eq. 4.6 at this fragment: is the blade point drawn here?
+fn blade_kept(world: vec3<f32>, threshold: f32, frag: vec2<f32>) -> bool {
+    let ld = grass::density_at(density_map, blade.density_rect, world.xz);
+    let d = distance(world, blade.eye.xyz);
+    let opacity = grass::geometry_opacity(blade.distances, blade.window, d, ld, threshold);
+    return opacity >= grass::DISCARD && opacity > grass::dither(frag);
+}
+
+#ifdef PREPASS_PIPELINE
+#ifdef PREPASS_FRAGMENT
+@fragment
+fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> FragmentOutput {
+    if !blade_kept(in.world_position.xyz, in.uv_b.x, in.position.xy) {
+        discard;
+    }
+    var out: FragmentOutput;
+#ifdef NORMAL_PREPASS
+    let n = normalize(select(-in.world_normal, in.world_normal, is_front));
+    out.normal = vec4(n * 0.5 + vec3(0.5), 1.0);
+#endif
+#ifdef UNCLIPPED_DEPTH_ORTHO_EMULATION
+    out.frag_depth = in.unclipped_depth;
+#endif
+#ifdef MOTION_VECTOR_PREPASS
+    out.motion_vector = calculate_motion_vector(in.world_position, in.previous_world_position);
+#endif
+    return out;
+}
+#else
+@fragment
+fn fragment(in: VertexOutput) {
+    if !blade_kept(in.world_position.xyz, in.uv_b.x, in.position.xy) {
+        discard;
+    }
+}
+#endif
+#else
+@fragment
+fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> FragmentOutput {
+    if !blade_kept(in.world_position.xyz, in.uv_b.x, in.position.xy) {
+        discard;
+    }
+    var pbr_input = pbr_input_from_standard_material(in, is_front);
+    // kd rising from root to tip; the ambient term darkened by the blade's occlusion (eq. 4.1's
+    // ao, §4.2.2), the direct light not.
+    let h = clamp(in.uv_b.y, 0.0, 1.0);
+    pbr_input.material.base_color = vec4(mix(blade.root_color.rgb, blade.tip_color.rgb, h), 1.0);
+    let ao = mix(blade.root_color.w, 1.0, h);
+    pbr_input.diffuse_occlusion *= ao;
+    var out: FragmentOutput;
+    out.color = apply_pbr_lighting(pbr_input);
+    out.color = main_pass_post_lighting_processing(pbr_input, out.color);
+    return out;
+}
+#endif

@@ -1,0 +1,358 @@
+//! The main-world grass systems: each [`GrassField`] gets its base patch, mesh, density map and
+//! material once (and again when it changes); every frame the cell quadtree is walked from the
+//! field's camera (§4.2.7.2) and the cells near enough for blade geometry are kept as entities —
+//! one per cell, the patch mesh placed by a transform that mirrors it (eq. 4.9) — spawned and
+//! despawned as the camera moves, so Bevy batches them as instances of one mesh and material.
+
+use super::density::DensityMap;
+use super::field::{GrassField, GrassFieldError, GrassSettings};
+use super::material::{
+    GrassBladeExtension, GrassBladeMaterial, GrassBladeParams, blade_material, density_image,
+    density_map_from_image,
+};
+use super::mesh::patch_mesh;
+use super::patch::{BasePatch, Mirror};
+use super::quadtree::{CellGrid, CellNode, CellView, GroundBounds, select_cells};
+use bevy::camera::primitives::Frustum;
+use bevy::diagnostic::{DiagnosticPath, Diagnostics};
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+use std::time::Instant;
+
+/// Blades drawn as geometry this frame (the patch's blades times the cells drawn; the density
+/// test discards some of them on the GPU).
+pub const GEOMETRY_BLADES: DiagnosticPath = DiagnosticPath::const_new("grass/geometry_blades");
+/// Cells drawn with blade geometry this frame.
+pub const GEOMETRY_CELLS: DiagnosticPath = DiagnosticPath::const_new("grass/geometry_cells");
+/// Milliseconds the cell walk and the entity updates took this frame (CPU).
+pub const SELECT_MS: DiagnosticPath = DiagnosticPath::const_new("grass/select_ms");
+
+/// Picks the camera a grass field is walked from (else: the active 3D camera of lowest order).
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct GrassCamera;
+
+/// What a field was built into.
+#[derive(Component)]
+pub struct GrassFieldState {
+    /// The base patch.
+    pub patch: BasePatch,
+    /// The cell grid over the field.
+    pub grid: CellGrid,
+    /// The field's rectangle (min corner x, z; size).
+    pub rect: Vec4,
+    /// The density map in use.
+    pub density: DensityMap,
+    /// The density image the map was read from (none: full density).
+    density_source: Option<AssetId<Image>>,
+    mesh: Handle<Mesh>,
+    material: Handle<GrassBladeMaterial>,
+    cells: HashMap<(u32, u32), Entity>,
+    /// Cells drawn as blade geometry in the last frame.
+    pub geometry_cells: u32,
+}
+
+/// Marks a cell entity of blade geometry (a child of its field).
+#[derive(Component, Clone, Copy, Debug)]
+pub struct GrassCell {
+    /// Cell column.
+    pub x: u32,
+    /// Cell row (along z).
+    pub z: u32,
+}
+
+/// Flat ground at the field's height.
+struct FlatGround;
+
+impl GroundBounds for FlatGround {
+    fn height_range(&self, _grid: &CellGrid, _node: CellNode) -> (f32, f32) {
+        (0.0, 0.0)
+    }
+    fn is_flat(&self, _grid: &CellGrid, _node: CellNode) -> bool {
+        true
+    }
+}
+
+/// Most cells a side of a field's grid (2^16: 32 km of 0.5 m patches).
+const MAX_LEVELS: u8 = 16;
+
+/// The grid over a field of `size` centred on `centre` (x, z) with patches of side `cell`.
+pub fn field_grid(centre: Vec2, size: Vec2, cell: f32) -> CellGrid {
+    let across = (size.max_element() / cell).ceil().max(1.0);
+    let levels = (across.log2().ceil() as u8).min(MAX_LEVELS);
+    CellGrid {
+        origin: centre - size / 2.0,
+        cell,
+        levels,
+    }
+}
+
+/// Builds (or rebuilds) a field's patch, mesh, grid and material when it is added or changed.
+pub fn prepare_grass_fields(
+    mut commands: Commands,
+    mut fields: Query<
+        (
+            Entity,
+            &GrassField,
+            &GlobalTransform,
+            Option<&mut GrassFieldState>,
+        ),
+        Changed<GrassField>,
+    >,
+    settings: Res<GrassSettings>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut images: ResMut<Assets<Image>>,
+    mut materials: ResMut<Assets<GrassBladeMaterial>>,
+) {
+    for (entity, field, transform, state) in &mut fields {
+        let (species, fixes) = field.species.sanitized();
+        for fix in fixes {
+            warn!("grass field {entity}: {fix}");
+        }
+        let size = if field.size.is_finite() && field.size.min_element() > 0.0 {
+            field.size
+        } else {
+            warn!(
+                "grass field {entity}: size {} must be positive: using 1 m",
+                field.size
+            );
+            Vec2::ONE
+        };
+        let centre = transform.translation().xz();
+        let min = centre - size / 2.0;
+        let rect = Vec4::new(min.x, min.y, size.x, size.y);
+        let patch = BasePatch::generate(&species.patch);
+        let grid = field_grid(centre, size, species.patch.size);
+        let density = DensityMap::uniform(1.0, min.to_array(), size.to_array())
+            .expect("a positive finite rectangle");
+        let mesh = meshes.add(patch_mesh(
+            &patch,
+            species.patch.width,
+            species.patch.segments,
+        ));
+        let material = materials.add(blade_material(
+            &species,
+            GrassBladeExtension {
+                params: GrassBladeParams::new(&settings, &species, rect, Vec3::ZERO),
+                density: images.add(density_image(&density)),
+            },
+        ));
+        // A rebuilt field starts with no cells: the old ones go.
+        if let Some(old) = state {
+            for &cell in old.cells.values() {
+                commands.entity(cell).despawn();
+            }
+        }
+        commands
+            .entity(entity)
+            .remove::<GrassFieldError>()
+            .insert(GrassFieldState {
+                patch,
+                grid,
+                rect,
+                density,
+                density_source: None,
+                mesh,
+                material,
+                cells: HashMap::default(),
+                geometry_cells: 0,
+            });
+    }
+}
+
+/// Reads each field's density map once its image has loaded; a map that cannot be read is an
+/// error on the entity (and in the log), and the field keeps full density.
+pub fn resolve_density_maps(
+    mut commands: Commands,
+    mut fields: Query<(Entity, &GrassField, &mut GrassFieldState)>,
+    mut images: ResMut<Assets<Image>>,
+    mut materials: ResMut<Assets<GrassBladeMaterial>>,
+) {
+    for (entity, field, mut state) in &mut fields {
+        let Some(handle) = &field.density else {
+            continue;
+        };
+        if state.density_source == Some(handle.id()) {
+            continue;
+        }
+        let Some(image) = images.get(handle) else {
+            continue;
+        };
+        let min = [state.rect.x, state.rect.y];
+        let size = [state.rect.z, state.rect.w];
+        state.density_source = Some(handle.id());
+        match density_map_from_image(image, min, size) {
+            Ok(map) => {
+                let gpu = images.add(density_image(&map));
+                if let Some(mut material) = materials.get_mut(&state.material) {
+                    material.extension.density = gpu;
+                }
+                state.density = map;
+            }
+            Err(e) => {
+                let why = format!("grass field {entity}: density map not used: {e}");
+                error!("{why}; the field grows at full density");
+                commands.entity(entity).insert(GrassFieldError(why));
+            }
+        }
+    }
+}
+
+/// The camera fields are walked from: one marked [`GrassCamera`], else the active 3D camera of
+/// lowest order.
+fn field_camera<'a>(
+    cameras: &'a Query<(&Camera, &GlobalTransform, &Frustum, Has<GrassCamera>), With<Camera3d>>,
+) -> Option<(&'a GlobalTransform, &'a Frustum)> {
+    cameras
+        .iter()
+        .filter(|(camera, ..)| camera.is_active)
+        .min_by_key(|(camera, _, _, marked)| (!*marked, camera.order))
+        .map(|(_, transform, frustum, _)| (transform, frustum))
+}
+
+/// Walks every field's cells from its camera and keeps one entity per cell drawn as blade
+/// geometry.
+#[allow(clippy::too_many_arguments)]
+pub fn update_grass_cells(
+    mut commands: Commands,
+    mut fields: Query<(Entity, &GrassField, &GlobalTransform, &mut GrassFieldState)>,
+    cameras: Query<(&Camera, &GlobalTransform, &Frustum, Has<GrassCamera>), With<Camera3d>>,
+    settings: Res<GrassSettings>,
+    mut materials: ResMut<Assets<GrassBladeMaterial>>,
+    mut diagnostics: Diagnostics,
+) {
+    let started = Instant::now();
+    let Some((camera, frustum)) = field_camera(&cameras) else {
+        return;
+    };
+    let eye = camera.translation();
+    let mut blades = 0u64;
+    let mut cells_drawn = 0u32;
+    for (entity, field, transform, mut state) in &mut fields {
+        let ground_y = transform.translation().y;
+        // The walk in the field's frame (ground at y = 0).
+        let view = CellView {
+            eye: eye - Vec3::Y * ground_y,
+            frustum: Some(frustum.half_spaces.map(|h| {
+                let nd = h.normal_d();
+                Vec4::new(nd.x, nd.y, nd.z, nd.w + nd.y * ground_y)
+            })),
+            max_distance: settings.max_distance,
+            macro_from: settings.transitions.max_btf,
+            split_factor: settings.split_factor,
+            grass_height: field.species.patch.height.1,
+        };
+        let reach = settings.transitions.max_geom;
+        let mut wanted: Vec<(u32, u32)> = Vec::new();
+        if settings.geometry {
+            let selection = select_cells(&state.grid, &FlatGround, &view);
+            let (min, max) = (state.rect.xy(), state.rect.xy() + state.rect.zw());
+            for (node, _) in selection.drawn {
+                if node.level != state.grid.levels {
+                    continue;
+                }
+                let (corner, side) = state.grid.rect(node);
+                // Cells wholly outside the field, or beyond the geometry's reach, draw no blade.
+                if corner.x >= max.x
+                    || corner.y >= max.y
+                    || corner.x + side <= min.x
+                    || corner.y + side <= min.y
+                {
+                    continue;
+                }
+                let nearest = Vec2::new(
+                    view.eye.x.clamp(corner.x, corner.x + side),
+                    view.eye.z.clamp(corner.y, corner.y + side),
+                );
+                let distance = (nearest - view.eye.xz()).length().hypot(view.eye.y);
+                if distance <= reach {
+                    wanted.push((node.x, node.z));
+                }
+            }
+        }
+        // The material follows the camera (the shadow pass measures from it too).
+        if let Some(material) = materials.get(&state.material) {
+            let params = GrassBladeParams::new(
+                &settings,
+                &field.species.sanitized().0,
+                material.extension.params.density_rect,
+                eye,
+            );
+            if params != material.extension.params
+                && let Some(mut material) = materials.get_mut(&state.material)
+            {
+                material.extension.params = params;
+            }
+        }
+        let state = &mut *state;
+        let wanted_set: bevy::platform::collections::HashSet<(u32, u32)> =
+            wanted.iter().copied().collect();
+        state.cells.retain(|key, cell| {
+            let keep = wanted_set.contains(key);
+            if !keep {
+                commands.entity(*cell).despawn();
+            }
+            keep
+        });
+        let field_origin = transform.translation();
+        for &(x, z) in &wanted {
+            if state.cells.contains_key(&(x, z)) {
+                continue;
+            }
+            let (corner, side) = state.grid.rect(CellNode {
+                level: state.grid.levels,
+                x,
+                z,
+            });
+            let mirror = Mirror::of_cell(x as i64, z as i64, field.species.patch.seed);
+            // Mirror::place as a transform: p ↦ corner + (x ? side − p.x : p.x, …).
+            let translation = Vec3::new(
+                corner.x + if mirror.x { side } else { 0.0 },
+                0.0,
+                corner.y + if mirror.z { side } else { 0.0 },
+            );
+            let scale = Vec3::new(
+                if mirror.x { -1.0 } else { 1.0 },
+                1.0,
+                if mirror.z { -1.0 } else { 1.0 },
+            );
+            let local = Transform::from_translation(
+                translation - Vec3::new(field_origin.x, 0.0, field_origin.z),
+            )
+            .with_scale(scale);
+            let cell = commands
+                .spawn((
+                    Name::new("grass cell"),
+                    GrassCell { x, z },
+                    Mesh3d(state.mesh.clone()),
+                    MeshMaterial3d(state.material.clone()),
+                    local,
+                    // Placed now, not one frame late after the next propagation.
+                    transform.mul_transform(local),
+                    ChildOf(entity),
+                ))
+                .id();
+            state.cells.insert((x, z), cell);
+        }
+        state.geometry_cells = wanted.len() as u32;
+        cells_drawn += wanted.len() as u32;
+        blades += wanted.len() as u64 * state.patch.blades.len() as u64;
+    }
+    diagnostics.add_measurement(&GEOMETRY_BLADES, || blades as f64);
+    diagnostics.add_measurement(&GEOMETRY_CELLS, || cells_drawn as f64);
+    diagnostics.add_measurement(&SELECT_MS, || started.elapsed().as_secs_f64() * 1e3);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_grid_covers_the_field_in_a_power_of_two_of_cells() {
+        let grid = field_grid(Vec2::new(10.0, -4.0), Vec2::new(6.0, 3.0), 0.5);
+        // 12 cells across → 16 = 2^4.
+        assert_eq!(grid.levels, 4);
+        assert_eq!(grid.origin, Vec2::new(7.0, -5.5));
+        let grid = field_grid(Vec2::ZERO, Vec2::splat(0.2), 0.5);
+        assert_eq!(grid.levels, 0);
+    }
+}
