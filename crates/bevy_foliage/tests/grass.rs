@@ -255,3 +255,113 @@ fn blade_pass_keeps_the_blades_the_cpu_keeps() {
     // it: the near coverage differs from the window's by more than the tolerance).
     assert!(c2 * 10 < c * 9, "{c2} vs {c}");
 }
+
+/// The slice bake renders, layer by layer, what its CPU reference rasterises: the same texels
+/// covered, the same threshold, colour and lighting where both cover one.
+#[test]
+fn slice_bake_matches_the_cpu_reference() {
+    use bevy_foliage::grass::bake::{GrassSliceBakeRequest, GrassSliceBakeResult};
+    use bevy_foliage::grass::mesh::bake_triangles;
+    use bevy_foliage::grass::slices::{LAYERS, bake_reference};
+    let Some(mut harness) = RenderHarness::for_test("grass_slice_bake", 32, 32) else {
+        return;
+    };
+    harness.app_mut().add_plugins(GrassPlugin);
+    harness.world_mut().spawn(Camera3d::default());
+    let cache =
+        std::env::temp_dir().join(format!("grass_slices_{}.grassslices", std::process::id()));
+    std::fs::remove_file(&cache).ok();
+    let species = GrassSpecies {
+        patch: PatchSettings {
+            strata: 8,
+            width: 0.03,
+            ..default()
+        },
+        ..default()
+    };
+    let entity = harness
+        .world_mut()
+        .spawn(GrassSliceBakeRequest {
+            label: "test grass".into(),
+            species: species.clone(),
+            per_axis: 2,
+            resolution: 32,
+            save_to: Some(cache.clone()),
+        })
+        .id();
+    let mut result = None;
+    for _ in 0..400 {
+        harness.step();
+        if let Some(r) = harness.world_mut().get::<GrassSliceBakeResult>(entity) {
+            result = Some(r.0.clone());
+            break;
+        }
+    }
+    let bake = result.expect("the bake finished").expect("the bake worked");
+    // The cache: the same request again is answered from the file at once, texel for texel as
+    // the file holds it (half floats, as baked).
+    let again = harness
+        .world_mut()
+        .spawn(GrassSliceBakeRequest {
+            label: "test grass again".into(),
+            species: species.clone(),
+            per_axis: 2,
+            resolution: 32,
+            save_to: Some(cache.clone()),
+        })
+        .id();
+    harness.step();
+    let cached = harness
+        .world_mut()
+        .get::<GrassSliceBakeResult>(again)
+        .expect("answered from the cache in one frame")
+        .0
+        .clone()
+        .expect("cached bake");
+    assert_eq!(cached.textures, bake.textures);
+    std::fs::remove_file(&cache).ok();
+    let layout = bake.textures.layout;
+    let patch = BasePatch::generate(&species.patch);
+    let reference = bake_reference(
+        &layout,
+        &species,
+        &bake_triangles(&patch, species.patch.width, species.patch.segments),
+    );
+    let mut worst = (0usize, 0usize, 0usize, String::new());
+    let (mut total_covered, mut total_differ, mut total_off) = (0, 0, 0);
+    for s in 0..layout.slices() {
+        for layer in 0..LAYERS {
+            let (gpu, cpu) = (bake.textures.layer(s, layer), reference.layer(s, layer));
+            let covered = cpu.iter().filter(|t| t[3] > 0.5).count();
+            let differ = gpu
+                .iter()
+                .zip(cpu)
+                .filter(|(g, c)| (g[3] > 0.5) != (c[3] > 0.5))
+                .count();
+            let off = gpu
+                .iter()
+                .zip(cpu)
+                .filter(|(g, c)| g[3] > 0.5 && c[3] > 0.5)
+                .filter(|(g, c)| (0..3).any(|k| (g[k] - c[k]).abs() > 0.004 + 0.01 * c[k].abs()))
+                .count();
+            total_covered += covered;
+            total_differ += differ;
+            total_off += off;
+            if differ + off > worst.1 + worst.2 {
+                worst = (covered, differ, off, format!("slice {s} layer {layer}"));
+            }
+        }
+    }
+    eprintln!(
+        "covered {total_covered}, coverage differs {total_differ}, values off {total_off}; worst {worst:?}"
+    );
+    assert!(total_covered > 5000, "{total_covered}");
+    assert!(
+        total_differ * 100 < total_covered,
+        "{total_differ} of {total_covered}"
+    );
+    assert!(
+        total_off * 100 < total_covered,
+        "{total_off} of {total_covered}"
+    );
+}

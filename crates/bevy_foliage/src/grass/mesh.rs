@@ -6,8 +6,10 @@
 //! normal (lighting is two-sided, eq. 4.1, so either face's normal will do).
 
 use super::patch::{BasePatch, blade_strip};
+use super::slices::BakeVertex;
 use bevy::asset::RenderAssetUsages;
 use bevy::math::Vec3;
+use bevy::mesh::VertexAttributeValues;
 use bevy::mesh::{Indices, Mesh, PrimitiveTopology};
 
 /// The mesh of `patch`, blades `width` wide at the root with `segments` segments each.
@@ -48,6 +50,38 @@ pub fn patch_mesh(patch: &BasePatch, width: f32, segments: u32) -> Mesh {
     mesh.insert_attribute(Mesh::ATTRIBUTE_UV_1, uv1);
     mesh.insert_indices(Indices::U32(indices));
     mesh
+}
+
+/// The triangles of [`patch_mesh`] as the slice bake's CPU reference reads them.
+pub fn bake_triangles(patch: &BasePatch, width: f32, segments: u32) -> Vec<[BakeVertex; 3]> {
+    let mesh = patch_mesh(patch, width, segments);
+    let (
+        Some(VertexAttributeValues::Float32x3(positions)),
+        Some(VertexAttributeValues::Float32x3(normals)),
+        Some(VertexAttributeValues::Float32x2(uv1)),
+        Some(Indices::U32(indices)),
+    ) = (
+        mesh.attribute(Mesh::ATTRIBUTE_POSITION),
+        mesh.attribute(Mesh::ATTRIBUTE_NORMAL),
+        mesh.attribute(Mesh::ATTRIBUTE_UV_1),
+        mesh.indices(),
+    )
+    else {
+        unreachable!("patch_mesh writes these attributes")
+    };
+    let vertex = |i: u32| {
+        let i = i as usize;
+        BakeVertex {
+            position: Vec3::from_array(positions[i]),
+            normal: Vec3::from_array(normals[i]),
+            threshold: uv1[i][0],
+            height_fraction: uv1[i][1],
+        }
+    };
+    indices
+        .chunks_exact(3)
+        .map(|t| [vertex(t[0]), vertex(t[1]), vertex(t[2])])
+        .collect()
 }
 
 #[cfg(test)]

@@ -13,6 +13,7 @@
 //! eq. 4.10–4.12 on curved ground). The slice bake, the render passes and the `GrassPlugin` come
 //! next.
 
+pub mod bake;
 pub mod density;
 pub mod field;
 pub mod ground;
@@ -22,7 +23,9 @@ pub mod mesh;
 pub mod patch;
 pub mod plugin;
 pub mod quadtree;
+pub mod slice_format;
 pub mod slice_mip;
+pub mod slices;
 pub mod systems;
 pub mod transition;
 

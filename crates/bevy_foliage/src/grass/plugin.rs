@@ -42,6 +42,7 @@ impl Plugin for GrassPlugin {
             app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
         }
         super::material::build(app);
+        super::bake::build(app);
         app.configure_sets(
             PostUpdate,
             (GrassSystems::Prepare, GrassSystems::Cells)

@@ -207,13 +207,21 @@ pub struct BakeSystems;
 /// Registers the bake.
 pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "impostor_bake.wgsl");
-    let idle = BakePipelinesIdle::default();
+    track_pipelines_idle(app);
     app.add_plugins(MaterialPlugin::<ImpostorBakeMaterial>::default())
-        .insert_resource(idle.clone())
         .add_systems(
             Update,
             (start_impostor_bakes, finish_impostor_bakes).chain(),
         );
+}
+
+/// Keeps [`BakePipelinesIdle`] up to date (once, whichever bake registers it first).
+pub(crate) fn track_pipelines_idle(app: &mut App) {
+    if app.world().contains_resource::<BakePipelinesIdle>() {
+        return;
+    }
+    let idle = BakePipelinesIdle::default();
+    app.insert_resource(idle.clone());
     if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
         render_app
             .insert_resource(idle)
@@ -493,9 +501,19 @@ fn start_impostor_bakes(
     }
 }
 
-/// Removes the 256-byte row padding of a texture readback.
+/// Removes the 256-byte row padding of an RGBA8 texture readback.
 fn unpad(padded: &[u8], width: u32, height: u32) -> Option<Vec<u8>> {
-    let row = width as usize * 4;
+    unpad_rows(padded, width, height, 4)
+}
+
+/// Removes the 256-byte row padding of a texture readback of `bytes_per_texel`.
+pub(crate) fn unpad_rows(
+    padded: &[u8],
+    width: u32,
+    height: u32,
+    bytes_per_texel: usize,
+) -> Option<Vec<u8>> {
+    let row = width as usize * bytes_per_texel;
     let stride = row.div_ceil(256) * 256;
     if padded.len() < stride * (height as usize - 1) + row {
         return None;
