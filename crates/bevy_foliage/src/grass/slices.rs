@@ -6,9 +6,9 @@
 //! Every slice image has [`LAYERS`] layers, the thesis' BTF rows: the unlit row (the blades'
 //! ambient reflectance `kd·ao` and coverage), the density-threshold row (the nearest blade's
 //! `dth`, so a slice thins with the density map exactly as the blades do), and for each of the
-//! five baked light directions ([`BTF_DIRECTIONS`]) the blades' direct response `kd·(max(n·l, 0)
-//! + γ·max(−n·l, 0))` (eq. 4.1 without the ambient term) seen from the slice's front and from
-//! its back. At run time the five are blended by the spherical barycentric weights of appendix A.
+//! five baked light directions ([`BTF_DIRECTIONS`]) the blades' direct response
+//! `kd·(max(n·l, 0) + γ·max(−n·l, 0))` (eq. 4.1 without the ambient term) seen from the slice's
+//! front and from its back. At run time the five are blended by the spherical barycentric weights of appendix A.
 //!
 //! Slice `s` is `0..K` across x (slab `[k, k+1]·size/K` in x, seen along −x from its front, +x
 //! from its back), `K..2K` across z, and `2K` the horizontal slice seen from above (front only).
