@@ -365,3 +365,279 @@ fn slice_bake_matches_the_cpu_reference() {
         "{total_off} of {total_covered}"
     );
 }
+
+/// Coverage (non-background fraction) of `regions.0 × regions.1` screen regions.
+fn region_coverage(image: &RgbaImage, regions: (u32, u32)) -> Vec<f64> {
+    let (w, h) = (image.width / regions.0, image.height / regions.1);
+    let mask = {
+        let bg = BACKGROUND.to_srgba();
+        let bg = [bg.red * 255.0, bg.green * 255.0, bg.blue * 255.0].map(|c| c as i32);
+        move |p: [u8; 4]| (0..3).any(|k| (p[k] as i32 - bg[k]).abs() > 24)
+    };
+    let mut out = Vec::new();
+    for ry in 0..regions.1 {
+        for rx in 0..regions.0 {
+            let mut covered = 0;
+            for y in ry * h..(ry + 1) * h {
+                for x in rx * w..(rx + 1) * w {
+                    covered += mask(image.pixel(x, y)) as u32;
+                }
+            }
+            out.push(covered as f64 / (w * h) as f64);
+        }
+    }
+    out
+}
+
+/// A slow dolly over a field across both transition distances: at every step the coverage of
+/// each screen region with geometry, vertical slices and the horizontal slice stays close to the
+/// all-geometry render of the same view — the transitions keep the grass whole. The tolerance is
+/// asymmetric: a region may lose at most 0.05 of its coverage (a hole where one representation
+/// fades before the next comes in is what the transitions exist to prevent), and gain at most
+/// 0.2 — the slices cover a little more than the blades by design: the horizontal slice fills in
+/// behind the vertical ones, and the slices' mips keep the maximum alpha (§4.3.3) so distant
+/// grass does not thin out.
+#[test]
+fn transitions_keep_the_coverage_of_the_all_geometry_field() {
+    let (width, height) = (96u32, 64u32);
+    let Some(mut harness) = RenderHarness::for_test("grass_dolly", width, height) else {
+        return;
+    };
+    let transitions = TransitionDistances {
+        min_geom: 3.0,
+        max_geom: 6.0,
+        min_btf: 9.0,
+        max_btf: 14.0,
+        max_silhouettes: 30.0,
+        ..default()
+    };
+    let all_geometry = TransitionDistances {
+        min_geom: 100.0,
+        max_geom: 101.0,
+        min_btf: 102.0,
+        max_btf: 103.0,
+        max_silhouettes: 104.0,
+        ..default()
+    };
+    harness
+        .app_mut()
+        .add_plugins(GrassPlugin)
+        .insert_resource(ClearColor(BACKGROUND))
+        .insert_resource(GrassSettings {
+            transitions,
+            max_distance: 24.0,
+            slice_per_axis: 4,
+            slice_resolution: 32,
+            ..default()
+        });
+    let species = GrassSpecies {
+        patch: PatchSettings {
+            strata: 6,
+            width: 0.02,
+            ..default()
+        },
+        ..default()
+    };
+    harness.world_mut().spawn(GrassField {
+        size: Vec2::new(12.0, 48.0),
+        species,
+        density: None,
+    });
+    harness.world_mut().spawn((
+        DirectionalLight::default(),
+        Transform::from_xyz(1.0, 3.0, 2.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    let camera = harness
+        .world_mut()
+        .spawn((
+            Camera3d::default(),
+            Msaa::Off,
+            Transform::from_xyz(0.0, 1.2, -20.0).looking_to(Vec3::new(0.0, -0.12, 1.0), Vec3::Y),
+        ))
+        .id();
+    harness.wait_until_ready().expect("pipelines");
+    // Wait for the slice bake.
+    for _ in 0..200 {
+        harness.step();
+        let drawn = harness
+            .world_mut()
+            .query::<&bevy_foliage::grass::systems::GrassFieldState>()
+            .iter(harness.world_mut())
+            .any(|s| s.slice_nodes.0 > 0);
+        if drawn {
+            break;
+        }
+    }
+    let regions = (6, 4);
+    let (mut worst_loss, mut worst_gain): (f64, f64) = (0.0, 0.0);
+    for step in 0..4 {
+        let z = -20.0 + 2.5 * step as f32;
+        harness
+            .world_mut()
+            .get_mut::<Transform>(camera)
+            .unwrap()
+            .translation
+            .z = z;
+        let render = |harness: &mut RenderHarness, t: TransitionDistances, name: &str| {
+            harness
+                .world_mut()
+                .resource_mut::<GrassSettings>()
+                .transitions = t;
+            for _ in 0..6 {
+                harness.step();
+            }
+            harness.wait_until_ready().expect("pipelines");
+            let image = harness.render().unwrap();
+            image
+                .save_png(
+                    bevy_nature_harness::compare::artifacts_dir()
+                        .join(format!("grass_dolly_{step}_{name}.png")),
+                )
+                .ok();
+            image
+        };
+        let mixed = render(&mut harness, transitions, "mixed");
+        let geometry = render(&mut harness, all_geometry, "geometry");
+        let (a, b) = (
+            region_coverage(&mixed, regions),
+            region_coverage(&geometry, regions),
+        );
+        let diffs: Vec<f64> = a.iter().zip(&b).map(|(x, y)| x - y).collect();
+        eprintln!(
+            "step {step}: mixed {:?}\n        geometry {:?}",
+            a.iter().map(|v| format!("{v:.2}")).collect::<Vec<_>>(),
+            b.iter().map(|v| format!("{v:.2}")).collect::<Vec<_>>()
+        );
+        worst_loss = diffs.iter().fold(worst_loss, |w, d| w.max(-d));
+        worst_gain = diffs.iter().fold(worst_gain, |w, d| w.max(*d));
+    }
+    eprintln!("worst region loss {worst_loss:.3}, gain {worst_gain:.3}");
+    assert!(
+        worst_loss <= 0.05,
+        "a region lost {worst_loss} of its coverage"
+    );
+    assert!(worst_gain <= 0.2, "a region gained {worst_gain}");
+}
+
+/// The slice pass keeps, pixel for pixel, the horizontal-slice texels its CPU reference keeps:
+/// seen straight down from far enough that only the horizontal slice is drawn, each pixel
+/// centre on a texel centre, every cell's mirrored version, the density gradient and algorithm
+/// 1's opacity dithered.
+#[test]
+fn slice_pass_keeps_the_texels_the_cpu_keeps() {
+    use bevy_foliage::grass::bake::GrassSliceBakeResult;
+    use bevy_foliage::grass::mesh::HORIZONTAL_SLICE_LIFT;
+    use bevy_foliage::grass::slice_shading::{fragment_opacity, slice_point};
+    use bevy_foliage::grass::slices::{LAYER_THRESHOLD, LAYER_UNLIT, SliceAxis};
+    let Some(mut harness) = RenderHarness::for_test("grass_slice_pass", SIZE, SIZE) else {
+        return;
+    };
+    let resolution = 32u32;
+    let texel = 0.5 / resolution as f32;
+    let view = texel * SIZE as f32;
+    let far = TransitionDistances {
+        min_geom: 1.0,
+        max_geom: 2.0,
+        min_btf: 3.0,
+        max_btf: 4.0,
+        max_silhouettes: 5.0,
+        ..default()
+    };
+    harness
+        .app_mut()
+        .add_plugins(GrassPlugin)
+        .insert_resource(ClearColor(BACKGROUND))
+        .insert_resource(GrassSettings {
+            transitions: far,
+            slice_per_axis: 2,
+            slice_resolution: resolution,
+            ..default()
+        });
+    let density = {
+        let mut images = harness.world_mut().resource_mut::<Assets<Image>>();
+        images.add(gradient_image())
+    };
+    let species = species();
+    harness.world_mut().spawn(GrassField {
+        size: Vec2::splat(2.0),
+        species: species.clone(),
+        density: Some(density),
+    });
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Projection::Orthographic(OrthographicProjection {
+            scaling_mode: ScalingMode::Fixed {
+                width: view,
+                height: view,
+            },
+            ..OrthographicProjection::default_3d()
+        }),
+        Transform::from_translation(EYE).looking_to(Vec3::NEG_Y, Vec3::NEG_Z),
+    ));
+    let mut bake = None;
+    for _ in 0..300 {
+        harness.step();
+        let mut q = harness.world_mut().query::<&GrassSliceBakeResult>();
+        if let Some(r) = q.iter(harness.world_mut()).next() {
+            bake = Some(r.0.clone().expect("slices baked"));
+            break;
+        }
+    }
+    let bake = bake.expect("the bake finished");
+    harness.wait_until_ready().expect("pipelines");
+    for _ in 0..4 {
+        harness.step();
+    }
+    let image = harness.render().unwrap();
+    image
+        .save_png(bevy_nature_harness::compare::artifacts_dir().join("grass_slice_pass.png"))
+        .ok();
+    let gpu = gpu_coverage(&image);
+    let layout = bake.textures.layout;
+    let grid = field_grid(Vec2::ZERO, Vec2::splat(2.0), 0.5);
+    let map = DensityMap::new(2, 1, vec![64.0 / 255.0, 1.0], [-1.0, -1.0], [2.0, 2.0]).unwrap();
+    let mut cpu = vec![false; (SIZE * SIZE) as usize];
+    for py in 0..SIZE {
+        for px in 0..SIZE {
+            let p = Vec3::new(
+                -view / 2.0 + (px as f32 + 0.5) * texel,
+                HORIZONTAL_SLICE_LIFT,
+                -view / 2.0 + (py as f32 + 0.5) * texel,
+            );
+            let sp = slice_point(
+                &layout,
+                &grid,
+                0.0,
+                species.patch.seed,
+                p,
+                SliceAxis::Horizontal,
+                EYE,
+            );
+            let (c, r) = (
+                ((sp.uv.x * resolution as f32) as u32).min(resolution - 1),
+                ((sp.uv.y * resolution as f32) as u32).min(resolution - 1),
+            );
+            let at = (r * resolution + c) as usize;
+            let coverage = bake.textures.layer(sp.slice, LAYER_UNLIT)[at][3];
+            let dth = bake.textures.layer(sp.slice, LAYER_THRESHOLD)[at][0];
+            let ld = map.density_at(p.x, p.z);
+            let o = fragment_opacity(
+                &far,
+                SliceAxis::Horizontal,
+                coverage,
+                dth,
+                p.distance(EYE),
+                ld,
+                1.0,
+            );
+            cpu[(py * SIZE + px) as usize] = o >= DISCARD && o > ordered_dither(px, py);
+        }
+    }
+    let (differ, g, c) = compare(&gpu, &cpu);
+    let (cl, cr) = thirds(&cpu);
+    eprintln!("slice pass: differ {differ}, GPU {g} px, CPU {c} px, CPU thirds {cl:.3}/{cr:.3}");
+    assert!(c > 1500, "{c}");
+    assert!(cl < 0.75 * cr, "{cl} vs {cr}");
+    assert!(differ * 100 < c, "{differ} px differ of {c}");
+}

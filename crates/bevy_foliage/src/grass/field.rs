@@ -111,6 +111,16 @@ pub struct GrassSettings {
     pub split_factor: f32,
     /// Draw blade geometry.
     pub geometry: bool,
+    /// Draw the volume slices (vertical and horizontal) beyond the geometry.
+    pub slices: bool,
+    /// Vertical slices per axis in the base patch (`K`; 1..=32).
+    pub slice_per_axis: u32,
+    /// Texels a side of each slice image (8..=1024).
+    pub slice_resolution: u32,
+    /// A folder to cache slice bakes in (`<species hash>.grassslices`); `None`: bake in memory
+    /// at every start.
+    #[reflect(ignore)]
+    pub slice_cache: Option<std::path::PathBuf>,
 }
 
 impl Default for GrassSettings {
@@ -120,6 +130,10 @@ impl Default for GrassSettings {
             max_distance: 400.0,
             split_factor: 2.0,
             geometry: true,
+            slices: true,
+            slice_per_axis: 4,
+            slice_resolution: 64,
+            slice_cache: None,
         }
     }
 }

@@ -73,3 +73,71 @@ fn dither(frag: vec2<f32>) -> f32 {
     var m = array<u32, 16>(0u, 8u, 2u, 10u, 12u, 4u, 14u, 6u, 3u, 11u, 1u, 9u, 15u, 7u, 13u, 5u);
     return (f32(m[p.y * 4u + p.x]) + 0.5) / 16.0;
 }
+
+// `grass::patch::hash32`.
+fn hash32(v: u32) -> u32 {
+    var x = v;
+    x ^= x >> 16u;
+    x *= 0x7feb352du;
+    x ^= x >> 15u;
+    x *= 0x846ca68bu;
+    x ^= x >> 16u;
+    return x;
+}
+
+// `grass::patch::Mirror::of_cell`: which axes cell (i, j) mirrors (eq. 4.9's orientation map).
+fn mirror_of_cell(i: i32, j: i32, seed: u32) -> vec2<bool> {
+    let h = hash32(bitcast<u32>(i) ^ hash32(bitcast<u32>(j) ^ hash32(seed)));
+    return vec2((h & 1u) == 1u, (h & 2u) == 2u);
+}
+
+// Eq. 4.4 / 4.14: the weight of the vertical slices at distance d, where the ground's normal
+// and the unit view vector make n_dot_v.
+fn vertical_weight(distances: vec4<f32>, window: vec4<f32>, d: f32, n_dot_v: f32) -> f32 {
+    let near = ramp(d, distances.x, distances.y) * ramp(d, distances.w, distances.z);
+    var silhouette = 0.0;
+    if d >= distances.w && d <= window.z {
+        silhouette = 1.0 - min(abs(n_dot_v) / max(window.w, 1e-6), 1.0);
+    }
+    return min(near + silhouette, 1.0);
+}
+
+// Van Oosterom–Strackee: the area of the spherical triangle a, b, c.
+fn spherical_area(a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> f32 {
+    let numerator = abs(dot(a, cross(b, c)));
+    let denominator = 1.0 + dot(a, b) + dot(b, c) + dot(c, a);
+    return 2.0 * atan2(numerator, denominator);
+}
+
+// Appendix A (`grass::lighting::btf_weights`): the weights of the baked directions Y+, X+, X−,
+// Z+, Z− for light from unit direction l (below the horizon: taken at the horizon).
+fn btf_weights(light: vec3<f32>) -> array<f32, 5> {
+    var l = vec3(light.x, max(light.y, 0.0), light.z);
+    if dot(l, l) > 1e-12 {
+        l = normalize(l);
+    } else {
+        l = vec3(0.0, 1.0, 0.0);
+    }
+    var x_index = 1u;
+    var x = vec3(1.0, 0.0, 0.0);
+    if l.x < 0.0 {
+        x_index = 2u;
+        x = vec3(-1.0, 0.0, 0.0);
+    }
+    var z_index = 3u;
+    var z = vec3(0.0, 0.0, 1.0);
+    if l.z < 0.0 {
+        z_index = 4u;
+        z = vec3(0.0, 0.0, -1.0);
+    }
+    let y = vec3(0.0, 1.0, 0.0);
+    var w = array<f32, 5>(0.0, 0.0, 0.0, 0.0, 0.0);
+    w[0] = spherical_area(l, x, z);
+    w[x_index] = spherical_area(l, y, z);
+    w[z_index] = spherical_area(l, y, x);
+    let sum = w[0] + w[1] + w[2] + w[3] + w[4];
+    for (var i = 0u; i < 5u; i += 1u) {
+        w[i] /= sum;
+    }
+    return w;
+}

@@ -6,7 +6,7 @@
 //! normal (lighting is two-sided, eq. 4.1, so either face's normal will do).
 
 use super::patch::{BasePatch, blade_strip};
-use super::slices::BakeVertex;
+use super::slices::{BakeVertex, SliceLayout};
 use bevy::asset::RenderAssetUsages;
 use bevy::math::Vec3;
 use bevy::mesh::VertexAttributeValues;
@@ -47,6 +47,99 @@ pub fn patch_mesh(patch: &BasePatch, width: f32, segments: u32) -> Mesh {
     mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
     mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
     mesh.insert_attribute(Mesh::ATTRIBUTE_UV_0, uv0);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_UV_1, uv1);
+    mesh.insert_indices(Indices::U32(indices));
+    mesh
+}
+
+/// How high above the ground the horizontal slice lies (m): clear of a ground drawn at the
+/// same height.
+pub const HORIZONTAL_SLICE_LIFT: f32 = 0.01;
+
+/// The quads of the slices over a block of `cells × cells` cells of side `layout.size`
+/// (`grass_slice.wgsl` draws them): in every cell, `K` quads across x and `K` across z where the
+/// base patch's vertical slices stand (the slab centres, the same in every mirrored version), one
+/// quad per slab line spanning the whole block, and the horizontal quad over the block. `UV_1.x`
+/// is the quad's axis: 0 across x, 1 across z, 2 horizontal.
+pub fn slice_block_mesh(layout: &SliceLayout, cells: u32) -> Mesh {
+    let cells = cells.max(1);
+    let (size, height, k) = (layout.size, layout.height, layout.per_axis);
+    let side = size * cells as f32;
+    let mut positions: Vec<[f32; 3]> = Vec::new();
+    let mut normals: Vec<[f32; 3]> = Vec::new();
+    let mut uv1: Vec<[f32; 2]> = Vec::new();
+    let mut indices: Vec<u32> = Vec::new();
+    let mut quad = |corners: [Vec3; 4], normal: Vec3, axis: f32| {
+        let base = positions.len() as u32;
+        for c in corners {
+            positions.push(c.to_array());
+            normals.push(normal.to_array());
+            uv1.push([axis, 0.0]);
+        }
+        indices.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
+    };
+    for c in 0..cells {
+        for slab in 0..k {
+            let at = (c as f32 + (slab as f32 + 0.5) / k as f32) * size;
+            quad(
+                [
+                    Vec3::new(at, 0.0, 0.0),
+                    Vec3::new(at, 0.0, side),
+                    Vec3::new(at, height, side),
+                    Vec3::new(at, height, 0.0),
+                ],
+                Vec3::X,
+                0.0,
+            );
+            quad(
+                [
+                    Vec3::new(0.0, 0.0, at),
+                    Vec3::new(side, 0.0, at),
+                    Vec3::new(side, height, at),
+                    Vec3::new(0.0, height, at),
+                ],
+                Vec3::Z,
+                1.0,
+            );
+        }
+    }
+    quad(horizontal_corners(side), Vec3::Y, 2.0);
+    build(positions, normals, uv1, indices)
+}
+
+/// A horizontal slice quad of `side` (a macro-cell's: scaled to the node by its transform).
+pub fn horizontal_slice_mesh(side: f32) -> Mesh {
+    let corners = horizontal_corners(side);
+    build(
+        corners.iter().map(|c| c.to_array()).collect(),
+        vec![[0.0, 1.0, 0.0]; 4],
+        vec![[2.0, 0.0]; 4],
+        vec![0, 1, 2, 0, 2, 3],
+    )
+}
+
+fn horizontal_corners(side: f32) -> [Vec3; 4] {
+    let y = HORIZONTAL_SLICE_LIFT;
+    [
+        Vec3::new(0.0, y, 0.0),
+        Vec3::new(side, y, 0.0),
+        Vec3::new(side, y, side),
+        Vec3::new(0.0, y, side),
+    ]
+}
+
+fn build(
+    positions: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+    uv1: Vec<[f32; 2]>,
+    indices: Vec<u32>,
+) -> Mesh {
+    let mut mesh = Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::RENDER_WORLD | RenderAssetUsages::MAIN_WORLD,
+    );
+    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
     mesh.insert_attribute(Mesh::ATTRIBUTE_UV_1, uv1);
     mesh.insert_indices(Indices::U32(indices));
     mesh

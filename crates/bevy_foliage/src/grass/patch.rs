@@ -217,18 +217,26 @@ impl Mirror {
     /// The version grid cell (i, j) shows: a hash of the cell, so any cell's version is known
     /// without storing a map (the orientation map of fig. 4.19, computed).
     pub fn of_cell(i: i64, j: i64, seed: u64) -> Self {
-        let mut h = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-            ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
-            ^ seed.wrapping_mul(0x1656_67B1_9E37_79F9);
-        h ^= h >> 31;
-        h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        h ^= h >> 29;
+        // 32-bit arithmetic only, so the shaders (`grass_functions.wgsl`) compute the same.
+        let h = hash32((i as u32) ^ hash32((j as u32) ^ hash32(seed as u32)));
         Self {
             x: h & 1 == 1,
             z: h & 2 == 2,
         }
     }
+}
 
+/// A 32-bit integer hash (Wellons' "lowbias32"): every input bit reaches every output bit.
+pub fn hash32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^= x >> 16;
+    x
+}
+
+impl Mirror {
     /// Eq. 4.9: the base patch's coordinates (in `[0, 1)²`) of cell-relative coordinates
     /// `(u, v) ∈ [0, 1)²` in a cell showing this version. (The thesis writes it for the macro-
     /// cells' texture coordinates, `frac(patchSize × ±1 × u)`; per cell that is `u` or `1 − u`.)

@@ -2,8 +2,8 @@
 
 use super::field::{GrassField, GrassSettings, GrassSpecies, sanitize_grass_settings};
 use super::systems::{
-    GEOMETRY_BLADES, GEOMETRY_CELLS, SELECT_MS, prepare_grass_fields, resolve_density_maps,
-    update_grass_cells,
+    GEOMETRY_BLADES, GEOMETRY_CELLS, MACRO_CELLS, SELECT_MS, SLICE_BLOCKS, attach_slice_bakes,
+    prepare_grass_fields, resolve_density_maps, update_grass_cells,
 };
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::diagnostic::{Diagnostic, RegisterDiagnostic};
@@ -38,11 +38,18 @@ impl Plugin for GrassPlugin {
         if !app.world().contains_resource::<AssetServer>() {
             return;
         }
-        for path in [GEOMETRY_BLADES, GEOMETRY_CELLS, SELECT_MS] {
+        for path in [
+            GEOMETRY_BLADES,
+            GEOMETRY_CELLS,
+            SLICE_BLOCKS,
+            MACRO_CELLS,
+            SELECT_MS,
+        ] {
             app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
         }
         super::material::build(app);
         super::bake::build(app);
+        super::slice_material::build(app);
         app.configure_sets(
             PostUpdate,
             (GrassSystems::Prepare, GrassSystems::Cells)
@@ -53,7 +60,11 @@ impl Plugin for GrassPlugin {
         .add_systems(
             PostUpdate,
             (
-                (prepare_grass_fields, resolve_density_maps)
+                (
+                    prepare_grass_fields,
+                    resolve_density_maps,
+                    attach_slice_bakes,
+                )
                     .chain()
                     .in_set(GrassSystems::Prepare),
                 update_grass_cells.in_set(GrassSystems::Cells),

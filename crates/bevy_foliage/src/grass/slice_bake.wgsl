@@ -1,8 +1,9 @@
 // The grass slice bake (Boulanger 2008, thesis §4.3.2): the base patch's blades, seen by one
 // slice camera, write one layer of the slice image — the unlit row (kd·ao, coverage), the
 // density-threshold row (the blade's threshold and height fraction), or the direct response to
-// one of the five baked light directions (eq. 4.1 without its ambient term) on the face towards
-// the camera. `grass::slices::bake_reference` is the CPU reference of exactly this.
+// one of the five baked light directions (eq. 4.1 without its ambient term, the lit face keeping
+// 1 − γ as Bevy's diffuse transmission does) on the face towards the camera.
+// `grass::slices::bake_reference` is the CPU reference of exactly this.
 
 #import bevy_pbr::forward_io::VertexOutput
 
@@ -41,6 +42,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     );
     let l = directions[(layer - 2u) % 5u];
     let c = dot(n, l);
-    let direct = max(c, 0.0) + params.tip_color.w * max(-c, 0.0);
+    let g = params.tip_color.w;
+    let direct = (1.0 - g) * max(c, 0.0) + g * max(-c, 0.0);
     return vec4(kd * direct, 1.0);
 }

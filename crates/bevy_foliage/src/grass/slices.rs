@@ -7,8 +7,10 @@
 //! ambient reflectance `kd·ao` and coverage), the density-threshold row (the nearest blade's
 //! `dth`, so a slice thins with the density map exactly as the blades do), and for each of the
 //! five baked light directions ([`BTF_DIRECTIONS`]) the blades' direct response
-//! `kd·(max(n·l, 0) + γ·max(−n·l, 0))` (eq. 4.1 without the ambient term) seen from the slice's
-//! front and from its back. At run time the five are blended by the spherical barycentric weights of appendix A.
+//! `kd·((1 − γ)·max(n·l, 0) + γ·max(−n·l, 0))` seen from the slice's front and from its back:
+//! eq. 4.1 without its ambient term, with the energy split of Bevy's diffuse transmission (the
+//! lit face keeps `1 − γ`), so the slices answer light as the blade geometry drawn by Bevy's PBR
+//! does. At run time the five are blended by the spherical barycentric weights of appendix A.
 //!
 //! Slice `s` is `0..K` across x (slab `[k, k+1]·size/K` in x, seen along −x from its front, +x
 //! from its back), `K..2K` across z, and `2K` the horizontal slice seen from above (front only).
@@ -239,7 +241,7 @@ pub fn layer_value(
             let n = if n.dot(view) < 0.0 { -n } else { n };
             let l = BTF_DIRECTIONS[((layer - 2) % 5) as usize];
             let cos = n.dot(l);
-            let c = kd * (cos.max(0.0) + gamma * (-cos).max(0.0));
+            let c = kd * ((1.0 - gamma) * cos.max(0.0) + gamma * (-cos).max(0.0));
             [c.x, c.y, c.z, 1.0]
         }
     }
@@ -397,7 +399,7 @@ mod tests {
     /// A straight blade at x = 0.1 leaning along x is a strip in the plane x = 0.1, its faces
     /// towards ±x: the x slice of slab 0 sees it face on from both sides, the other x slices
     /// and the edge-on z and horizontal slices not at all; lit head-on from its camera's side it
-    /// returns `kd`, from the far side `γ·kd` (eq. 4.1), from above nothing.
+    /// returns `(1 − γ)·kd`, from the far side `γ·kd`, from above nothing.
     #[test]
     fn the_reference_puts_a_blade_in_the_slices_of_its_slab_only() {
         let patch = one_blade_patch();
@@ -429,7 +431,7 @@ mod tests {
                     continue;
                 }
                 assert!(
-                    (through[i][1] - gamma * lit[i][1]).abs() < 1e-4,
+                    (through[i][1] * (1.0 - gamma) - gamma * lit[i][1]).abs() < 1e-4,
                     "{back} {i}"
                 );
                 assert!(above[i][1].abs() < 1e-4);

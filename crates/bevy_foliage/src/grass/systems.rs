@@ -4,17 +4,21 @@
 //! one per cell, the patch mesh placed by a transform that mirrors it (eq. 4.9) — spawned and
 //! despawned as the camera moves, so Bevy batches them as instances of one mesh and material.
 
+use super::bake::{GrassSliceBakeRequest, GrassSliceBakeResult, source_hash};
 use super::density::DensityMap;
 use super::field::{GrassField, GrassFieldError, GrassSettings};
 use super::material::{
     GrassBladeExtension, GrassBladeMaterial, GrassBladeParams, blade_material, density_image,
     density_map_from_image,
 };
-use super::mesh::patch_mesh;
+use super::mesh::{horizontal_slice_mesh, patch_mesh, slice_block_mesh};
 use super::patch::{BasePatch, Mirror};
-use super::quadtree::{CellGrid, CellNode, CellView, GroundBounds, select_cells};
+use super::quadtree::{CellDraw, CellGrid, CellNode, CellView, GroundBounds, select_cells};
+use super::slice_material::{GrassSliceMaterial, GrassSliceParams, slice_image};
+use super::slices::SliceTextures;
 use bevy::camera::primitives::Frustum;
 use bevy::diagnostic::{DiagnosticPath, Diagnostics};
+use bevy::light::NotShadowCaster;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use std::time::Instant;
@@ -24,6 +28,10 @@ use std::time::Instant;
 pub const GEOMETRY_BLADES: DiagnosticPath = DiagnosticPath::const_new("grass/geometry_blades");
 /// Cells drawn with blade geometry this frame.
 pub const GEOMETRY_CELLS: DiagnosticPath = DiagnosticPath::const_new("grass/geometry_cells");
+/// Blocks of cells drawn as volume slices this frame.
+pub const SLICE_BLOCKS: DiagnosticPath = DiagnosticPath::const_new("grass/slice_blocks");
+/// Macro-cells drawn as horizontal slice this frame.
+pub const MACRO_CELLS: DiagnosticPath = DiagnosticPath::const_new("grass/macro_cells");
 /// Milliseconds the cell walk and the entity updates took this frame (CPU).
 pub const SELECT_MS: DiagnosticPath = DiagnosticPath::const_new("grass/select_ms");
 
@@ -49,7 +57,27 @@ pub struct GrassFieldState {
     cells: HashMap<(u32, u32), Entity>,
     /// Cells drawn as blade geometry in the last frame.
     pub geometry_cells: u32,
+    /// The slice bake's request entity (a child of the field).
+    slice_bake: Entity,
+    /// The slices, once baked.
+    slices: Option<FieldSlices>,
+    /// Slice blocks and macro-cells drawn in the last frame.
+    pub slice_nodes: (u32, u32),
 }
+
+/// A field's baked slices and what draws them.
+struct FieldSlices {
+    textures: SliceTextures,
+    material: Handle<GrassSliceMaterial>,
+    block_mesh: Handle<Mesh>,
+    quad_mesh: Handle<Mesh>,
+    /// The grid of slice blocks (`SLICE_BLOCK` cells a side).
+    blocks: CellGrid,
+    nodes: HashMap<(CellNode, bool), Entity>,
+}
+
+/// Cells a side of a block of slice quads: `2^3`.
+const SLICE_BLOCK_LEVELS: u8 = 3;
 
 /// Marks a cell entity of blade geometry (a child of its field).
 #[derive(Component, Clone, Copy, Debug)]
@@ -141,7 +169,32 @@ pub fn prepare_grass_fields(
             for &cell in old.cells.values() {
                 commands.entity(cell).despawn();
             }
+            if let Some(slices) = &old.slices {
+                for &node in slices.nodes.values() {
+                    commands.entity(node).despawn();
+                }
+            }
+            commands.entity(old.slice_bake).despawn();
         }
+        let per_axis = settings.slice_per_axis;
+        let resolution = settings.slice_resolution;
+        let slice_bake = commands
+            .spawn((
+                GrassSliceBakeRequest {
+                    label: format!("grass field {entity}"),
+                    species: species.clone(),
+                    per_axis,
+                    resolution,
+                    save_to: settings.slice_cache.as_ref().map(|dir| {
+                        dir.join(format!(
+                            "{:016x}.grassslices",
+                            source_hash(&species, per_axis, resolution)
+                        ))
+                    }),
+                },
+                ChildOf(entity),
+            ))
+            .id();
         commands
             .entity(entity)
             .remove::<GrassFieldError>()
@@ -155,6 +208,9 @@ pub fn prepare_grass_fields(
                 material,
                 cells: HashMap::default(),
                 geometry_cells: 0,
+                slice_bake,
+                slices: None,
+                slice_nodes: (0, 0),
             });
     }
 }
@@ -197,6 +253,74 @@ pub fn resolve_density_maps(
     }
 }
 
+/// Takes each field's finished slice bake into a slice material; a failed bake is logged and the
+/// field draws blade geometry only.
+#[allow(clippy::too_many_arguments)]
+pub fn attach_slice_bakes(
+    mut commands: Commands,
+    mut fields: Query<(Entity, &GrassField, &GlobalTransform, &mut GrassFieldState)>,
+    results: Query<&GrassSliceBakeResult>,
+    settings: Res<GrassSettings>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut images: ResMut<Assets<Image>>,
+    mut materials: ResMut<Assets<GrassSliceMaterial>>,
+    blade_materials: Res<Assets<GrassBladeMaterial>>,
+) {
+    for (entity, field, transform, mut state) in &mut fields {
+        if state.slices.is_some() {
+            continue;
+        }
+        let Ok(result) = results.get(state.slice_bake) else {
+            continue;
+        };
+        let bake = match &result.0 {
+            Ok(bake) => bake.clone(),
+            Err(e) => {
+                error!("grass field {entity}: no slices ({e}); blade geometry only");
+                commands
+                    .entity(state.slice_bake)
+                    .remove::<GrassSliceBakeResult>();
+                continue;
+            }
+        };
+        let Some(density) = blade_materials
+            .get(&state.material)
+            .map(|m| m.extension.density.clone())
+        else {
+            continue;
+        };
+        let textures = bake.textures.clone();
+        let species = field.species.sanitized().0;
+        let material = materials.add(GrassSliceMaterial {
+            params: GrassSliceParams::new(
+                &settings,
+                &species,
+                &textures,
+                &state.grid,
+                transform.translation().y,
+                state.rect,
+                Vec3::ZERO,
+            ),
+            slices: images.add(slice_image(&textures)),
+            density,
+        });
+        let block_cells = 1u32 << SLICE_BLOCK_LEVELS.min(state.grid.levels);
+        let blocks = CellGrid {
+            origin: state.grid.origin,
+            cell: state.grid.cell * block_cells as f32,
+            levels: state.grid.levels - SLICE_BLOCK_LEVELS.min(state.grid.levels),
+        };
+        state.slices = Some(FieldSlices {
+            block_mesh: meshes.add(slice_block_mesh(&textures.layout, block_cells)),
+            quad_mesh: meshes.add(horizontal_slice_mesh(1.0)),
+            textures,
+            material,
+            blocks,
+            nodes: HashMap::default(),
+        });
+    }
+}
+
 /// The camera fields are walked from: one marked [`GrassCamera`], else the active 3D camera of
 /// lowest order.
 fn field_camera<'a>(
@@ -218,9 +342,11 @@ pub fn update_grass_cells(
     cameras: Query<(&Camera, &GlobalTransform, &Frustum, Has<GrassCamera>), With<Camera3d>>,
     settings: Res<GrassSettings>,
     mut materials: ResMut<Assets<GrassBladeMaterial>>,
+    mut slice_materials: ResMut<Assets<GrassSliceMaterial>>,
     mut diagnostics: Diagnostics,
 ) {
     let started = Instant::now();
+    let (mut blocks_drawn, mut macro_drawn) = (0u32, 0u32);
     let Some((camera, frustum)) = field_camera(&cameras) else {
         return;
     };
@@ -336,7 +462,114 @@ pub fn update_grass_cells(
         state.geometry_cells = wanted.len() as u32;
         cells_drawn += wanted.len() as u32;
         blades += wanted.len() as u64 * state.patch.blades.len() as u64;
+
+        // The slices: blocks of cells where the vertical slices may show, macro-cells of
+        // horizontal slice beyond (§4.2.7.2).
+        let density = materials
+            .get(&state.material)
+            .map(|m| m.extension.density.clone());
+        let Some(slices) = state.slices.as_mut() else {
+            continue;
+        };
+        if let (Some(material), Some(density)) = (slice_materials.get(&slices.material), density) {
+            let params = GrassSliceParams::new(
+                &settings,
+                &field.species.sanitized().0,
+                &slices.textures,
+                &state.grid,
+                ground_y,
+                state.rect,
+                eye,
+            );
+            if params != material.params || material.density != density {
+                let mut material = slice_materials.get_mut(&slices.material).unwrap();
+                material.params = params;
+                material.density = density;
+            }
+        }
+        let mut wanted_nodes: Vec<(CellNode, bool)> = Vec::new();
+        if settings.slices {
+            let selection = select_cells(&slices.blocks, &FlatGround, &view);
+            let (min, max) = (state.rect.xy(), state.rect.xy() + state.rect.zw());
+            for (node, draw) in selection.drawn {
+                let (corner, side) = slices.blocks.rect(node);
+                if corner.x >= max.x
+                    || corner.y >= max.y
+                    || corner.x + side <= min.x
+                    || corner.y + side <= min.y
+                {
+                    continue;
+                }
+                // Wholly nearer than min_geom: the slices' weights are zero there.
+                let far = Vec2::new(
+                    (view.eye.x - corner.x)
+                        .abs()
+                        .max((view.eye.x - corner.x - side).abs()),
+                    (view.eye.z - corner.y)
+                        .abs()
+                        .max((view.eye.z - corner.y - side).abs()),
+                )
+                .length()
+                .hypot(view.eye.y);
+                if far < settings.transitions.min_geom {
+                    continue;
+                }
+                wanted_nodes.push((node, draw == CellDraw::MacroCell));
+            }
+        }
+        let wanted_set: bevy::platform::collections::HashSet<(CellNode, bool)> =
+            wanted_nodes.iter().copied().collect();
+        slices.nodes.retain(|key, node| {
+            let keep = wanted_set.contains(key);
+            if !keep {
+                commands.entity(*node).despawn();
+            }
+            keep
+        });
+        for &(node, is_macro) in &wanted_nodes {
+            if slices.nodes.contains_key(&(node, is_macro)) {
+                continue;
+            }
+            let (corner, side) = slices.blocks.rect(node);
+            let local = Transform::from_translation(Vec3::new(
+                corner.x - field_origin.x,
+                0.0,
+                corner.y - field_origin.z,
+            ))
+            .with_scale(if is_macro {
+                Vec3::new(side, 1.0, side)
+            } else {
+                Vec3::ONE
+            });
+            let mesh = if is_macro {
+                slices.quad_mesh.clone()
+            } else {
+                slices.block_mesh.clone()
+            };
+            let id = commands
+                .spawn((
+                    Name::new(if is_macro {
+                        "grass macro-cell"
+                    } else {
+                        "grass slice block"
+                    }),
+                    Mesh3d(mesh),
+                    MeshMaterial3d(slices.material.clone()),
+                    local,
+                    transform.mul_transform(local),
+                    NotShadowCaster,
+                    ChildOf(entity),
+                ))
+                .id();
+            slices.nodes.insert((node, is_macro), id);
+        }
+        let macros = wanted_nodes.iter().filter(|(_, m)| *m).count() as u32;
+        state.slice_nodes = (wanted_nodes.len() as u32 - macros, macros);
+        blocks_drawn += state.slice_nodes.0;
+        macro_drawn += macros;
     }
+    diagnostics.add_measurement(&SLICE_BLOCKS, || blocks_drawn as f64);
+    diagnostics.add_measurement(&MACRO_CELLS, || macro_drawn as f64);
     diagnostics.add_measurement(&GEOMETRY_BLADES, || blades as f64);
     diagnostics.add_measurement(&GEOMETRY_CELLS, || cells_drawn as f64);
     diagnostics.add_measurement(&SELECT_MS, || started.elapsed().as_secs_f64() * 1e3);

@@ -1,0 +1,144 @@
+// Grass as volume slices (Boulanger 2008, thesis §4.2.3–4.2.5, §4.2.7): quads standing where the
+// base patch's vertical slices stand in every cell of a block, and a horizontal quad on the
+// ground — or one horizontal quad over a whole macro-cell. Each fragment finds its cell, that
+// cell's mirrored version (eq. 4.9) and so its point in the base patch; reads the slice image
+// there (the unlit, threshold and five lit layers of the side it is seen from); keeps the blades
+// the density map and the slice's weight keep (algorithm 1), dithered; and lights them by the
+// five baked directions blended by appendix A's spherical barycentric weights, with Bevy's sun,
+// its shadow map and the ambient light. `grass::slice_shading` is the CPU reference.
+
+#import bevy_pbr::forward_io::VertexOutput
+#import bevy_pbr::{
+    mesh_view_bindings as view_bindings,
+    mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
+    shadows::fetch_directional_shadow,
+}
+#import bevy_foliage::grass_functions as grass
+
+struct GrassSliceParams {
+    eye: vec4<f32>,
+    // (min_geom, max_geom, min_btf, max_btf)
+    distances: vec4<f32>,
+    // (ω_max, ω₀, max_silhouettes, silhouette ε)
+    window: vec4<f32>,
+    density_rect: vec4<f32>,
+    // (origin x, origin z, cell side, ground y)
+    grid: vec4<f32>,
+    // (slice height, slices per axis K, texels a side, transmission γ)
+    slices: vec4<f32>,
+    // x: the patch's mirror seed (bits as f32-exact integer below 2^24)
+    seed: vec4<u32>,
+}
+
+@group(#{MATERIAL_BIND_GROUP}) @binding(0) var<uniform> params: GrassSliceParams;
+@group(#{MATERIAL_BIND_GROUP}) @binding(1) var slice_images: texture_2d_array<f32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(2) var slice_sampler: sampler;
+@group(#{MATERIAL_BIND_GROUP}) @binding(3) var density_map: texture_2d<f32>;
+
+const LAYERS: u32 = 12u;
+
+struct SlicePoint {
+    // The slice image (its first layer's index) and the uv in it.
+    base_layer: u32,
+    uv: vec2<f32>,
+    back: bool,
+    // Mirror signs of the cell (−1 mirrors that axis).
+    mirror: vec2<f32>,
+}
+
+// Where world point p on a quad of `axis` (0 across x, 1 across z, 2 horizontal) reads the
+// slices, seen from eye.
+fn slice_point(p: vec3<f32>, axis: u32, eye: vec3<f32>) -> SlicePoint {
+    let size = params.grid.z;
+    let k = u32(params.slices.y);
+    let cells = (p.xz - params.grid.xy) / size;
+    let cell = vec2<i32>(floor(cells));
+    let f = cells - floor(cells);
+    let m = grass::mirror_of_cell(cell.x, cell.y, params.seed.x);
+    let local_xz = vec2(select(f.x, 1.0 - f.x, m.x), select(f.y, 1.0 - f.y, m.y)) * size;
+    let y = p.y - params.grid.w;
+    let h = params.slices.x;
+    let mirror = vec2(select(1.0, -1.0, m.x), select(1.0, -1.0, m.y));
+    // The view direction in the base patch's frame.
+    let v = normalize(eye - p) * vec3(mirror.x, 1.0, mirror.y);
+    var out: SlicePoint;
+    out.mirror = mirror;
+    let slab = size / f32(k);
+    let row = (h - y) / h;
+    if axis == 0u {
+        let s = min(u32(local_xz.x / slab), k - 1u);
+        out.back = v.x < 0.0;
+        out.base_layer = s * LAYERS;
+        out.uv = vec2(select((size - local_xz.y) / size, local_xz.y / size, out.back), row);
+    } else if axis == 1u {
+        let s = k + min(u32(local_xz.y / slab), k - 1u);
+        out.back = v.z < 0.0;
+        out.base_layer = s * LAYERS;
+        out.uv = vec2(select(local_xz.x / size, (size - local_xz.x) / size, out.back), row);
+    } else {
+        out.back = false;
+        out.base_layer = 2u * k * LAYERS;
+        out.uv = local_xz / size;
+    }
+    return out;
+}
+
+fn layer(uv: vec2<f32>, index: u32, lod: f32) -> vec4<f32> {
+    return textureSampleLevel(slice_images, slice_sampler, uv, index, lod);
+}
+
+@fragment
+fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
+    let p = in.world_position.xyz;
+    let eye = params.eye.xyz;
+    let axis = u32(in.uv_b.x + 0.5);
+    let sp = slice_point(p, axis, eye);
+    // The mip: texels under a pixel, from the world-space footprint (uv jumps at mirrored cell
+    // edges, so hardware derivatives of uv would not do).
+    let footprint = max(length(dpdx(p)), length(dpdy(p)));
+    let texel = params.grid.z / params.slices.z;
+    let lod = max(log2(max(footprint, 1e-9) / texel), 0.0);
+    let unlit = layer(sp.uv, sp.base_layer, lod);
+    let threshold = layer(sp.uv, sp.base_layer + 1u, lod).r;
+    // Algorithm 1: this slice's weight, the density here, the blade's threshold.
+    let d = distance(p, eye);
+    let v = normalize(eye - p);
+    var w = grass::horizontal_weight(params.distances, d);
+    if axis < 2u {
+        w = grass::vertical_weight(params.distances, params.window, d, v.y);
+    }
+    let ld = grass::density_at(density_map, params.density_rect, p.xz);
+    let opacity = unlit.a * grass::slice_opacity(params.window, w, ld, threshold);
+    if opacity < grass::DISCARD || opacity <= grass::dither(in.position.xy) {
+        discard;
+    }
+    let gamma = params.slices.w;
+    // Ambient: the blades' kd·ao, the lit share (1 − γ) as Bevy's diffuse transmission keeps it.
+    var color = view_bindings::lights.ambient_color.rgb * unlit.rgb * (1.0 - gamma);
+    // The sun through the five baked directions.
+    if view_bindings::lights.n_directional_lights > 0u {
+        let light = &view_bindings::lights.directional_lights[0];
+        let l = (*light).direction_to_light * vec3(sp.mirror.x, 1.0, sp.mirror.y);
+        let weights = grass::btf_weights(l);
+        var direct = vec3(0.0);
+        let first = sp.base_layer + 2u + select(0u, 5u, sp.back);
+        for (var i = 0u; i < 5u; i += 1u) {
+            if weights[i] > 0.0 {
+                direct += weights[i] * layer(sp.uv, first + i, lod).rgb;
+            }
+        }
+        var shadow = 1.0;
+        if ((*light).flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            let view_z = dot(vec4<f32>(
+                view_bindings::view.view_from_world[0].z,
+                view_bindings::view.view_from_world[1].z,
+                view_bindings::view.view_from_world[2].z,
+                view_bindings::view.view_from_world[3].z
+            ), vec4(p, 1.0));
+            shadow = fetch_directional_shadow(0u, vec4(p, 1.0), vec3(0.0, 1.0, 0.0), view_z, in.position.xy);
+        }
+        // Lambert's 1/π, as Bevy's diffuse lobe.
+        color += (*light).color.rgb * shadow * direct * (1.0 / 3.14159265);
+    }
+    return vec4(color * view_bindings::view.exposure, 1.0);
+}
