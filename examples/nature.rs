@@ -39,6 +39,8 @@ fn main() -> bevy::app::AppExit {
     ExampleRunner::with_args("nature", args)
         .inspect_resource::<FoliagePruningSettings>()
         .inspect_resource::<ClipmapSettings>()
+        .inspect_resource::<bevy_nature::foliage::grass::GrassSettings>()
         .inspect_component::<bevy_nature::soft_shadows::ScreenSpaceSoftShadows>()
+        .ready_when(bevy_nature::foliage::grass::systems::grass_ready)
         .run(move |app| build_showcase(app, options))
 }

@@ -6,7 +6,8 @@
 //! stack, a box casting a soft shadow under the
 //! sun, an olive tree (the thesis' *Olea europaea*, 16,107 leaves) whose leaves are pruned every
 //! frame by distance and view direction ([`bevy_foliage::pruning`]), and behind it the edge of a
-//! forest of 40 ash, oak and cedar trees drawn by the forest LoD manager, with
+//! forest of 40 ash, oak and cedar trees drawn by the forest LoD manager, a meadow of grass
+//! (blade geometry near, baked volume slices beyond) around them, with
 //! [`NaturePlugins`](crate::NaturePlugins) added. Each feature of the suite adds itself here as
 //! it lands.
 
@@ -81,6 +82,11 @@ pub struct ShowcaseOptions {
     /// Screen Space Soft Shadows on the sun: penumbrae harden at contact and widen with the
     /// distance to the blocker on the ground (plain or clipmap-textured), the box and the bark.
     pub soft_shadows: bool,
+    /// A 40 m meadow around the box and the tree ([`bevy_foliage::grass`]): blade geometry
+    /// near, baked volume slices beyond, thinned by a procedural density map with clearings at
+    /// the box and the trunk (slices cached in `assets/grass/`). Tests turn it off: when the
+    /// slice bake finishes depends on the machine.
+    pub grass: bool,
 }
 
 impl Default for ShowcaseOptions {
@@ -94,6 +100,7 @@ impl Default for ShowcaseOptions {
             impostors: true,
             terrain: true,
             soft_shadows: true,
+            grass: true,
         }
     }
 }
@@ -102,6 +109,10 @@ impl Default for ShowcaseOptions {
 /// plugins (windowed or headless).
 pub fn build_showcase(app: &mut App, options: ShowcaseOptions) {
     app.add_plugins(crate::NaturePlugins)
+        .insert_resource(bevy_foliage::grass::GrassSettings {
+            slice_cache: Some("assets/grass".into()),
+            ..default()
+        })
         .insert_resource(options)
         .insert_resource(ClearColor(Color::srgb(0.55, 0.7, 0.9)))
         .add_systems(Startup, spawn_showcase);
@@ -181,6 +192,9 @@ fn spawn_showcase(
             });
         }
     }
+    if options.grass {
+        spawn_meadow(&mut commands, &mut trees.images);
+    }
     let mut sun = commands.spawn((
         Name::new("sun"),
         DirectionalLight {
@@ -211,6 +225,35 @@ fn spawn_showcase(
     if !options.msaa {
         camera.insert(Msaa::Off);
     }
+}
+
+/// Side of the showcase meadow (m): inside the flat ground.
+const MEADOW: f32 = 40.0;
+
+/// The meadow: the default grass species over [`MEADOW`] metres, cleared at the box and the
+/// olive tree's trunk.
+fn spawn_meadow(commands: &mut Commands, images: &mut Assets<Image>) {
+    use bevy_foliage::grass::{GrassField, GrassSpecies, density::meadow};
+    use layout::*;
+    let clearings = [
+        ([BOX_CENTER.x, BOX_CENTER.z], BOX_SIZE * 0.75),
+        ([TREE_POSITION.x, TREE_POSITION.z], 0.6),
+    ];
+    let density = match meadow(128, [0.0, 0.0], [MEADOW, MEADOW], &clearings, 3) {
+        Ok(map) => Some(images.add(bevy_foliage::grass::material::density_map_image(&map))),
+        Err(e) => {
+            error!("showcase meadow: {e}");
+            None
+        }
+    };
+    commands.spawn((
+        Name::new("meadow"),
+        GrassField {
+            size: Vec2::splat(MEADOW),
+            species: GrassSpecies::default(),
+            density,
+        },
+    ));
 }
 
 /// A backdrop forest behind the scene: 40 managed trees of three species (ash, oak, cedar) in a

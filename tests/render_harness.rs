@@ -17,6 +17,8 @@ fn test_options() -> ShowcaseOptions {
         terrain: false,
         // So does when the billboard-cloud bakes finish.
         impostors: false,
+        // And when the grass slice bake finishes.
+        grass: false,
         ..default()
     }
 }

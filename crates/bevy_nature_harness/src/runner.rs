@@ -130,6 +130,7 @@ pub struct ExampleRunner {
     args: ExampleArgs,
     #[cfg_attr(not(feature = "windowed"), allow(dead_code))]
     inspected: Vec<fn(&mut App)>,
+    ready_when: Option<fn(&mut World) -> bool>,
 }
 
 impl ExampleRunner {
@@ -144,7 +145,15 @@ impl ExampleRunner {
             name: name.into(),
             args,
             inspected: Vec::new(),
+            ready_when: None,
         }
+    }
+
+    /// Headless runs wait, besides the pipelines, until `condition` holds (a bake finished, an
+    /// asset loaded) before measuring and taking the screenshot.
+    pub fn ready_when(mut self, condition: fn(&mut World) -> bool) -> Self {
+        self.ready_when = Some(condition);
+        self
     }
 
     /// The parsed flags.
@@ -223,7 +232,8 @@ impl ExampleRunner {
         let mut harness =
             RenderHarness::new(HarnessConfig::sized(size.x, size.y)).map_err(|e| e.to_string())?;
         scene(harness.app_mut());
-        let warmup = harness.wait_until_ready().map_err(|e| e.to_string())?;
+        let condition = self.ready_when.unwrap_or(|_| true);
+        let warmup = harness.wait_until(condition).map_err(|e| e.to_string())?;
         eprintln!(
             "{}: scene ready after {warmup} frames; measuring {frames} frames",
             self.name

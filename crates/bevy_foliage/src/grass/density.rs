@@ -175,6 +175,59 @@ impl DensityMap {
     }
 }
 
+/// A procedural meadow's density over `size` metres (x, z) centred on `centre`, as
+/// `resolution²` texels: patches of thicker and thinner grass from a few octaves of smooth
+/// value noise (seeded), cleared to nothing inside each `(centre, radius)` of `clearings` with a
+/// soft metre-wide edge — e.g. around rocks, trunks and buildings.
+pub fn meadow(
+    resolution: u32,
+    centre: [f32; 2],
+    size: [f32; 2],
+    clearings: &[([f32; 2], f32)],
+    seed: u64,
+) -> Result<DensityMap, DensityMapError> {
+    let n = resolution.max(1);
+    let lattice = |x: i64, z: i64, octave: u64| {
+        let mut h = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (z as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+            ^ seed
+                .wrapping_add(octave)
+                .wrapping_mul(0x1656_67B1_9E37_79F9);
+        h ^= h >> 31;
+        h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        h ^= h >> 29;
+        (h >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let noise = |x: f32, z: f32, octave: u64| {
+        let (x0, z0) = (x.floor(), z.floor());
+        let (fx, fz) = (x - x0, z - z0);
+        let (sx, sz) = (fx * fx * (3.0 - 2.0 * fx), fz * fz * (3.0 - 2.0 * fz));
+        let (x0, z0) = (x0 as i64, z0 as i64);
+        let a =
+            lattice(x0, z0, octave) + (lattice(x0 + 1, z0, octave) - lattice(x0, z0, octave)) * sx;
+        let b = lattice(x0, z0 + 1, octave)
+            + (lattice(x0 + 1, z0 + 1, octave) - lattice(x0, z0 + 1, octave)) * sx;
+        a + (b - a) * sz
+    };
+    let min = [centre[0] - size[0] / 2.0, centre[1] - size[1] / 2.0];
+    let mut values = Vec::with_capacity((n * n) as usize);
+    for j in 0..n {
+        for i in 0..n {
+            let x = min[0] + (i as f32 + 0.5) / n as f32 * size[0];
+            let z = min[1] + (j as f32 + 0.5) / n as f32 * size[1];
+            // Patches about 12 m and 4 m across.
+            let v = 0.65 * noise(x / 12.0, z / 12.0, 0) + 0.35 * noise(x / 4.0, z / 4.0, 1);
+            let mut d = (0.35 + 1.1 * (v - 0.3)).clamp(0.0, 1.0);
+            for &(c, r) in clearings {
+                let dist = ((x - c[0]).powi(2) + (z - c[1]).powi(2)).sqrt();
+                d *= ((dist - r) / 1.0).clamp(0.0, 1.0);
+            }
+            values.push(d);
+        }
+    }
+    DensityMap::new(n, n, values, min, size)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -243,5 +296,18 @@ mod tests {
             DensityMap::from_pixels(1, 1, &0.25f32.to_le_bytes(), 1, 32, [0.0; 2], [1.0; 2])
                 .unwrap();
         assert_eq!(float.texel(0, 0), 0.25);
+    }
+
+    #[test]
+    fn a_meadow_varies_and_is_cleared_where_asked() {
+        let map = meadow(64, [0.0, 0.0], [40.0, 40.0], &[([5.0, 5.0], 3.0)], 7).unwrap();
+        assert_eq!(map.density_at(5.0, 5.0), 0.0);
+        assert_eq!(map.density_at(6.5, 5.0), 0.0);
+        let values = map.values();
+        let mean = values.iter().sum::<f32>() / values.len() as f32;
+        let spread = values.iter().fold(0.0f32, |m, v| m.max((v - mean).abs()));
+        assert!(mean > 0.3 && mean < 0.9, "{mean}");
+        assert!(spread > 0.2, "{spread}");
+        assert_ne!(map, meadow(64, [0.0, 0.0], [40.0, 40.0], &[], 8).unwrap());
     }
 }

@@ -122,6 +122,14 @@ pub fn density_image(map: &DensityMap) -> Image {
     )
 }
 
+/// `map` as an image a [`GrassField`](super::GrassField) can take as its density map (`R32Float`,
+/// kept on the CPU too, where the field reads it).
+pub fn density_map_image(map: &DensityMap) -> Image {
+    let mut image = density_image(map);
+    image.asset_usage = RenderAssetUsages::all();
+    image
+}
+
 /// The density map in `image`'s first channel over the rectangle `[min, min + size]`, or why it
 /// cannot be read (a compressed or unsupported format, missing data, a size that does not match
 /// the data).

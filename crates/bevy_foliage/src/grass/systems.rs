@@ -63,6 +63,24 @@ pub struct GrassFieldState {
     slices: Option<FieldSlices>,
     /// Slice blocks and macro-cells drawn in the last frame.
     pub slice_nodes: (u32, u32),
+    /// Why the slices could not be baked (the field then draws blade geometry only).
+    pub slice_error: Option<String>,
+}
+
+impl GrassFieldState {
+    /// Whether the field's slices are baked and drawn, or have failed for good.
+    pub fn slices_settled(&self) -> bool {
+        self.slices.is_some() || self.slice_error.is_some()
+    }
+}
+
+/// Whether every grass field in `world` has its slices (or has given up on them): for headless
+/// runs that should not start measuring, or take a screenshot, before the slices are there.
+pub fn grass_ready(world: &mut World) -> bool {
+    world
+        .query::<&GrassFieldState>()
+        .iter(world)
+        .all(GrassFieldState::slices_settled)
 }
 
 /// A field's baked slices and what draws them.
@@ -211,6 +229,7 @@ pub fn prepare_grass_fields(
                 slice_bake,
                 slices: None,
                 slice_nodes: (0, 0),
+                slice_error: None,
             });
     }
 }

@@ -1,0 +1,549 @@
+//! The grass benchmark (Boulanger 2008, thesis §4.4), headless, one process: a field of grass to
+//! the horizon drawn by our levels (blade geometry near, volume slices, the horizontal slice and
+//! macro-cells far) and by what the Bevy grass crates draw — plain instanced blade geometry to the
+//! same distance — each swept over its settings, every image compared with an all-geometry
+//! reference rendered in the same run.
+//!
+//! Rows (`mode`):
+//! - `reference`: every blade as geometry to `distance`, full segments (rendered once, untimed);
+//! - `geometry`: the baseline — the base patch mesh instanced per cell (mirrored as ours) with
+//!   Bevy's `StandardMaterial`, opaque, no discard, no dither, nothing of ours switched on; swept
+//!   over blade segments and how far it reaches (beyond: bare ground);
+//! - `ours`: a `GrassField`, swept over the transition distances.
+//!
+//! Both draw the same blades in the same colours (the species' root-to-tip gradient as vertex
+//! colours for the baseline, with no ambient occlusion on either side), so the reference is the
+//! baseline at its best and the error of ours is what its levels change.
+//!
+//! Frame time is GPU-synchronised: each frame is `App::update` (the renderer runs inside it,
+//! unpipelined) followed by a blocking wait until the GPU has finished everything submitted
+//! (`timing: "gpu-synchronised"`). `virtual_blades` counts the blades of every cell in view within
+//! `distance` (the field's content); `geometry_blades` those drawn as geometry. The headline,
+//! `speedup_at_matched_rmse`, is ours over the baseline's lower envelope interpolated at our
+//! RMSE, our worst case over the matched range (`bevy_nature::bench_curves`).
+//!
+//! ```text
+//! cargo run --release --example grass_bench -- [--preset gpu|quick] [--distance M]
+//!     [--strata N] [--frames N] [--size WxH] [--ours-only] [--screenshot DIR] [--stats FILE]
+//! ```
+//! `--preset gpu` (default): 400 m of the default species (576 blades per 0.5 m patch); the
+//! all-geometry reference is some 10^9 triangles, for a GPU. `--preset quick`: 40 m of a sparser
+//! species at 160×90, what a software rasteriser can finish. `--ours-only` skips the baseline and
+//! the reference (no RMSE): the count of virtual blades ours draws in view.
+
+use bevy::camera::primitives::Frustum;
+use bevy::prelude::*;
+use bevy_nature::bench_curves::{matched_speedups, speedups_at_baseline_points};
+use bevy_nature::foliage::grass::mesh::patch_mesh;
+use bevy_nature::foliage::grass::patch::{BasePatch, Mirror, PatchSettings};
+use bevy_nature::foliage::grass::quadtree::{
+    CellGrid, CellNode, CellView, GroundBounds, select_cells,
+};
+use bevy_nature::foliage::grass::systems::{GEOMETRY_BLADES, field_grid, grass_ready};
+use bevy_nature::foliage::grass::transition::TransitionDistances;
+use bevy_nature::foliage::grass::{GrassField, GrassSettings, GrassSpecies};
+use bevy_nature_harness::compare::{Comparison, RgbaImage};
+use bevy_nature_harness::headless::HarnessConfig;
+use bevy_nature_harness::{RenderHarness, require_adapter};
+use std::path::PathBuf;
+
+struct Args {
+    distance: f32,
+    strata: u32,
+    frames: u32,
+    size: UVec2,
+    ours_only: bool,
+    screenshots: Option<PathBuf>,
+    stats: Option<PathBuf>,
+    ours_sweep: Vec<TransitionDistances>,
+}
+
+fn distances(min_geom: f32, max_geom: f32, min_btf: f32, max_btf: f32) -> TransitionDistances {
+    TransitionDistances {
+        min_geom,
+        max_geom,
+        min_btf,
+        max_btf,
+        max_silhouettes: max_btf * 4.0,
+        ..default()
+    }
+}
+
+fn parse_args() -> Args {
+    let mut args = Args {
+        distance: 400.0,
+        strata: 24,
+        frames: 10,
+        size: UVec2::new(640, 360),
+        ours_only: false,
+        screenshots: None,
+        stats: None,
+        ours_sweep: Vec::new(),
+    };
+    let mut preset = "gpu".to_string();
+    let (mut distance, mut strata, mut size) = (None, None, None);
+    let mut it = std::env::args().skip(1);
+    let usage = "flags: [--preset gpu|quick] [--distance M] [--strata N] [--frames N] [--size WxH] [--ours-only] [--screenshot DIR] [--stats FILE]";
+    let fail = |m: String| -> ! {
+        eprintln!("{m}; {usage}");
+        std::process::exit(2)
+    };
+    while let Some(flag) = it.next() {
+        let mut value = || {
+            it.next()
+                .unwrap_or_else(|| fail(format!("{flag} needs a value")))
+        };
+        match flag.as_str() {
+            "--preset" => preset = value(),
+            "--distance" => {
+                distance = Some(
+                    value()
+                        .parse::<f32>()
+                        .ok()
+                        .filter(|d| *d > 1.0 && d.is_finite())
+                        .unwrap_or_else(|| fail("--distance takes metres > 1".into())),
+                )
+            }
+            "--strata" => {
+                strata = Some(
+                    value()
+                        .parse::<u32>()
+                        .ok()
+                        .filter(|s| (1..=64).contains(s))
+                        .unwrap_or_else(|| fail("--strata takes 1..=64".into())),
+                )
+            }
+            "--frames" => {
+                args.frames = value()
+                    .parse::<u32>()
+                    .ok()
+                    .filter(|f| *f > 0)
+                    .unwrap_or_else(|| fail("--frames takes a whole number > 0".into()))
+            }
+            "--size" => {
+                size = Some(
+                    bevy_nature_harness::runner::parse_size(&value()).unwrap_or_else(|e| fail(e)),
+                )
+            }
+            "--ours-only" => args.ours_only = true,
+            "--screenshot" => args.screenshots = Some(value().into()),
+            "--stats" => args.stats = Some(value().into()),
+            other => fail(format!("unknown flag {other}")),
+        }
+    }
+    match preset.as_str() {
+        "gpu" => {
+            args.ours_sweep = vec![
+                distances(8.0, 16.0, 40.0, 80.0),
+                distances(4.0, 8.0, 20.0, 40.0),
+                distances(16.0, 32.0, 60.0, 120.0),
+            ];
+        }
+        "quick" => {
+            args.distance = 40.0;
+            args.strata = 8;
+            args.size = UVec2::new(160, 90);
+            args.frames = 3;
+            args.ours_sweep = vec![
+                distances(2.0, 4.0, 8.0, 16.0),
+                distances(1.0, 2.0, 4.0, 8.0),
+                distances(4.0, 8.0, 12.0, 24.0),
+            ];
+        }
+        other => fail(format!("unknown preset {other}")),
+    }
+    args.distance = distance.unwrap_or(args.distance);
+    args.strata = strata.unwrap_or(args.strata);
+    args.size = size.unwrap_or(args.size);
+    args
+}
+
+/// The species: default blades, `strata²` a patch, no ambient occlusion (the baseline's
+/// `StandardMaterial` has none per vertex, so neither side gets it).
+fn species(strata: u32) -> GrassSpecies {
+    GrassSpecies {
+        patch: PatchSettings {
+            strata,
+            ..default()
+        },
+        root_ao: 1.0,
+        ..default()
+    }
+}
+
+/// Flat ground.
+struct Flat;
+impl GroundBounds for Flat {
+    fn height_range(&self, _: &CellGrid, _: CellNode) -> (f32, f32) {
+        (0.0, 0.0)
+    }
+    fn is_flat(&self, _: &CellGrid, _: CellNode) -> bool {
+        true
+    }
+}
+
+/// Marks the baseline's cells.
+#[derive(Component)]
+struct BaselineCell;
+
+fn camera_transform(distance: f32) -> Transform {
+    Transform::from_xyz(0.0, 1.7, -1.05 * distance).looking_to(Vec3::new(0.0, -0.1, 1.0), Vec3::Y)
+}
+
+/// The cells in view within `reach` (single cells), from the camera's frustum.
+fn cells_in_view(
+    harness: &mut RenderHarness,
+    grid: &CellGrid,
+    reach: f32,
+    height: f32,
+) -> Vec<CellNode> {
+    let world = harness.world_mut();
+    let (transform, frustum) = world
+        .query_filtered::<(&GlobalTransform, &Frustum), With<Camera3d>>()
+        .single(world)
+        .expect("one camera");
+    let view = CellView {
+        eye: transform.translation(),
+        frustum: Some(frustum.half_spaces.map(|h| h.normal_d())),
+        max_distance: reach,
+        macro_from: f32::INFINITY,
+        split_factor: 2.0,
+        grass_height: height,
+    };
+    select_cells(grid, &Flat, &view)
+        .drawn
+        .into_iter()
+        .map(|(node, _)| node)
+        .collect()
+}
+
+/// The patch mesh with each vertex coloured by the species' root-to-tip gradient.
+fn coloured_patch_mesh(patch: &BasePatch, species: &GrassSpecies, segments: u32) -> Mesh {
+    let mut mesh = patch_mesh(patch, species.patch.width, segments);
+    let Some(bevy::mesh::VertexAttributeValues::Float32x2(uv1)) =
+        mesh.attribute(Mesh::ATTRIBUTE_UV_1)
+    else {
+        unreachable!()
+    };
+    let (r, t) = (species.root_color, species.tip_color);
+    let colours: Vec<[f32; 4]> = uv1
+        .iter()
+        .map(|uv| {
+            let h = uv[1].clamp(0.0, 1.0);
+            [
+                r.red + (t.red - r.red) * h,
+                r.green + (t.green - r.green) * h,
+                r.blue + (t.blue - r.blue) * h,
+                1.0,
+            ]
+        })
+        .collect();
+    mesh.insert_attribute(Mesh::ATTRIBUTE_COLOR, colours);
+    mesh
+}
+
+/// Replaces the baseline's cells: `segments` per blade, cells within `reach`.
+fn spawn_baseline(
+    harness: &mut RenderHarness,
+    cells: &[CellNode],
+    grid: &CellGrid,
+    patch: &BasePatch,
+    species: &GrassSpecies,
+    segments: u32,
+    reach: f32,
+) -> u64 {
+    let world = harness.world_mut();
+    let old: Vec<Entity> = world
+        .query_filtered::<Entity, With<BaselineCell>>()
+        .iter(world)
+        .collect();
+    for e in old {
+        world.despawn(e);
+    }
+    let mesh = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(coloured_patch_mesh(patch, species, segments));
+    let material = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::WHITE,
+            perceptual_roughness: 0.8,
+            reflectance: 0.3,
+            diffuse_transmission: species.transmission,
+            double_sided: true,
+            cull_mode: None,
+            ..default()
+        });
+    let camera = world
+        .query_filtered::<&GlobalTransform, With<Camera3d>>()
+        .single(world)
+        .expect("camera")
+        .translation();
+    let mut drawn = 0u64;
+    for node in cells {
+        let (corner, side) = grid.rect(*node);
+        let nearest = Vec2::new(
+            camera.x.clamp(corner.x, corner.x + side),
+            camera.z.clamp(corner.y, corner.y + side),
+        );
+        if (nearest - camera.xz()).length() > reach {
+            continue;
+        }
+        let mirror = Mirror::of_cell(node.x as i64, node.z as i64, species.patch.seed);
+        let translation = Vec3::new(
+            corner.x + if mirror.x { side } else { 0.0 },
+            0.0,
+            corner.y + if mirror.z { side } else { 0.0 },
+        );
+        let scale = Vec3::new(
+            if mirror.x { -1.0 } else { 1.0 },
+            1.0,
+            if mirror.z { -1.0 } else { 1.0 },
+        );
+        world.spawn((
+            BaselineCell,
+            Mesh3d(mesh.clone()),
+            MeshMaterial3d(material.clone()),
+            Transform::from_translation(translation).with_scale(scale),
+        ));
+        drawn += patch.blades.len() as u64;
+    }
+    drawn
+}
+
+struct Row {
+    mode: &'static str,
+    params: String,
+    virtual_blades: u64,
+    geometry_blades: u64,
+    frame_ms: f64,
+    frame_ms_p95: f64,
+    rmse: Option<f64>,
+}
+
+fn measure(
+    harness: &mut RenderHarness,
+    frames: u32,
+    reference: Option<&RgbaImage>,
+    name: &str,
+    shots: Option<&PathBuf>,
+) -> (f64, f64, Option<f64>) {
+    harness.wait_until(grass_ready).expect("ready");
+    for _ in 0..2 {
+        harness.step();
+    }
+    harness.reset_timing();
+    harness
+        .run_frames_gpu_synchronised(frames)
+        .expect("measured frames");
+    let stats = harness.frame_stats();
+    let image = harness.render().expect("render");
+    if let Some(dir) = shots {
+        std::fs::create_dir_all(dir).ok();
+        image.save_png(dir.join(format!("{name}.png"))).ok();
+    }
+    let rmse = reference.map(|r| Comparison::new(format!("grass_bench/{name}"), &image, r).rmse);
+    (stats.median_ms, stats.p95_ms, rmse)
+}
+
+fn main() {
+    let args = parse_args();
+    if require_adapter("grass_bench").is_none() {
+        eprintln!("grass_bench: no GPU adapter");
+        std::process::exit(1);
+    }
+    let species = species(args.strata);
+    let patch = BasePatch::generate(&species.patch);
+    let field_size = Vec2::splat(2.2 * args.distance);
+    let grid = field_grid(Vec2::ZERO, field_size, species.patch.size);
+    let mut harness = RenderHarness::new(HarnessConfig {
+        gpu_timing: false,
+        ..HarnessConfig::sized(args.size.x, args.size.y)
+    })
+    .expect("harness");
+    harness
+        .app_mut()
+        .add_plugins(bevy_nature::NaturePlugins)
+        .insert_resource(ClearColor(Color::srgb(0.62, 0.74, 0.9)))
+        .insert_resource(GrassSettings {
+            max_distance: args.distance,
+            geometry: false,
+            slices: false,
+            ..default()
+        });
+    {
+        let world = harness.world_mut();
+        let ground = world.resource_mut::<Assets<Mesh>>().add(
+            Plane3d::default()
+                .mesh()
+                .size(field_size.x * 1.5, field_size.y * 1.5),
+        );
+        let ground_material =
+            world
+                .resource_mut::<Assets<StandardMaterial>>()
+                .add(StandardMaterial {
+                    base_color: Color::srgb(0.2, 0.17, 0.09),
+                    perceptual_roughness: 1.0,
+                    ..default()
+                });
+        world.spawn((Mesh3d(ground), MeshMaterial3d(ground_material)));
+        world.spawn((
+            DirectionalLight {
+                illuminance: 10_000.0,
+                shadow_maps_enabled: true,
+                ..default()
+            },
+            Transform::default().looking_to(Vec3::new(-0.5, -0.7, 0.6), Vec3::Y),
+        ));
+        world.insert_resource(GlobalAmbientLight {
+            brightness: 500.0,
+            ..default()
+        });
+        world.spawn((
+            Camera3d::default(),
+            Msaa::Off,
+            camera_transform(args.distance),
+        ));
+    }
+    harness.wait_until_ready().expect("ready");
+    let cells = cells_in_view(&mut harness, &grid, args.distance, species.patch.height.1);
+    let virtual_blades = cells.len() as u64 * patch.blades.len() as u64;
+    eprintln!(
+        "grass_bench: {} cells in view within {} m: {virtual_blades} virtual blades ({:.2e})",
+        cells.len(),
+        args.distance,
+        virtual_blades as f64
+    );
+    let shots = args.screenshots.as_ref();
+    let mut rows = Vec::new();
+    let reference = if args.ours_only {
+        None
+    } else {
+        // The reference: every blade, full segments, to the full distance.
+        spawn_baseline(
+            &mut harness,
+            &cells,
+            &grid,
+            &patch,
+            &species,
+            species.patch.segments,
+            args.distance,
+        );
+        harness.wait_until_ready().expect("reference ready");
+        let image = harness.render().expect("reference");
+        if let Some(dir) = shots {
+            std::fs::create_dir_all(dir).ok();
+            image.save_png(dir.join("reference.png")).ok();
+        }
+        for segments in [species.patch.segments, 2, 1] {
+            for reach in [1.0, 0.5, 0.25] {
+                let reach = args.distance * reach;
+                let drawn = spawn_baseline(
+                    &mut harness,
+                    &cells,
+                    &grid,
+                    &patch,
+                    &species,
+                    segments,
+                    reach,
+                );
+                let name = format!("geometry_s{segments}_r{reach:.0}");
+                let (ms, p95, rmse) =
+                    measure(&mut harness, args.frames, Some(&image), &name, shots);
+                eprintln!("grass_bench: {name}: {ms:.1} ms, rmse {:.4}", rmse.unwrap());
+                rows.push(Row {
+                    mode: "geometry",
+                    params: format!("segments {segments}, reach {reach:.0} m"),
+                    virtual_blades,
+                    geometry_blades: drawn,
+                    frame_ms: ms,
+                    frame_ms_p95: p95,
+                    rmse,
+                });
+            }
+        }
+        spawn_baseline(&mut harness, &[], &grid, &patch, &species, 1, 0.0);
+        Some(image)
+    };
+    // Ours.
+    harness.world_mut().spawn(GrassField {
+        size: field_size,
+        species: species.clone(),
+        density: None,
+    });
+    for t in &args.ours_sweep {
+        {
+            let mut settings = harness.world_mut().resource_mut::<GrassSettings>();
+            settings.transitions = *t;
+            settings.geometry = true;
+            settings.slices = true;
+        }
+        let name = format!(
+            "ours_g{}-{}_v{}-{}",
+            t.min_geom, t.max_geom, t.min_btf, t.max_btf
+        );
+        let (ms, p95, rmse) = measure(&mut harness, args.frames, reference.as_ref(), &name, shots);
+        let geometry_blades = harness.diagnostic(&GEOMETRY_BLADES).unwrap_or(0.0) as u64;
+        eprintln!(
+            "grass_bench: {name}: {ms:.1} ms, {geometry_blades} geometry blades, rmse {rmse:?}"
+        );
+        rows.push(Row {
+            mode: "ours",
+            params: format!(
+                "geometry {}–{} m, vertical slices to {}–{} m",
+                t.min_geom, t.max_geom, t.min_btf, t.max_btf
+            ),
+            virtual_blades,
+            geometry_blades,
+            frame_ms: ms,
+            frame_ms_p95: p95,
+            rmse,
+        });
+    }
+    let points = |mode: &str| -> Vec<(f64, f64)> {
+        rows.iter()
+            .filter(|r| r.mode == mode)
+            .filter_map(|r| r.rmse.map(|e| (e, r.frame_ms)))
+            .collect()
+    };
+    let matched = matched_speedups(&points("ours"), &points("geometry"));
+    let headline = matched.iter().map(|m| m.1).min_by(f64::total_cmp);
+    let at_baseline = speedups_at_baseline_points(&points("ours"), &points("geometry"));
+    let json_f = |v: Option<f64>| v.map_or("null".to_string(), |v| format!("{v:.5}"));
+    let rows_json: Vec<String> = rows
+        .iter()
+        .map(|r| {
+            format!(
+                "{{\"mode\": \"{}\", \"params\": \"{}\", \"virtual_blades\": {}, \"geometry_blades\": {}, \"frame_ms\": {:.3}, \"frame_ms_p95\": {:.3}, \"rmse\": {}}}",
+                r.mode, r.params, r.virtual_blades, r.geometry_blades, r.frame_ms, r.frame_ms_p95, json_f(r.rmse)
+            )
+        })
+        .collect();
+    let matched_json: Vec<String> = matched
+        .iter()
+        .map(|(e, s)| format!("{{\"rmse\": {e:.5}, \"speedup\": {s:.3}}}"))
+        .collect();
+    let at_baseline_json: Vec<String> = at_baseline
+        .iter()
+        .map(|(e, s)| format!("{{\"baseline_rmse\": {e:.5}, \"speedup\": {}}}", json_f(*s)))
+        .collect();
+    let json = format!(
+        "{{\"bench\": \"grass\", \"headline\": \"speedup_at_matched_rmse (ours over plain instanced blade geometry at equal RMSE against the all-geometry reference; our worst case; > 1: ours faster)\", \"timing\": \"gpu-synchronised\", \"distance_m\": {}, \"blades_per_patch\": {}, \"size\": [{}, {}], \"frames\": {}, \"virtual_blades_in_view\": {virtual_blades}, \"speedup_at_matched_rmse\": {}, \"matched_points\": [{}], \"speedup_at_baseline_points\": [{}], \"rows\": [\n  {}\n]}}",
+        args.distance,
+        patch.blades.len(),
+        args.size.x,
+        args.size.y,
+        args.frames,
+        json_f(headline),
+        matched_json.join(", "),
+        at_baseline_json.join(", "),
+        rows_json.join(",\n  ")
+    );
+    println!("{json}");
+    if let Some(path) = &args.stats
+        && let Err(e) = bevy_nature_harness::stats::write_atomically(path, &json)
+    {
+        eprintln!("grass_bench: {e}");
+        std::process::exit(1);
+    }
+}
