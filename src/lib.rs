@@ -47,7 +47,8 @@ impl PluginGroup for NaturePlugins {
 }
 
 /// Connects the suite's crates where they meet (each works without the others): the clipmap
-/// terrain and leaf materials receive Screen Space Soft Shadows while a light has them.
+/// terrain, leaf and grass-blade materials receive Screen Space Soft Shadows while a light has
+/// them.
 #[derive(Default)]
 pub struct NatureGluePlugin;
 
@@ -58,6 +59,7 @@ impl bevy::app::Plugin for NatureGluePlugin {
             (
                 receive_soft_shadows::<terrain_clip::material::ClipmapExtension>,
                 receive_soft_shadows::<foliage::pruning::material::LeafExtension>,
+                receive_soft_shadows::<foliage::grass::material::GrassBladeExtension>,
             ),
         );
     }
@@ -79,6 +81,15 @@ impl SoftShadowReceiving for terrain_clip::material::ClipmapExtension {
 }
 
 impl SoftShadowReceiving for foliage::pruning::material::LeafExtension {
+    fn soft_visibility(&mut self) -> &mut Option<bevy::prelude::Handle<bevy::prelude::Image>> {
+        &mut self.soft_visibility
+    }
+    fn holds(&self, texture: &bevy::prelude::Handle<bevy::prelude::Image>) -> bool {
+        self.soft_visibility.as_ref() == Some(texture)
+    }
+}
+
+impl SoftShadowReceiving for foliage::grass::material::GrassBladeExtension {
     fn soft_visibility(&mut self) -> &mut Option<bevy::prelude::Handle<bevy::prelude::Image>> {
         &mut self.soft_visibility
     }

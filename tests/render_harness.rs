@@ -296,6 +296,59 @@ fn showcase_terrain_receives_soft_shadows() {
     assert!(material.height_layers.is_some() && material.height_base.is_some());
 }
 
+/// The main scene's meadow receives the soft shadows: the blade material holds the SSSS
+/// visibility texture, and its soft-shadow fragment stage compiles and renders.
+#[test]
+fn showcase_grass_receives_soft_shadows() {
+    use bevy_nature::foliage::grass::material::GrassBladeMaterial;
+    use bevy_nature::foliage::grass::{GrassSettings, systems::GrassFieldState};
+    use bevy_nature::soft_shadows::ssss::receiver::SsssTextures;
+    let Some(mut harness) = RenderHarness::for_test("showcase_grass_ssss", W, H) else {
+        return;
+    };
+    build_showcase(
+        harness.app_mut(),
+        ShowcaseOptions {
+            grass: true,
+            forest: false,
+            ..test_options()
+        },
+    );
+    // Blades only within 8 m of the camera (4.5 m up): a few hundred cells, so the software
+    // rasteriser keeps up.
+    harness
+        .app_mut()
+        .world_mut()
+        .resource_mut::<GrassSettings>()
+        .transitions
+        .min_geom = 6.0;
+    harness
+        .app_mut()
+        .world_mut()
+        .resource_mut::<GrassSettings>()
+        .transitions
+        .max_geom = 8.0;
+    harness.wait_until_ready().unwrap();
+    harness.run_frames(3).unwrap();
+    harness.render().unwrap();
+    let world = harness.world_mut();
+    let cells = world
+        .query::<&GrassFieldState>()
+        .single(world)
+        .expect("one meadow")
+        .geometry_cells;
+    assert!(cells > 20, "{cells} cells of blades");
+    let visibility = world.resource::<SsssTextures>().visibility.clone();
+    let materials = world.resource::<Assets<GrassBladeMaterial>>();
+    assert!(!materials.is_empty());
+    for (_, material) in materials.iter() {
+        assert_eq!(
+            material.extension.soft_visibility.as_ref(),
+            Some(&visibility)
+        );
+    }
+}
+
 /// The main scene's distant backdrop trees are drawn by their billboard clouds: once the bakes
 /// are done every backdrop tree has exactly one impostor, and some are on screen.
 #[test]

@@ -64,6 +64,7 @@ impl GrassBladeParams {
 
 /// The grass part of [`GrassBladeMaterial`].
 #[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
+#[bind_group_data(GrassBladeKey)]
 pub struct GrassBladeExtension {
     /// Transition distances, eye, colours.
     #[uniform(100)]
@@ -71,9 +72,35 @@ pub struct GrassBladeExtension {
     /// The density map (`R32Float`, see [`density_image`]).
     #[texture(101, sample_type = "float", filterable = false)]
     pub density: Handle<Image>,
+    /// A screen-space soft-shadow visibility texture (`bevy_soft_shadows`'
+    /// `SsssTextures::visibility`) to use as the sun's shadow term. With one, the main pass's
+    /// fragment stage is `grass_blade_soft.wgsl`, which imports
+    /// `bevy_soft_shadows::receiver_functions` (so that plugin must be added); `bevy_nature`'s
+    /// glue sets it while a light has soft shadows.
+    #[texture(102, sample_type = "float", filterable = false)]
+    pub soft_visibility: Option<Handle<Image>>,
+}
+
+/// What the blade pipeline is specialised on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct GrassBladeKey {
+    /// The blades receive screen-space soft shadows.
+    pub soft_shadows: bool,
+}
+
+impl From<&GrassBladeExtension> for GrassBladeKey {
+    fn from(material: &GrassBladeExtension) -> Self {
+        Self {
+            soft_shadows: material.soft_visibility.is_some(),
+        }
+    }
 }
 
 const BLADE_SHADER: &str = "embedded://bevy_foliage/grass/grass_blade.wgsl";
+
+/// The soft-shadow main-pass stage, loaded at start-up and swapped in by `specialize`.
+static BLADE_SOFT_SHADER: std::sync::OnceLock<Handle<bevy::shader::Shader>> =
+    std::sync::OnceLock::new();
 
 impl MaterialExtension for GrassBladeExtension {
     fn fragment_shader() -> ShaderRef {
@@ -81,6 +108,26 @@ impl MaterialExtension for GrassBladeExtension {
     }
     fn prepass_fragment_shader() -> ShaderRef {
         ShaderRef::Path(BLADE_SHADER.into())
+    }
+    fn specialize(
+        _pipeline: &bevy::pbr::MaterialExtensionPipeline,
+        descriptor: &mut bevy::render::render_resource::RenderPipelineDescriptor,
+        _layout: &bevy::mesh::MeshVertexBufferLayoutRef,
+        key: bevy::pbr::MaterialExtensionKey<Self>,
+    ) -> Result<(), bevy::render::render_resource::SpecializedMeshPipelineError> {
+        // Only the main pass: the prepass and shadow pipelines keep the blade test of
+        // `grass_blade.wgsl`.
+        if key.bind_group_data.soft_shadows
+            && let (Some(fragment), Some(soft)) =
+                (descriptor.fragment.as_mut(), BLADE_SOFT_SHADER.get())
+            && !fragment
+                .shader_defs
+                .iter()
+                .any(|d| *d == bevy::shader::ShaderDefVal::from("PREPASS_PIPELINE"))
+        {
+            fragment.shader = soft.clone();
+        }
+        Ok(())
     }
 }
 
@@ -185,9 +232,19 @@ pub fn density_map_from_image(
 /// Registers the blade material and the shaders.
 pub(crate) fn build(app: &mut App) {
     load_shader_library!(app, "grass_functions.wgsl");
+    load_shader_library!(app, "grass_blade_functions.wgsl");
     embedded_asset!(app, "grass_blade.wgsl");
-    app.add_plugins(MaterialPlugin::<GrassBladeMaterial>::default());
+    embedded_asset!(app, "grass_blade_soft.wgsl");
+    let soft: Handle<bevy::shader::Shader> =
+        bevy::asset::load_embedded_asset!(app, "grass_blade_soft.wgsl");
+    let _ = BLADE_SOFT_SHADER.set(soft.clone());
+    app.insert_resource(GrassBladeSoftShader(soft))
+        .add_plugins(MaterialPlugin::<GrassBladeMaterial>::default());
 }
+
+/// Keeps the soft-shadow blade stage loaded.
+#[derive(Resource)]
+struct GrassBladeSoftShader(#[allow(dead_code)] Handle<bevy::shader::Shader>);
 
 #[cfg(test)]
 mod tests {

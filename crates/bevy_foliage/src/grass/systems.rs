@@ -180,6 +180,7 @@ pub fn prepare_grass_fields(
             GrassBladeExtension {
                 params: GrassBladeParams::new(&settings, &species, rect, Vec3::ZERO),
                 density: images.add(density_image(&density)),
+                soft_visibility: None,
             },
         ));
         // A rebuilt field starts with no cells: the old ones go.

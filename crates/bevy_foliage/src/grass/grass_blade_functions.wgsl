@@ -1,0 +1,34 @@
+#define_import_path bevy_foliage::grass_blade
+
+// The blade material's bindings and its per-fragment test, shared by the blade fragment stages
+// (`grass_blade.wgsl`, and `grass_blade_soft.wgsl` where the blades receive screen-space soft
+// shadows).
+#import bevy_foliage::grass_functions as grass
+
+struct GrassBladeParams {
+    // xyz: the eye the transitions are measured from (the field's camera, so the shadow pass
+    // keeps the same blades).
+    eye: vec4<f32>,
+    // (min_geom, max_geom, min_btf, max_btf)
+    distances: vec4<f32>,
+    // (ω_max, ω₀, max_silhouettes, silhouette ε)
+    window: vec4<f32>,
+    // The density map's rectangle (min.x, min.z, size.x, size.z).
+    density_rect: vec4<f32>,
+    // rgb: root colour; w: ambient occlusion at the root.
+    root_color: vec4<f32>,
+    // rgb: tip colour.
+    tip_color: vec4<f32>,
+}
+
+@group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> blade: GrassBladeParams;
+@group(#{MATERIAL_BIND_GROUP}) @binding(101) var density_map: texture_2d<f32>;
+
+// Algorithm 1 / eq. 4.6 at this fragment: is the blade point drawn here?
+fn blade_kept(world: vec3<f32>, threshold: f32, frag: vec2<f32>) -> bool {
+    let ld = grass::density_at(density_map, blade.density_rect, world.xz);
+    let d = distance(world, blade.eye.xyz);
+    let opacity = grass::geometry_opacity(blade.distances, blade.window, d, ld, threshold);
+    return opacity >= grass::DISCARD && opacity > grass::dither(frag);
+}
+
