@@ -92,11 +92,19 @@ fn setup(
         brightness: 500.0,
         ..default()
     });
-    commands.spawn((Camera3d::default(), Transform::from_xyz(0.0, 1.6, -10.0)));
+    commands.spawn((
+        FlyCamera,
+        Camera3d::default(),
+        Transform::from_xyz(0.0, 1.6, -10.0),
+    ));
 }
 
+/// The camera that glides.
+#[derive(Component)]
+struct FlyCamera;
+
 /// Glides forward along z at 1.5 m/s, 1.6 m above the grass, looking slightly down.
-fn glide(time: Res<Time>, mut cameras: Query<&mut Transform, With<Camera3d>>) {
+fn glide(time: Res<Time>, mut cameras: Query<&mut Transform, With<FlyCamera>>) {
     let z = -10.0 + (time.elapsed_secs() * 1.5) % 120.0;
     for mut transform in &mut cameras {
         *transform =

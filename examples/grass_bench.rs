@@ -34,6 +34,7 @@
 use bevy::camera::primitives::Frustum;
 use bevy::prelude::*;
 use bevy_nature::bench_curves::{matched_speedups, speedups_at_baseline_points};
+use bevy_nature::foliage::grass::bake::GrassSliceBakeCamera;
 use bevy_nature::foliage::grass::mesh::patch_mesh;
 use bevy_nature::foliage::grass::patch::{BasePatch, Mirror, PatchSettings};
 use bevy_nature::foliage::grass::quadtree::{
@@ -199,7 +200,7 @@ fn cells_in_view(
 ) -> Vec<CellNode> {
     let world = harness.world_mut();
     let (transform, frustum) = world
-        .query_filtered::<(&GlobalTransform, &Frustum), With<Camera3d>>()
+        .query_filtered::<(&GlobalTransform, &Frustum), (With<Camera3d>, Without<GrassSliceBakeCamera>)>()
         .single(world)
         .expect("one camera");
     let view = CellView {
@@ -275,7 +276,7 @@ fn spawn_baseline(
             ..default()
         });
     let camera = world
-        .query_filtered::<&GlobalTransform, With<Camera3d>>()
+        .query_filtered::<&GlobalTransform, (With<Camera3d>, Without<GrassSliceBakeCamera>)>()
         .single(world)
         .expect("camera")
         .translation();

@@ -291,6 +291,12 @@ fn slice_bake_matches_the_cpu_reference() {
         .id();
     let mut result = None;
     for _ in 0..400 {
+        // A naive camera controller moving every `Camera3d`: the bake holds its own cameras.
+        let world = harness.world_mut();
+        let mut cameras = world.query_filtered::<&mut Transform, With<Camera3d>>();
+        for mut transform in cameras.iter_mut(world) {
+            transform.translation.x += 0.01;
+        }
         harness.step();
         if let Some(r) = harness.world_mut().get::<GrassSliceBakeResult>(entity) {
             result = Some(r.0.clone());

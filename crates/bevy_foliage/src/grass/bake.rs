@@ -60,9 +60,22 @@ pub struct GrassSliceBakeRequest {
 #[derive(Component, Clone, Debug)]
 pub struct GrassSliceBakeResult(pub Result<Arc<SliceBake>, String>);
 
-/// Marks the bake's cameras.
+/// Marks the bake's cameras, and holds where each must stand: a game's camera controller that
+/// moves every `Camera3d` would otherwise move them too, and the bake would never settle; the
+/// pose is put back before transforms propagate.
 #[derive(Component, Clone, Copy, Debug, Default)]
-pub struct GrassSliceBakeCamera;
+pub struct GrassSliceBakeCamera(pub Transform);
+
+/// Puts the bake cameras back where the bake placed them.
+fn hold_bake_cameras(
+    mut cameras: Query<(&mut Transform, &GrassSliceBakeCamera), Changed<Transform>>,
+) {
+    for (mut transform, pose) in &mut cameras {
+        if *transform != pose.0 {
+            *transform = pose.0;
+        }
+    }
+}
 
 /// The bake's unlit material: one layer's value of the blades (see `slice_bake.wgsl`).
 #[derive(Asset, TypePath, AsBindGroup, Clone, Debug)]
@@ -125,7 +138,11 @@ pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "slice_bake.wgsl");
     track_pipelines_idle(app);
     app.add_plugins(MaterialPlugin::<SliceBakeMaterial>::default())
-        .add_systems(Update, (start_slice_bakes, finish_slice_bakes).chain());
+        .add_systems(Update, (start_slice_bakes, finish_slice_bakes).chain())
+        .add_systems(
+            PostUpdate,
+            hold_bake_cameras.before(bevy::transform::TransformSystems::Propagate),
+        );
 }
 
 /// The hash a cached bake of `species` at this layout must carry.
@@ -311,7 +328,7 @@ fn start_slice_bakes(
                                     ..OrthographicProjection::default_3d()
                                 }),
                                 transform,
-                                GrassSliceBakeCamera,
+                                GrassSliceBakeCamera(transform),
                                 Hdr,
                                 Tonemapping::None,
                                 DebandDither::Disabled,
