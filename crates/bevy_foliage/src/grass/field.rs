@@ -4,6 +4,7 @@
 //! shared by every field (a reflected resource, so the panel and inspectors can edit it live).
 
 use super::patch::PatchSettings;
+use super::slice_mip::MipAlpha;
 use super::transition::TransitionDistances;
 use bevy::prelude::*;
 
@@ -117,6 +118,11 @@ pub struct GrassSettings {
     pub slice_per_axis: u32,
     /// Texels a side of each slice image (8..=1024).
     pub slice_resolution: u32,
+    /// How the slices' coarser mips make their alpha ([`MipAlpha`]: the thesis' maximum by
+    /// default, so distant grass keeps its coverage at grazing views; the mean is closer in
+    /// colour seen from higher up).
+    /// Read when a field's slices are made.
+    pub slice_mip_alpha: MipAlpha,
     /// A folder to cache slice bakes in (`<species hash>.grassslices`); `None`: bake in memory
     /// at every start.
     #[reflect(ignore)]
@@ -133,6 +139,7 @@ impl Default for GrassSettings {
             slices: true,
             slice_per_axis: 4,
             slice_resolution: 64,
+            slice_mip_alpha: MipAlpha::Max,
             slice_cache: None,
         }
     }

@@ -5,6 +5,7 @@
 
 use super::field::{GrassSettings, GrassSpecies};
 use super::quadtree::CellGrid;
+use super::slice_mip::MipAlpha;
 use super::slices::{LAYERS, SliceTextures};
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::image::{ImageAddressMode, ImageFilterMode, ImageSampler, ImageSamplerDescriptor};
@@ -111,11 +112,12 @@ impl Material for GrassSliceMaterial {
 }
 
 /// The slice images as one array texture: layer `s·LAYERS + l` is slice `s`'s layer `l`, each
-/// with its custom mip chain, trilinearly filtered and clamped at the edges.
-pub fn slice_image(textures: &SliceTextures) -> Image {
+/// with its custom mip chain (alpha made as `alpha` says), trilinearly filtered and clamped at
+/// the edges.
+pub fn slice_image(textures: &SliceTextures, alpha: MipAlpha) -> Image {
     let layout = textures.layout;
     let layers = layout.slices() * LAYERS;
-    let mips = textures.mips();
+    let mips = textures.mips(alpha);
     let levels = mips.first().map_or(1, |chain| chain.len()) as u32;
     let mut data = Vec::new();
     // Layer-major: every mip of layer 0, then layer 1, …
@@ -175,7 +177,7 @@ mod tests {
             resolution: 4,
         };
         let textures = SliceTextures::empty(layout);
-        let image = slice_image(&textures);
+        let image = slice_image(&textures, MipAlpha::Mean);
         assert_eq!(
             image.texture_descriptor.size.depth_or_array_layers,
             3 * LAYERS

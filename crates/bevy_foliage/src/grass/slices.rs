@@ -21,7 +21,7 @@
 use super::field::GrassSpecies;
 use super::lighting::BTF_DIRECTIONS;
 use super::patch::BasePatch;
-use super::slice_mip::{RgbaLevel, mip_chain};
+use super::slice_mip::{MipAlpha, RgbaLevel, mip_chain_with};
 use bevy::math::{Vec2, Vec3};
 
 /// Layers of each slice image.
@@ -200,17 +200,20 @@ impl SliceTextures {
         &self.texels[start..start + self.layout.texels_per_layer()]
     }
 
-    /// Each layer's mip chain by the slices' custom filter ([`super::slice_mip`]), layer by layer:
-    /// `result[layer][level]`.
-    pub fn mips(&self) -> Vec<Vec<RgbaLevel>> {
+    /// Each layer's mip chain by the slices' custom filter ([`super::slice_mip`]) with its alpha
+    /// made as `alpha` says, layer by layer: `result[layer][level]`.
+    pub fn mips(&self, alpha: MipAlpha) -> Vec<Vec<RgbaLevel>> {
         (0..self.layout.slices() * LAYERS)
             .map(|l| {
                 let start = l as usize * self.layout.texels_per_layer();
-                mip_chain(&RgbaLevel {
-                    width: self.layout.resolution,
-                    height: self.layout.resolution,
-                    texels: self.texels[start..start + self.layout.texels_per_layer()].to_vec(),
-                })
+                mip_chain_with(
+                    &RgbaLevel {
+                        width: self.layout.resolution,
+                        height: self.layout.resolution,
+                        texels: self.texels[start..start + self.layout.texels_per_layer()].to_vec(),
+                    },
+                    alpha,
+                )
             })
             .collect()
     }

@@ -321,7 +321,7 @@ pub fn attach_slice_bakes(
                 state.rect,
                 Vec3::ZERO,
             ),
-            slices: images.add(slice_image(&textures)),
+            slices: images.add(slice_image(&textures, settings.slice_mip_alpha)),
             density,
         });
         let block_cells = 1u32 << SLICE_BLOCK_LEVELS.min(state.grid.levels);
