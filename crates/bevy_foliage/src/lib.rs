@@ -16,9 +16,11 @@
 //! - **billboard-cloud impostors** for distant trees (seed 001, ch. 4): each species simplified
 //!   to a few tens of planes textured from one GPU-baked atlas, drawn beyond the pruning's `far`
 //!   with a dithered handover ([`impostor`]).
-//! - **grass** with geometry / slice LoD (Boulanger, ch. 4): so far the plain-Rust core of
-//!   [`grass`] — base patch, density maps, seamless transitions, the cell quadtree, lighting and
-//!   ground frames — with the rendering to come; tree lighting (ch. 5) later.
+//! - **grass** with geometry / slice LoD (Boulanger, ch. 4): a [`grass::GrassField`] is drawn
+//!   near as blade geometry, at middle distance as GPU-baked volume slices lit through five
+//!   baked light directions, far as the horizontal slice on macro-cells, with seamless
+//!   transitions and density maps ([`grass`], [`grass::GrassPlugin`]); tree lighting (ch. 5)
+//!   later.
 //!
 //! Add [`FoliagePlugin`]; tune [`FoliagePruningSettings`] (a reflected resource, so inspectors can
 //! edit it live).
@@ -27,11 +29,13 @@
 //! (`pruning::{leaves, cells, visibility, mask, bake, extract, selection, appearance, format,
 //! gltf, procedural}`, `forest::{cache, feedback, lod, manager, hlod}`,
 //! `impostor::{cloud, atlas, texture, format}`, `grass::{patch, density, transition, quadtree,
-//! lighting, ground, slice_mip}`, [`distance`]); meshes are built from them in `meshes`,
+//! lighting, ground, slices, slice_shading, slice_mip, slice_format}`, [`distance`]); meshes are
+//! built from them in `meshes`,
 //! `pruning::slot_mesh` and `grass::mesh`; the main-world ECS code lives in
 //! `components`, `systems`, `store`, `spawn`, `bake` and `assets` modules; the render-world code
 //! sits beside its WGSL (`pruning::render` with `prune.wgsl`, `pruning::material` with the leaf
-//! shaders, `impostor::bake` with `impostor_bake.wgsl`).
+//! shaders, `impostor::bake` with `impostor_bake.wgsl`, `grass::material` and
+//! `grass::slice_material` with the grass shaders, `grass::bake` with `slice_bake.wgsl`).
 
 use bevy::prelude::*;
 

@@ -3,15 +3,27 @@
 //! volume slices with baked lighting, and far as a horizontal slice, with transitions that keep
 //! the coverage whole.
 //!
-//! This module holds the plain-Rust core so far: [`patch`] (the base patch, its stratified roots
-//! and density thresholds, the mirrored versions of eq. 4.9, blade strips along a ballistic
-//! curve), [`mesh`] (the base patch as one mesh carrying each blade's threshold), [`quadtree`] (the implicit quadtree of cells and macro-cells walked by frustum and
-//! distance), [`density`] (density maps), [`transition`] (the weights of eq. 4.3–4.5 and 4.14 and the
-//! complementary opacities of algorithm 1 and eq. 4.6), [`slice_mip`] (the slices' custom mip
-//! filter), [`lighting`] (eq. 4.1, the blade ambient occlusion, the shadow mask's eq. 4.7, the
-//! spherical barycentric BTF weights of appendix A) and [`ground`] (the lift and frame of
-//! eq. 4.10–4.12 on curved ground). The slice bake, the render passes and the `GrassPlugin` come
-//! next.
+//! Add [`GrassPlugin`] (part of `bevy_nature`'s `NaturePlugins`), spawn a [`GrassField`] (a
+//! rectangle, a [`GrassSpecies`], an optional density map) and tune [`GrassSettings`]. Each field
+//! bakes its species' slices on the GPU once ([`bake`], cached on disk when
+//! `GrassSettings::slice_cache` names a folder), then every frame walks its cells from the camera
+//! ([`systems`]): cells within the geometry's reach become blade-geometry entities
+//! ([`material`], `grass_blade.wgsl`), blocks of cells beyond become slice quads and, past the
+//! vertical slices' reach, macro-cells of horizontal slice ([`slice_material`],
+//! `grass_slice.wgsl`). Blades receive Bevy's shadows, and screen-space soft shadows through
+//! `bevy_nature`'s glue.
+//!
+//! The plain-Rust core: [`patch`] (the base patch, its stratified roots and density thresholds,
+//! the mirrored versions of eq. 4.9, blade strips along a ballistic curve), [`mesh`] (the patch
+//! and slice meshes), [`quadtree`] (the implicit quadtree of cells and macro-cells walked by
+//! frustum and distance), [`density`] (density maps, procedural meadows), [`transition`] (the
+//! weights of eq. 4.3–4.5 and 4.14, the complementary opacities of algorithm 1 and eq. 4.6, the
+//! ordered dither), [`slices`] (the slice layout and cameras, the CPU reference of the bake),
+//! [`slice_shading`] (the CPU reference of the slice shader), [`slice_mip`] (the slices' mip
+//! filter), [`slice_format`] (the `*.grassslices` cache), [`lighting`] (eq. 4.1, the blade
+//! ambient occlusion, the shadow mask's eq. 4.7, the spherical barycentric BTF weights of
+//! appendix A) and [`ground`] (the lift and frame of eq. 4.10–4.12 on curved ground, not yet
+//! used by the renderer: fields lie on flat ground so far).
 
 pub mod bake;
 pub mod density;
