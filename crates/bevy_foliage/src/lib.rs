@@ -48,6 +48,7 @@ pub mod meshes;
 pub mod pruning;
 pub mod rng;
 pub mod settings;
+mod soft_receiver;
 
 pub use distance::LodDistances;
 pub use forest::components::{ForestBudget, ForestSettings, ForestTree, TreeLod};

@@ -47,6 +47,30 @@ fn gradient_image() -> Image {
     )
 }
 
+/// An orthographic camera at [`EYE`] looking straight down over `view` metres: image x along
+/// +x, image y along +z.
+fn spawn_top_down_camera(harness: &mut RenderHarness, view: f32) {
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Projection::Orthographic(OrthographicProjection {
+            scaling_mode: ScalingMode::Fixed {
+                width: view,
+                height: view,
+            },
+            ..OrthographicProjection::default_3d()
+        }),
+        Transform::from_translation(EYE).looking_to(Vec3::NEG_Y, Vec3::NEG_Z),
+    ));
+}
+
+fn add_image(harness: &mut RenderHarness, image: Image) -> Handle<Image> {
+    harness
+        .world_mut()
+        .resource_mut::<Assets<Image>>()
+        .add(image)
+}
+
 /// The pixels the blades cover, seen straight down from `EYE` over `VIEW` metres, as the CPU
 /// computes them: every strip triangle of every cell (mirrored as eq. 4.9 places it), each
 /// pixel centre inside it kept where the blade point there passes the density test and its
@@ -181,10 +205,7 @@ fn blade_pass_keeps_the_blades_the_cpu_keeps() {
             slices: false,
             ..default()
         });
-    let density = {
-        let mut images = harness.world_mut().resource_mut::<Assets<Image>>();
-        images.add(gradient_image())
-    };
+    let density = add_image(&mut harness, gradient_image());
     harness.world_mut().spawn(GrassField {
         size: field_size,
         species: species(),
@@ -194,18 +215,7 @@ fn blade_pass_keeps_the_blades_the_cpu_keeps() {
         DirectionalLight::default(),
         Transform::from_xyz(1.0, 3.0, 2.0).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    harness.world_mut().spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Projection::Orthographic(OrthographicProjection {
-            scaling_mode: ScalingMode::Fixed {
-                width: VIEW,
-                height: VIEW,
-            },
-            ..OrthographicProjection::default_3d()
-        }),
-        Transform::from_translation(EYE).looking_to(Vec3::NEG_Y, Vec3::NEG_Z),
-    ));
+    spawn_top_down_camera(&mut harness, VIEW);
     harness.wait_until_ready().expect("pipelines");
     let map = DensityMap::new(2, 1, vec![64.0 / 255.0, 1.0], [-1.0, -1.0], [2.0, 2.0]).unwrap();
 
@@ -561,28 +571,14 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
             slice_resolution: resolution,
             ..default()
         });
-    let density = {
-        let mut images = harness.world_mut().resource_mut::<Assets<Image>>();
-        images.add(gradient_image())
-    };
+    let density = add_image(&mut harness, gradient_image());
     let species = species();
     harness.world_mut().spawn(GrassField {
         size: Vec2::splat(2.0),
         species: species.clone(),
         density: Some(density),
     });
-    harness.world_mut().spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Projection::Orthographic(OrthographicProjection {
-            scaling_mode: ScalingMode::Fixed {
-                width: view,
-                height: view,
-            },
-            ..OrthographicProjection::default_3d()
-        }),
-        Transform::from_translation(EYE).looking_to(Vec3::NEG_Y, Vec3::NEG_Z),
-    ));
+    spawn_top_down_camera(&mut harness, view);
     let mut bake = None;
     for _ in 0..300 {
         harness.step();

@@ -68,7 +68,9 @@ impl GrassSpecies {
 /// rotation and scale are ignored).
 ///
 /// The base patch is generated once per field from `species.patch` and repeated on a grid of
-/// patch-sized cells, each cell showing one of its four mirrored versions (eq. 4.9).
+/// patch-sized cells, each cell showing one of its four mirrored versions (eq. 4.9). The field is
+/// built when the component is added or changed (its slices baked again then, or read from the
+/// cache); moving the entity afterwards does not move the grass.
 #[derive(Component, Clone, Debug, Reflect)]
 #[reflect(Component, Debug)]
 #[require(Transform, Visibility)]

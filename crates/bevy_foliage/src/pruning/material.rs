@@ -127,16 +127,11 @@ impl MaterialExtension for LeafExtension {
         key: bevy::pbr::MaterialExtensionKey<Self>,
     ) -> Result<(), bevy::render::render_resource::SpecializedMeshPipelineError> {
         // Only the main pass: the prepass and shadow pipelines keep Bevy's prepass shader.
-        if key.bind_group_data.soft_shadows
-            && let (Some(fragment), Some(soft)) =
-                (descriptor.fragment.as_mut(), LEAF_SOFT_SHADER.get())
-            && !fragment
-                .shader_defs
-                .iter()
-                .any(|d| *d == bevy::shader::ShaderDefVal::from("PREPASS_PIPELINE"))
-        {
-            fragment.shader = soft.clone();
-        }
+        crate::soft_receiver::use_soft_fragment(
+            descriptor,
+            key.bind_group_data.soft_shadows,
+            LEAF_SOFT_SHADER.get(),
+        );
         Ok(())
     }
 }
