@@ -645,3 +645,47 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
     assert!(cl < 0.75 * cr, "{cl} vs {cr}");
     assert!(differ * 100 < c, "{differ} px differ of {c}");
 }
+
+/// A density map that cannot be read (here an `Rgba8Snorm` image) is an error on the field naming
+/// the format, and the field grows at full density meanwhile; a readable one replaces nothing
+/// but the map.
+#[test]
+fn an_unreadable_density_map_is_an_error_and_the_field_still_grows() {
+    use bevy_foliage::grass::GrassFieldError;
+    use bevy_foliage::grass::systems::GrassFieldState;
+    let Some(mut harness) = RenderHarness::for_test("grass_bad_density", 32, 32) else {
+        return;
+    };
+    harness.app_mut().add_plugins(GrassPlugin);
+    let mut bad = gradient_image();
+    bad.texture_descriptor.format = bevy::render::render_resource::TextureFormat::Rgba8Snorm;
+    bad.data = Some(vec![0; 8]);
+    // Kept on the CPU only: nothing of it goes to the GPU.
+    bad.asset_usage = bevy::asset::RenderAssetUsages::MAIN_WORLD;
+    let bad = add_image(&mut harness, bad);
+    let good = add_image(&mut harness, gradient_image());
+    let field = |density| GrassField {
+        size: Vec2::splat(2.0),
+        species: species(),
+        density: Some(density),
+    };
+    let (broken, fine) = (
+        harness.world_mut().spawn(field(bad)).id(),
+        harness.world_mut().spawn(field(good)).id(),
+    );
+    spawn_top_down_camera(&mut harness, VIEW);
+    for _ in 0..4 {
+        harness.step();
+    }
+    let world = harness.world_mut();
+    let error = world
+        .get::<GrassFieldError>(broken)
+        .expect("an error on the field");
+    assert!(error.0.contains("Rgba8Snorm"), "{}", error.0);
+    assert!(world.get::<GrassFieldError>(fine).is_none());
+    let full = world.get::<GrassFieldState>(broken).unwrap();
+    assert_eq!(full.density.values(), &[1.0]);
+    assert!(full.geometry_cells > 0);
+    let read = world.get::<GrassFieldState>(fine).unwrap();
+    assert_eq!(read.density.dimensions(), (2, 1));
+}
