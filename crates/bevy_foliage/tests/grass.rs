@@ -64,6 +64,15 @@ fn spawn_top_down_camera(harness: &mut RenderHarness, view: f32) {
     ));
 }
 
+/// Renders, and keeps the image in the artifacts folder as `name.png`.
+fn render_saved(harness: &mut RenderHarness, name: &str) -> RgbaImage {
+    let image = harness.render().unwrap();
+    image
+        .save_png(bevy_nature_harness::compare::artifacts_dir().join(format!("{name}.png")))
+        .ok();
+    image
+}
+
 fn add_image(harness: &mut RenderHarness, image: Image) -> Handle<Image> {
     harness
         .world_mut()
@@ -220,10 +229,7 @@ fn blade_pass_keeps_the_blades_the_cpu_keeps() {
     let map = DensityMap::new(2, 1, vec![64.0 / 255.0, 1.0], [-1.0, -1.0], [2.0, 2.0]).unwrap();
 
     // Geometry only: the density gradient alone thins the blades.
-    let image = harness.render().unwrap();
-    image
-        .save_png(bevy_nature_harness::compare::artifacts_dir().join("grass_blades_near.png"))
-        .ok();
+    let image = render_saved(&mut harness, "grass_blades_near");
     let gpu = gpu_coverage(&image);
     let cpu = cpu_coverage(field_size, &map, &near);
     let (differ, g, c) = compare(&gpu, &cpu);
@@ -254,10 +260,7 @@ fn blade_pass_keeps_the_blades_the_cpu_keeps() {
     for _ in 0..4 {
         harness.step();
     }
-    let image = harness.render().unwrap();
-    image
-        .save_png(bevy_nature_harness::compare::artifacts_dir().join("grass_blades_window.png"))
-        .ok();
+    let image = render_saved(&mut harness, "grass_blades_window");
     let gpu = gpu_coverage(&image);
     let cpu_window = cpu_coverage(field_size, &map, &window);
     let (differ, g, c2) = compare(&gpu, &cpu_window);
@@ -593,10 +596,7 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
     for _ in 0..4 {
         harness.step();
     }
-    let image = harness.render().unwrap();
-    image
-        .save_png(bevy_nature_harness::compare::artifacts_dir().join("grass_slice_pass.png"))
-        .ok();
+    let image = render_saved(&mut harness, "grass_slice_pass");
     let gpu = gpu_coverage(&image);
     let layout = bake.textures.layout;
     let grid = field_grid(Vec2::ZERO, Vec2::splat(2.0), 0.5);

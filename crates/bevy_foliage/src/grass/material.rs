@@ -6,6 +6,7 @@
 
 use super::density::DensityMap;
 use super::field::{GrassSettings, GrassSpecies};
+use super::transition::TransitionDistances;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
 use bevy::prelude::*;
@@ -44,22 +45,31 @@ impl GrassBladeParams {
         density_rect: Vec4,
         eye: Vec3,
     ) -> Self {
-        let t = &settings.transitions;
+        let (distances, window) = transition_uniforms(&settings.transitions);
         let c = |c: LinearRgba| Vec4::new(c.red, c.green, c.blue, 1.0);
         Self {
             eye: eye.extend(1.0),
-            distances: Vec4::new(t.min_geom, t.max_geom, t.min_btf, t.max_btf),
-            window: Vec4::new(
-                t.omega_max,
-                t.omega_0,
-                t.max_silhouettes,
-                t.silhouette_epsilon,
-            ),
+            distances,
+            window,
             density_rect,
             root_color: c(species.root_color).truncate().extend(species.root_ao),
             tip_color: c(species.tip_color),
         }
     }
+}
+
+/// The transition distances and window as the grass shaders take them:
+/// `(min_geom, max_geom, min_btf, max_btf)` and `(ω_max, ω₀, max_silhouettes, silhouette ε)`.
+pub fn transition_uniforms(t: &TransitionDistances) -> (Vec4, Vec4) {
+    (
+        Vec4::new(t.min_geom, t.max_geom, t.min_btf, t.max_btf),
+        Vec4::new(
+            t.omega_max,
+            t.omega_0,
+            t.max_silhouettes,
+            t.silhouette_epsilon,
+        ),
+    )
 }
 
 /// The grass part of [`GrassBladeMaterial`].

@@ -4,6 +4,7 @@
 //! distant grass keeps its coverage.
 
 use super::field::{GrassSettings, GrassSpecies};
+use super::material::transition_uniforms;
 use super::quadtree::CellGrid;
 use super::slice_mip::MipAlpha;
 use super::slices::{LAYERS, SliceTextures};
@@ -48,17 +49,12 @@ impl GrassSliceParams {
         density_rect: Vec4,
         eye: Vec3,
     ) -> Self {
-        let t = &settings.transitions;
+        let (distances, window) = transition_uniforms(&settings.transitions);
         let l = &textures.layout;
         Self {
             eye: eye.extend(1.0),
-            distances: Vec4::new(t.min_geom, t.max_geom, t.min_btf, t.max_btf),
-            window: Vec4::new(
-                t.omega_max,
-                t.omega_0,
-                t.max_silhouettes,
-                t.silhouette_epsilon,
-            ),
+            distances,
+            window,
             density_rect,
             grid: Vec4::new(grid.origin.x, grid.origin.y, grid.cell, ground_y),
             slices: Vec4::new(
