@@ -44,7 +44,9 @@ use bevy_nature::foliage::grass::patch::{BasePatch, Mirror, PatchSettings};
 use bevy_nature::foliage::grass::quadtree::{
     CellGrid, CellNode, CellView, GroundBounds, select_cells,
 };
-use bevy_nature::foliage::grass::systems::{GEOMETRY_BLADES, field_grid, grass_ready};
+use bevy_nature::foliage::grass::systems::{
+    GEOMETRY_BLADES, cell_transform, field_grid, grass_ready,
+};
 use bevy_nature::foliage::grass::transition::TransitionDistances;
 use bevy_nature::foliage::grass::{GrassField, GrassSettings, GrassSpecies};
 use bevy_nature_harness::compare::{Comparison, RgbaImage};
@@ -295,21 +297,11 @@ fn spawn_baseline(
             continue;
         }
         let mirror = Mirror::of_cell(node.x as i64, node.z as i64, species.patch.seed);
-        let translation = Vec3::new(
-            corner.x + if mirror.x { side } else { 0.0 },
-            0.0,
-            corner.y + if mirror.z { side } else { 0.0 },
-        );
-        let scale = Vec3::new(
-            if mirror.x { -1.0 } else { 1.0 },
-            1.0,
-            if mirror.z { -1.0 } else { 1.0 },
-        );
         world.spawn((
             BaselineCell,
             Mesh3d(mesh.clone()),
             MeshMaterial3d(material.clone()),
-            Transform::from_translation(translation).with_scale(scale),
+            cell_transform(corner, side, mirror),
         ));
         drawn += patch.blades.len() as u64;
     }

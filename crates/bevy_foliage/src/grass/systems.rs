@@ -42,6 +42,8 @@ pub struct GrassCamera;
 /// What a field was built into.
 #[derive(Component)]
 pub struct GrassFieldState {
+    /// The field's species, with unusable values replaced.
+    pub species: super::field::GrassSpecies,
     /// The base patch.
     pub patch: BasePatch,
     /// The cell grid over the field.
@@ -132,6 +134,19 @@ pub fn field_grid(centre: Vec2, size: Vec2, cell: f32) -> CellGrid {
     }
 }
 
+/// Where a cell of corner `corner` (x, z) and `side` showing `mirror` puts the base patch mesh:
+/// [`Mirror::place`] as a transform, `p ↦ corner + (x ? side − p.x : p.x, y, z ? side − p.z :
+/// p.z)` — a negative scale on each mirrored axis.
+pub fn cell_transform(corner: Vec2, side: f32, mirror: Mirror) -> Transform {
+    let sign = |m: bool| if m { -1.0 } else { 1.0 };
+    Transform::from_translation(Vec3::new(
+        corner.x + if mirror.x { side } else { 0.0 },
+        0.0,
+        corner.y + if mirror.z { side } else { 0.0 },
+    ))
+    .with_scale(Vec3::new(sign(mirror.x), 1.0, sign(mirror.z)))
+}
+
 /// Builds (or rebuilds) a field's patch, mesh, grid and material when it is added or changed.
 pub fn prepare_grass_fields(
     mut commands: Commands,
@@ -218,6 +233,7 @@ pub fn prepare_grass_fields(
             .entity(entity)
             .remove::<GrassFieldError>()
             .insert(GrassFieldState {
+                species: species.clone(),
                 patch,
                 grid,
                 rect,
@@ -278,7 +294,7 @@ pub fn resolve_density_maps(
 #[allow(clippy::too_many_arguments)]
 pub fn attach_slice_bakes(
     mut commands: Commands,
-    mut fields: Query<(Entity, &GrassField, &GlobalTransform, &mut GrassFieldState)>,
+    mut fields: Query<(Entity, &GlobalTransform, &mut GrassFieldState)>,
     results: Query<&GrassSliceBakeResult>,
     settings: Res<GrassSettings>,
     mut meshes: ResMut<Assets<Mesh>>,
@@ -286,7 +302,7 @@ pub fn attach_slice_bakes(
     mut materials: ResMut<Assets<GrassSliceMaterial>>,
     blade_materials: Res<Assets<GrassBladeMaterial>>,
 ) {
-    for (entity, field, transform, mut state) in &mut fields {
+    for (entity, transform, mut state) in &mut fields {
         if state.slices.is_some() {
             continue;
         }
@@ -310,7 +326,7 @@ pub fn attach_slice_bakes(
             continue;
         };
         let textures = bake.textures.clone();
-        let species = field.species.sanitized().0;
+        let species = state.species.clone();
         let material = materials.add(GrassSliceMaterial {
             params: GrassSliceParams::new(
                 &settings,
@@ -419,7 +435,7 @@ pub fn update_grass_cells(
         if let Some(material) = materials.get(&state.material) {
             let params = GrassBladeParams::new(
                 &settings,
-                &field.species.sanitized().0,
+                &state.species,
                 material.extension.params.density_rect,
                 eye,
             );
@@ -449,22 +465,9 @@ pub fn update_grass_cells(
                 x,
                 z,
             });
-            let mirror = Mirror::of_cell(x as i64, z as i64, field.species.patch.seed);
-            // Mirror::place as a transform: p ↦ corner + (x ? side − p.x : p.x, …).
-            let translation = Vec3::new(
-                corner.x + if mirror.x { side } else { 0.0 },
-                0.0,
-                corner.y + if mirror.z { side } else { 0.0 },
-            );
-            let scale = Vec3::new(
-                if mirror.x { -1.0 } else { 1.0 },
-                1.0,
-                if mirror.z { -1.0 } else { 1.0 },
-            );
-            let local = Transform::from_translation(
-                translation - Vec3::new(field_origin.x, 0.0, field_origin.z),
-            )
-            .with_scale(scale);
+            let mirror = Mirror::of_cell(x as i64, z as i64, state.species.patch.seed);
+            let mut local = cell_transform(corner, side, mirror);
+            local.translation -= Vec3::new(field_origin.x, 0.0, field_origin.z);
             let cell = commands
                 .spawn((
                     Name::new("grass cell"),
@@ -494,7 +497,7 @@ pub fn update_grass_cells(
         if let (Some(material), Some(density)) = (slice_materials.get(&slices.material), density) {
             let params = GrassSliceParams::new(
                 &settings,
-                &field.species.sanitized().0,
+                &state.species,
                 &slices.textures,
                 &state.grid,
                 ground_y,
