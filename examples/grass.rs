@@ -78,6 +78,7 @@ fn setup(
             size: Vec2::splat(FIELD),
             species: GrassSpecies::default(),
             density,
+            ground: None,
         },
     ));
     commands.spawn((

@@ -482,6 +482,7 @@ fn main() {
         size: field_size,
         species: species.clone(),
         density: None,
+        ground: None,
     });
     for t in &args.ours_sweep {
         {

@@ -252,6 +252,7 @@ fn spawn_meadow(commands: &mut Commands, images: &mut Assets<Image>) {
             size: Vec2::splat(MEADOW),
             species: GrassSpecies::default(),
             density,
+            ground: None,
         },
     ));
 }

@@ -21,6 +21,14 @@ const VIEW: f32 = 2.2;
 const EYE: Vec3 = Vec3::new(0.0, 10.0, 0.0);
 const BACKGROUND: Color = Color::srgb(1.0, 0.0, 1.0);
 
+/// No wind: the blades stand as the base patch has them.
+fn still_air() -> bevy_foliage::grass::GrassWind {
+    bevy_foliage::grass::GrassWind {
+        strength: 0.0,
+        ..default()
+    }
+}
+
 fn species() -> GrassSpecies {
     GrassSpecies {
         patch: PatchSettings {
@@ -85,6 +93,36 @@ fn add_image(harness: &mut RenderHarness, image: Image) -> Handle<Image> {
 /// pixel centre inside it kept where the blade point there passes the density test and its
 /// geometry opacity beats the pixel's dither.
 fn cpu_coverage(field_size: Vec2, density: &DensityMap, t: &TransitionDistances) -> Vec<bool> {
+    let to_pixel = |p: Vec3| {
+        Vec2::new(
+            ((p.x - EYE.x) / VIEW + 0.5) * SIZE as f32,
+            ((p.z - EYE.z) / VIEW + 0.5) * SIZE as f32,
+        )
+    };
+    rasterize_blades(
+        field_size,
+        UVec2::splat(SIZE),
+        to_pixel,
+        |p, _| p,
+        |p, threshold, px, py| {
+            let ld = density.density_at(p.x, p.z);
+            let opacity = geometry_opacity(t, p.distance(EYE), ld, threshold);
+            opacity >= DISCARD && opacity > ordered_dither(px, py)
+        },
+    )
+}
+
+/// The pixels of an image `pixels` across covered by the blades of a field of `field_size`
+/// centred on the origin: every strip triangle of every cell (mirrored as eq. 4.9 places it), its
+/// vertices moved by `deform(flat point, height above the ground)` and projected by `to_pixel`,
+/// each pixel centre inside it covered where `keep(point, blade threshold, px, py)`.
+fn rasterize_blades(
+    field_size: Vec2,
+    pixels: UVec2,
+    to_pixel: impl Fn(Vec3) -> Vec2,
+    deform: impl Fn(Vec3, f32) -> Vec3,
+    keep: impl Fn(Vec3, f32, u32, u32) -> bool,
+) -> Vec<bool> {
     let species = species();
     let patch = BasePatch::generate(&species.patch);
     let mesh = patch_mesh(&patch, species.patch.width, species.patch.segments);
@@ -100,36 +138,27 @@ fn cpu_coverage(field_size: Vec2, density: &DensityMap, t: &TransitionDistances)
         panic!()
     };
     let grid = field_grid(Vec2::ZERO, field_size, species.patch.size);
-    let cells = (field_size.x / species.patch.size).ceil() as u32;
-    let mut covered = vec![false; (SIZE * SIZE) as usize];
-    let to_pixel = |p: Vec3| {
-        Vec2::new(
-            ((p.x - EYE.x) / VIEW + 0.5) * SIZE as f32,
-            ((p.z - EYE.z) / VIEW + 0.5) * SIZE as f32,
-        )
-    };
-    for cz in 0..cells {
-        for cx in 0..cells {
+    let cells = (field_size / species.patch.size).ceil().as_uvec2();
+    let mut covered = vec![false; (pixels.x * pixels.y) as usize];
+    for cz in 0..cells.y {
+        for cx in 0..cells.x {
             let mirror = Mirror::of_cell(cx as i64, cz as i64, species.patch.seed);
             let corner = grid.origin + Vec2::new(cx as f32, cz as f32) * species.patch.size;
             let world = |i: u32| {
-                let p = mirror.place(Vec3::from_array(positions[i as usize]), species.patch.size);
-                p + Vec3::new(corner.x, 0.0, corner.y)
+                let local = Vec3::from_array(positions[i as usize]);
+                let p = mirror.place(local, species.patch.size);
+                deform(p + Vec3::new(corner.x, 0.0, corner.y), local.y)
             };
             for tri in indices.chunks_exact(3) {
                 let w = [world(tri[0]), world(tri[1]), world(tri[2])];
                 let threshold = uv1[tri[0] as usize][0];
-                let s = w.map(to_pixel);
+                let s = w.map(&to_pixel);
                 let area = (s[1] - s[0]).perp_dot(s[2] - s[0]);
                 if area.abs() < 1e-12 {
                     continue;
                 }
                 let lo = s[0].min(s[1]).min(s[2]).floor().max(Vec2::ZERO);
-                let hi = s[0]
-                    .max(s[1])
-                    .max(s[2])
-                    .ceil()
-                    .min(Vec2::splat(SIZE as f32));
+                let hi = s[0].max(s[1]).max(s[2]).ceil().min(pixels.as_vec2());
                 for py in lo.y as u32..hi.y as u32 {
                     for px in lo.x as u32..hi.x as u32 {
                         let c = Vec2::new(px as f32 + 0.5, py as f32 + 0.5);
@@ -140,10 +169,8 @@ fn cpu_coverage(field_size: Vec2, density: &DensityMap, t: &TransitionDistances)
                             continue;
                         }
                         let p = w[0] * b0 + w[1] * b1 + w[2] * b2;
-                        let ld = density.density_at(p.x, p.z);
-                        let opacity = geometry_opacity(t, p.distance(EYE), ld, threshold);
-                        if opacity >= DISCARD && opacity > ordered_dither(px, py) {
-                            covered[(py * SIZE + px) as usize] = true;
+                        if keep(p, threshold, px, py) {
+                            covered[(py * pixels.x + px) as usize] = true;
                         }
                     }
                 }
@@ -154,15 +181,20 @@ fn cpu_coverage(field_size: Vec2, density: &DensityMap, t: &TransitionDistances)
 }
 
 fn gpu_coverage(image: &RgbaImage) -> Vec<bool> {
+    covered_pixels(image, UVec2::splat(SIZE))
+}
+
+/// The pixels of `image` (`pixels` across) not showing the background.
+fn covered_pixels(image: &RgbaImage, pixels: UVec2) -> Vec<bool> {
     let bg = BACKGROUND.to_srgba();
     let bg = [
         (bg.red * 255.0) as i32,
         (bg.green * 255.0) as i32,
         (bg.blue * 255.0) as i32,
     ];
-    (0..SIZE * SIZE)
+    (0..pixels.x * pixels.y)
         .map(|i| {
-            let p = image.pixel(i % SIZE, i / SIZE);
+            let p = image.pixel(i % pixels.x, i / pixels.x);
             (0..3).any(|k| (p[k] as i32 - bg[k]).abs() > 24)
         })
         .collect()
@@ -210,8 +242,9 @@ fn blade_pass_keeps_the_blades_the_cpu_keeps() {
         .insert_resource(ClearColor(BACKGROUND))
         .insert_resource(GrassSettings {
             transitions: near,
-            // The blade pass alone.
+            // The blade pass alone, in still air.
             slices: false,
+            wind: still_air(),
             ..default()
         });
     let density = add_image(&mut harness, gradient_image());
@@ -219,6 +252,7 @@ fn blade_pass_keeps_the_blades_the_cpu_keeps() {
         size: field_size,
         species: species(),
         density: Some(density),
+        ground: None,
     });
     harness.world_mut().spawn((
         DirectionalLight::default(),
@@ -449,6 +483,7 @@ fn transitions_keep_the_coverage_of_the_all_geometry_field() {
             max_distance: 24.0,
             slice_per_axis: 4,
             slice_resolution: 32,
+            wind: still_air(),
             ..default()
         });
     let species = GrassSpecies {
@@ -463,6 +498,7 @@ fn transitions_keep_the_coverage_of_the_all_geometry_field() {
         size: Vec2::new(12.0, 48.0),
         species,
         density: None,
+        ground: None,
     });
     harness.world_mut().spawn((
         DirectionalLight::default(),
@@ -572,6 +608,7 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
             transitions: far,
             slice_per_axis: 2,
             slice_resolution: resolution,
+            wind: still_air(),
             ..default()
         });
     let density = add_image(&mut harness, gradient_image());
@@ -580,6 +617,7 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
         size: Vec2::splat(2.0),
         species: species.clone(),
         density: Some(density),
+        ground: None,
     });
     spawn_top_down_camera(&mut harness, view);
     let mut bake = None;
@@ -668,6 +706,7 @@ fn an_unreadable_density_map_is_an_error_and_the_field_still_grows() {
         size: Vec2::splat(2.0),
         species: species(),
         density: Some(density),
+        ground: None,
     };
     let (broken, fine) = (
         harness.world_mut().spawn(field(bad)).id(),
@@ -688,4 +727,241 @@ fn an_unreadable_density_map_is_an_error_and_the_field_still_grows() {
     assert!(full.geometry_cells > 0);
     let read = world.get::<GrassFieldState>(fine).unwrap();
     assert_eq!(read.density.dimensions(), (2, 1));
+}
+
+/// The blade pass on relief and in the wind: seen side-on, the blades stand where the CPU puts
+/// them — lifted onto the ground by eq. 4.10 from the field's height map sampled at its cell
+/// corners (`GroundGrid`), and sheared by the corner winds of the wind map (`GrassWind::offset`)
+/// — pixel by pixel. The field stands 1.5 m up, out of the view of its flat bounds, so cells
+/// whose bounds were not lifted would be culled.
+#[test]
+fn blades_stand_on_the_ground_and_lean_in_the_wind() {
+    use bevy_foliage::grass::GrassWindMap;
+    use bevy_foliage::grass::ground::{GrassWind, GroundGrid};
+    use bevy_foliage::grass::ground_map::{HeightMap, height_map_image};
+    const W: u32 = 160;
+    const H: u32 = 64;
+    let (view_w, view_h, centre_y) = (4.4, 1.76, 1.75);
+    let Some(mut harness) = RenderHarness::for_test("grass_relief", W, H) else {
+        return;
+    };
+    let field_size = Vec2::new(4.0, 0.5);
+    let wind = GrassWind {
+        direction: Vec2::X,
+        strength: 0.15,
+        // Still gusts: the time the frame is drawn at does not matter.
+        speed: 0.0,
+        scale: 3.0,
+    };
+    let near = TransitionDistances {
+        min_geom: 30.0,
+        max_geom: 40.0,
+        min_btf: 50.0,
+        max_btf: 80.0,
+        ..default()
+    };
+    harness
+        .app_mut()
+        .add_plugins(GrassPlugin)
+        .insert_resource(ClearColor(BACKGROUND))
+        .insert_resource(GrassSettings {
+            transitions: near,
+            slices: false,
+            wind,
+            ..default()
+        });
+    let height = |p: Vec2| 1.5 + 0.3 * (p.x * 1.5).sin() + 0.05 * p.x;
+    let heights = height_map_image(field_size, UVec2::new(16, 2), height);
+    let heights_handle = add_image(&mut harness, heights.clone());
+    harness.world_mut().spawn(GrassField {
+        size: field_size,
+        species: species(),
+        density: None,
+        ground: Some(heights_handle),
+    });
+    harness.world_mut().spawn((
+        DirectionalLight::default(),
+        Transform::from_xyz(1.0, 3.0, 2.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    // Side-on, looking along −z: image x along +x, image y down −y.
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Projection::Orthographic(OrthographicProjection {
+            scaling_mode: ScalingMode::Fixed {
+                width: view_w,
+                height: view_h,
+            },
+            ..OrthographicProjection::default_3d()
+        }),
+        Transform::from_xyz(0.0, centre_y, 10.0).looking_to(Vec3::NEG_Z, Vec3::Y),
+    ));
+    harness.wait_until_ready().expect("pipelines");
+    let image = render_saved(&mut harness, "grass_relief");
+    let gpu = covered_pixels(&image, UVec2::new(W, H));
+
+    // The CPU's ground and wind, from the same inputs.
+    let species = species();
+    let grid = field_grid(Vec2::ZERO, field_size, species.patch.size);
+    let map = HeightMap::from_image(&heights, -field_size / 2.0, field_size).unwrap();
+    let (ground, _) = GroundGrid::sample(&grid, |p| map.height_at(p));
+    let wind_map = harness.world_mut().resource::<GrassWindMap>().map.clone();
+    let volume = species.patch.height.1;
+    let to_pixel = |p: Vec3| {
+        Vec2::new(
+            (p.x / view_w + 0.5) * W as f32,
+            ((centre_y - p.y) / view_h + 0.5) * H as f32,
+        )
+    };
+    // Full density inside the field's rectangle and none outside: blades leaning out of it are
+    // cut at its edge.
+    let full =
+        DensityMap::uniform(1.0, (-field_size / 2.0).to_array(), field_size.to_array()).unwrap();
+    let keep_all = |p: Vec3, _: f32, _: u32, _: u32| full.density_at(p.x, p.z) >= DISCARD;
+    let lifted = |p: Vec3, h: f32| {
+        let push = wind.offset(&wind_map, &grid, p.xz(), h, volume, 0.0);
+        Vec3::new(p.x + push.x, p.y + ground.height_at(p.xz()), p.z + push.y)
+    };
+    let still = |p: Vec3, _: f32| Vec3::new(p.x, p.y + ground.height_at(p.xz()), p.z);
+    let pixels = UVec2::new(W, H);
+    let cpu = rasterize_blades(field_size, pixels, to_pixel, lifted, keep_all);
+    let cpu_still = rasterize_blades(field_size, pixels, to_pixel, still, keep_all);
+    let cpu_flat = rasterize_blades(
+        field_size,
+        pixels,
+        to_pixel,
+        |p, _| p + Vec3::Y * 1.5,
+        keep_all,
+    );
+    let (differ, g, c) = compare(&gpu, &cpu);
+    let (differ_still, ..) = compare(&gpu, &cpu_still);
+    let (differ_flat, ..) = compare(&gpu, &cpu_flat);
+    eprintln!(
+        "relief: differ {differ} (without wind {differ_still}, on a plane {differ_flat}), GPU {g} px, CPU {c} px"
+    );
+    assert!(c > 1500, "the CPU reference covers {c} px");
+    // Pixel centres on a strip edge may go either way; nothing else may differ.
+    assert!(differ * 100 < c, "{differ} px differ of {c}");
+    // And the test sees both: without the wind, or on a plane, far more would differ.
+    assert!(
+        differ_still > 5 * differ.max(10),
+        "{differ_still} vs {differ}"
+    );
+    assert!(
+        differ_flat > 5 * differ.max(10),
+        "{differ_flat} vs {differ}"
+    );
+}
+
+/// The slice pass on the ground: vertical and horizontal slices of a field lifted 1.5 m by its
+/// height map draw exactly what the same field on a plane 1.5 m up draws — the vertex stage
+/// lifts every quad, the fragment stage reads the slices at the unlifted point. Without the lift
+/// nothing would show: the view starts 0.87 m up.
+#[test]
+fn slices_on_lifted_ground_match_slices_on_a_raised_plane() {
+    use bevy_foliage::grass::ground_map::height_map_image;
+    use bevy_foliage::grass::systems::grass_ready;
+    const W: u32 = 128;
+    const H: u32 = 48;
+    let Some(mut harness) = RenderHarness::for_test("grass_slice_relief", W, H) else {
+        return;
+    };
+    let field_size = Vec2::new(4.0, 0.5);
+    harness
+        .app_mut()
+        .add_plugins(GrassPlugin)
+        .insert_resource(ClearColor(BACKGROUND))
+        .insert_resource(GrassSettings {
+            // Slices only, the vertical ones in full at the camera's 10 m.
+            transitions: TransitionDistances {
+                min_geom: 1.0,
+                max_geom: 2.0,
+                min_btf: 30.0,
+                max_btf: 40.0,
+                ..default()
+            },
+            geometry: false,
+            slice_per_axis: 2,
+            slice_resolution: 32,
+            wind: still_air(),
+            ..default()
+        });
+    harness.world_mut().spawn((
+        DirectionalLight::default(),
+        Transform::from_xyz(1.0, 3.0, 2.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Projection::Orthographic(OrthographicProjection {
+            scaling_mode: ScalingMode::Fixed {
+                width: 4.4,
+                height: 1.65,
+            },
+            ..OrthographicProjection::default_3d()
+        }),
+        Transform::from_xyz(0.3, 2.7, 10.0).looking_to(Vec3::new(-0.03, -0.1, -1.0), Vec3::Y),
+    ));
+    let render_field = |harness: &mut RenderHarness, y: f32, ground: Option<Handle<Image>>| {
+        let field = harness
+            .world_mut()
+            .spawn((
+                GrassField {
+                    size: field_size,
+                    species: species(),
+                    density: None,
+                    ground,
+                },
+                Transform::from_xyz(0.0, y, 0.0),
+            ))
+            .id();
+        for _ in 0..300 {
+            harness.step();
+            if grass_ready(harness.world_mut()) {
+                break;
+            }
+        }
+        harness.wait_until_ready().expect("pipelines");
+        for _ in 0..4 {
+            harness.step();
+        }
+        let image = harness.render().unwrap();
+        harness.world_mut().entity_mut(field).despawn();
+        image
+    };
+    let raised = render_field(&mut harness, 1.5, None);
+    let heights = add_image(
+        &mut harness,
+        height_map_image(field_size, UVec2::new(4, 2), |_| 1.5),
+    );
+    let lifted = render_field(&mut harness, 0.0, Some(heights));
+    for (name, image) in [
+        ("grass_slices_raised", &raised),
+        ("grass_slices_lifted", &lifted),
+    ] {
+        image
+            .save_png(bevy_nature_harness::compare::artifacts_dir().join(format!("{name}.png")))
+            .ok();
+    }
+    let pixels = UVec2::new(W, H);
+    let (a, b) = (
+        covered_pixels(&raised, pixels),
+        covered_pixels(&lifted, pixels),
+    );
+    let covered = a.iter().filter(|c| **c).count();
+    let mut off = 0;
+    for y in 0..H {
+        for x in 0..W {
+            let (p, q) = (raised.pixel(x, y), lifted.pixel(x, y));
+            if (0..3).any(|k| (p[k] as i32 - q[k] as i32).abs() > 2) {
+                off += 1;
+            }
+        }
+    }
+    let (differ, ..) = compare(&a, &b);
+    eprintln!(
+        "slices on the ground: covered {covered} px, coverage differs {differ}, colour off {off}"
+    );
+    assert!(covered > 600, "the raised field covers {covered} px");
+    assert!(off * 200 < covered, "{off} px differ of {covered}");
 }

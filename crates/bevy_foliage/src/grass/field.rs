@@ -3,6 +3,7 @@
 //! [`GrassSettings`] resource holds the transition distances and the cell walk's parameters,
 //! shared by every field (a reflected resource, so the panel and inspectors can edit it live).
 
+use super::ground::GrassWind;
 use super::patch::PatchSettings;
 use super::slice_mip::MipAlpha;
 use super::transition::TransitionDistances;
@@ -84,6 +85,14 @@ pub struct GrassField {
     /// be read is a logged error and a [`GrassFieldError`] on the entity, and the field then
     /// grows at full density.
     pub density: Option<Handle<Image>>,
+    /// The ground's height (m above the entity's plane) over the field, as a 32-bit float image
+    /// (first channel; row 0 at the −z edge; [`height_map_image`] makes one from a function, a
+    /// terrain's height query for one); `None`: flat. The grass follows it: the heights are
+    /// sampled at the cell corners and every blade and slice lifted by eq. 4.10. A map that cannot
+    /// be read is a logged error and a [`GrassFieldError`], and the field stays flat.
+    ///
+    /// [`height_map_image`]: super::ground_map::height_map_image
+    pub ground: Option<Handle<Image>>,
 }
 
 impl Default for GrassField {
@@ -92,11 +101,13 @@ impl Default for GrassField {
             size: Vec2::splat(32.0),
             species: GrassSpecies::default(),
             density: None,
+            ground: None,
         }
     }
 }
 
-/// Why a field's density map was not used (the field grows at full density meanwhile).
+/// Why a field's density map or height map was not used (the field grows at full density, or
+/// on flat ground, meanwhile).
 #[derive(Component, Clone, Debug, PartialEq)]
 pub struct GrassFieldError(pub String);
 
@@ -125,6 +136,10 @@ pub struct GrassSettings {
     /// colour seen from higher up).
     /// Read when a field's slices are made.
     pub slice_mip_alpha: MipAlpha,
+    /// The wind over every field (the map it reads is the [`GrassWindMap`] resource).
+    ///
+    /// [`GrassWindMap`]: super::ground_map::GrassWindMap
+    pub wind: GrassWind,
     /// A folder to cache slice bakes in (`<species hash>.grassslices`); `None`: bake in memory
     /// at every start.
     #[reflect(ignore)]
@@ -142,6 +157,7 @@ impl Default for GrassSettings {
             slice_per_axis: 4,
             slice_resolution: 64,
             slice_mip_alpha: MipAlpha::Max,
+            wind: GrassWind::default(),
             slice_cache: None,
         }
     }
@@ -170,6 +186,9 @@ impl GrassSettings {
             ));
             s.split_factor = 2.0;
         }
+        let (wind, wind_fixes) = s.wind.sanitized();
+        s.wind = wind;
+        fixes.extend(wind_fixes);
         (s, fixes)
     }
 }
@@ -196,8 +215,9 @@ mod tests {
         s.transitions.max_geom = 1.0; // below min_geom
         s.max_distance = f32::NAN;
         s.split_factor = 0.0;
+        s.wind.scale = -1.0;
         let (fixed, fixes) = s.sanitized();
-        assert_eq!(fixes.len(), 3, "{fixes:?}");
+        assert_eq!(fixes.len(), 4, "{fixes:?}");
         assert!(fixed.sanitized().1.is_empty());
         let species = GrassSpecies {
             root_ao: 2.0,

@@ -1,6 +1,7 @@
 #define_import_path bevy_foliage::grass_blade
 
-// The blade material's bindings and its per-fragment test, shared by the blade fragment stages
+// The blade material's bindings and its per-fragment test, shared by the blade vertex stage
+// (`grass_blade_vertex.wgsl`) and fragment stages
 // (`grass_blade.wgsl`, and `grass_blade_soft.wgsl` where the blades receive screen-space soft
 // shadows).
 #import bevy_foliage::grass_functions as grass
@@ -19,10 +20,15 @@ struct GrassBladeParams {
     root_color: vec4<f32>,
     // rgb: tip colour.
     tip_color: vec4<f32>,
+    // The ground under the field and the wind over it.
+    ground_wind: grass::GroundWind,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> blade: GrassBladeParams;
 @group(#{MATERIAL_BIND_GROUP}) @binding(101) var density_map: texture_2d<f32>;
+// The ground's samples (`grass::ground_map::ground_image`) and the wind map.
+@group(#{MATERIAL_BIND_GROUP}) @binding(103) var ground_heights: texture_2d<f32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(104) var wind_map: texture_2d<f32>;
 
 // Algorithm 1 / eq. 4.6 at this fragment: is the blade point drawn here?
 fn blade_kept(world: vec3<f32>, threshold: f32, frag: vec2<f32>) -> bool {

@@ -141,3 +141,95 @@ fn btf_weights(light: vec3<f32>) -> array<f32, 5> {
     }
     return w;
 }
+
+// The ground and the wind of a field (`grass::ground_map::GroundWindUniform`).
+struct GroundWind {
+    // (origin x, origin z, sample spacing, cell side)
+    ground: vec4<f32>,
+    // (unit direction x, z, strength, speed)
+    wind: vec4<f32>,
+    // (map scale, volume height, time, 0)
+    wind_shape: vec4<f32>,
+}
+
+struct GroundSample {
+    height: f32,
+    // (∂h/∂x, ∂h/∂z)
+    gradient: vec2<f32>,
+}
+
+// Eq. 4.10 over the ground's samples (`GroundGrid::height_at`, `gradient_at`): the bilinear patch
+// through the four samples around world xz, clamped to the grid at its edges.
+fn ground_at(heights: texture_2d<f32>, gw: GroundWind, xz: vec2<f32>) -> GroundSample {
+    let last = f32(textureDimensions(heights).x) - 1.0;
+    let t = clamp((xz - gw.ground.xy) / gw.ground.z, vec2(0.0), vec2(last));
+    let base = min(floor(t), vec2(last - 1.0));
+    let f = t - base;
+    let i = vec2<i32>(base);
+    let h00 = textureLoad(heights, i, 0).r;
+    let h10 = textureLoad(heights, i + vec2(1, 0), 0).r;
+    let h01 = textureLoad(heights, i + vec2(0, 1), 0).r;
+    let h11 = textureLoad(heights, i + vec2(1, 1), 0).r;
+    var out: GroundSample;
+    out.height = (1.0 - f.x) * (1.0 - f.y) * h00 + f.x * (1.0 - f.y) * h10
+        + (1.0 - f.x) * f.y * h01 + f.x * f.y * h11;
+    out.gradient = vec2(
+        (1.0 - f.y) * (h10 - h00) + f.y * (h11 - h01),
+        (1.0 - f.x) * (h01 - h00) + f.x * (h11 - h10),
+    ) / gw.ground.z;
+    return out;
+}
+
+// `WindMap::sample`: bilinear between texel centres, wrapping.
+fn wind_map_at(map: texture_2d<f32>, uv: vec2<f32>) -> vec2<f32> {
+    let dims = vec2<i32>(textureDimensions(map));
+    let t = uv * vec2<f32>(dims) - 0.5;
+    let base = floor(t);
+    let f = t - base;
+    let i = vec2<i32>(base);
+    let a = textureLoad(map, ((i % dims) + dims) % dims, 0).rg;
+    let b = textureLoad(map, (((i + vec2(1, 0)) % dims) + dims) % dims, 0).rg;
+    let c = textureLoad(map, (((i + vec2(0, 1)) % dims) + dims) % dims, 0).rg;
+    let e = textureLoad(map, (((i + vec2(1, 1)) % dims) + dims) % dims, 0).rg;
+    return mix(mix(a, b, f.x), mix(c, e, f.x), f.y);
+}
+
+// `GrassWind::corner_wind`: the lean of the volume's top at a cell corner.
+fn corner_wind(map: texture_2d<f32>, gw: GroundWind, corner: vec2<f32>) -> vec2<f32> {
+    let dir = gw.wind.xy;
+    let m = wind_map_at(map, (corner - dir * gw.wind.w * gw.wind_shape.z) / gw.wind_shape.x);
+    return (dir * m.x + vec2(-dir.y, dir.x) * m.y) * gw.wind.z;
+}
+
+// `GrassWind::offset`: a point at world xz, `height` above the ground, pushed by the bilinear
+// blend of its cell's corner winds in proportion to its height (§4.2.7.4).
+fn wind_offset(map: texture_2d<f32>, gw: GroundWind, xz: vec2<f32>, height: f32) -> vec2<f32> {
+    if gw.wind.z <= 0.0 || gw.wind_shape.y <= 0.0 {
+        return vec2(0.0);
+    }
+    let cell = gw.ground.w;
+    let t = (xz - gw.ground.xy) / cell;
+    let base = floor(t);
+    let f = t - base;
+    let w00 = corner_wind(map, gw, gw.ground.xy + base * cell);
+    let w10 = corner_wind(map, gw, gw.ground.xy + (base + vec2(1.0, 0.0)) * cell);
+    let w01 = corner_wind(map, gw, gw.ground.xy + (base + vec2(0.0, 1.0)) * cell);
+    let w11 = corner_wind(map, gw, gw.ground.xy + (base + vec2(1.0, 1.0)) * cell);
+    let w = w00 * ((1.0 - f.x) * (1.0 - f.y)) + w10 * (f.x * (1.0 - f.y))
+        + w01 * ((1.0 - f.x) * f.y) + w11 * (f.x * f.y);
+    return w * clamp(height / gw.wind_shape.y, 0.0, 1.0);
+}
+
+// A point of the flat grass volume (world xz and y on the field's plane, `height` above it) on
+// the ground and in the wind: lifted by eq. 4.10, then sheared.
+fn on_ground(heights: texture_2d<f32>, map: texture_2d<f32>, gw: GroundWind, flat: vec3<f32>, height: f32) -> vec3<f32> {
+    let lift = ground_at(heights, gw, flat.xz).height;
+    let push = wind_offset(map, gw, flat.xz, height);
+    return vec3(flat.x + push.x, flat.y + lift, flat.z + push.y);
+}
+
+// `ground::lift_to_patch`: a world direction in the unlifted patch volume (eq. 4.11 with the
+// lift's own tangents), not normalised.
+fn lift_to_patch(gradient: vec2<f32>, l: vec3<f32>) -> vec3<f32> {
+    return vec3(l.x, l.y - gradient.x * l.x - gradient.y * l.z, l.z);
+}

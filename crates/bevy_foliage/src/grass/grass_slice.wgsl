@@ -7,8 +7,10 @@
 // five baked directions blended by appendix A's spherical barycentric weights, with Bevy's sun,
 // its shadow map and the ambient light. `grass::slice_shading` is the CPU reference.
 
-#import bevy_pbr::forward_io::VertexOutput
+#import bevy_pbr::forward_io::Vertex
 #import bevy_pbr::{
+    mesh_functions,
+    view_transformations::position_world_to_clip,
     mesh_view_bindings as view_bindings,
     mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
     shadows::fetch_directional_shadow,
@@ -28,12 +30,16 @@ struct GrassSliceParams {
     slices: vec4<f32>,
     // x: the patch's mirror seed (bits as f32-exact integer below 2^24)
     seed: vec4<u32>,
+    // The ground under the field and the wind over it.
+    ground_wind: grass::GroundWind,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(0) var<uniform> params: GrassSliceParams;
 @group(#{MATERIAL_BIND_GROUP}) @binding(1) var slice_images: texture_2d_array<f32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(2) var slice_sampler: sampler;
 @group(#{MATERIAL_BIND_GROUP}) @binding(3) var density_map: texture_2d<f32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(4) var ground_heights: texture_2d<f32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(5) var wind_map: texture_2d<f32>;
 
 const LAYERS: u32 = 12u;
 
@@ -46,9 +52,35 @@ struct SlicePoint {
     mirror: vec2<f32>,
 }
 
-// Where world point p on a quad of `axis` (0 across x, 1 across z, 2 horizontal) reads the
-// slices, seen from eye.
-fn slice_point(p: vec3<f32>, axis: u32, eye: vec3<f32>) -> SlicePoint {
+struct SliceVaryings {
+    @builtin(position) position: vec4<f32>,
+    // The point on the ground and in the wind.
+    @location(0) world_position: vec3<f32>,
+    // The same point in the flat volume: world x, z before the wind, y on the field's plane.
+    @location(1) flat_position: vec3<f32>,
+    // xy: the ground's slope (∂h/∂x, ∂h/∂z) under the point; z: the quad's axis.
+    @location(2) slope_axis: vec3<f32>,
+}
+
+// The slice quads are laid out flat, one segment per cell (`grass::mesh::slice_block_mesh`);
+// each vertex goes onto the ground and into the wind as the blades' do (`on_ground`).
+@vertex
+fn vertex(vertex: Vertex) -> SliceVaryings {
+    var out: SliceVaryings;
+    let world_from_local = mesh_functions::get_world_from_local(vertex.instance_index);
+    let flat = mesh_functions::mesh_position_local_to_world(world_from_local, vec4(vertex.position, 1.0)).xyz;
+    let gw = params.ground_wind;
+    let world = grass::on_ground(ground_heights, wind_map, gw, flat, vertex.position.y);
+    out.position = position_world_to_clip(world);
+    out.world_position = world;
+    out.flat_position = flat;
+    out.slope_axis = vec3(grass::ground_at(ground_heights, gw, flat.xz).gradient, vertex.uv_b.x);
+    return out;
+}
+
+// Where point p of the flat volume on a quad of `axis` (0 across x, 1 across z, 2 horizontal)
+// reads the slices, seen along `to_eye` (in the unlifted volume, any length).
+fn slice_point(p: vec3<f32>, axis: u32, to_eye: vec3<f32>) -> SlicePoint {
     let size = params.grid.z;
     let k = u32(params.slices.y);
     let cells = (p.xz - params.grid.xy) / size;
@@ -60,7 +92,7 @@ fn slice_point(p: vec3<f32>, axis: u32, eye: vec3<f32>) -> SlicePoint {
     let h = params.slices.x;
     let mirror = vec2(select(1.0, -1.0, m.x), select(1.0, -1.0, m.y));
     // The view direction in the base patch's frame.
-    let v = normalize(eye - p) * vec3(mirror.x, 1.0, mirror.y);
+    let v = to_eye * vec3(mirror.x, 1.0, mirror.y);
     var out: SlicePoint;
     out.mirror = mirror;
     let slab = size / f32(k);
@@ -88,11 +120,14 @@ fn layer(uv: vec2<f32>, index: u32, lod: f32) -> vec4<f32> {
 }
 
 @fragment
-fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
-    let p = in.world_position.xyz;
+fn fragment(in: SliceVaryings) -> @location(0) vec4<f32> {
+    let p = in.world_position;
     let eye = params.eye.xyz;
-    let axis = u32(in.uv_b.x + 0.5);
-    let sp = slice_point(p, axis, eye);
+    let axis = u32(in.slope_axis.z + 0.5);
+    let slope = in.slope_axis.xy;
+    // The eye as the unlifted patch sees it (eq. 4.11).
+    let to_eye = normalize(grass::lift_to_patch(slope, eye - p));
+    let sp = slice_point(in.flat_position, axis, to_eye);
     // The mip: texels under a pixel, from the world-space footprint (uv jumps at mirrored cell
     // edges, so hardware derivatives of uv would not do).
     let footprint = max(length(dpdx(p)), length(dpdy(p)));
@@ -102,12 +137,12 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     let threshold = layer(sp.uv, sp.base_layer + 1u, lod).r;
     // Algorithm 1: this slice's weight, the density here, the blade's threshold.
     let d = distance(p, eye);
-    let v = normalize(eye - p);
     var w = grass::horizontal_weight(params.distances, d);
     if axis < 2u {
-        w = grass::vertical_weight(params.distances, params.window, d, v.y);
+        // Eq. 4.14 against the ground's normal: the eye's height in the patch frame.
+        w = grass::vertical_weight(params.distances, params.window, d, to_eye.y);
     }
-    let ld = grass::density_at(density_map, params.density_rect, p.xz);
+    let ld = grass::density_at(density_map, params.density_rect, in.flat_position.xz);
     let opacity = unlit.a * grass::slice_opacity(params.window, w, ld, threshold);
     if opacity < grass::DISCARD || opacity <= grass::dither(in.position.xy) {
         discard;
@@ -118,7 +153,8 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // The sun through the five baked directions.
     if view_bindings::lights.n_directional_lights > 0u {
         let light = &view_bindings::lights.directional_lights[0];
-        let l = (*light).direction_to_light * vec3(sp.mirror.x, 1.0, sp.mirror.y);
+        let l = normalize(grass::lift_to_patch(slope, (*light).direction_to_light))
+            * vec3(sp.mirror.x, 1.0, sp.mirror.y);
         let weights = grass::btf_weights(l);
         var direct = vec3(0.0);
         let first = sp.base_layer + 2u + select(0u, 5u, sp.back);

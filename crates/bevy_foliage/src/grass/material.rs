@@ -6,6 +6,7 @@
 
 use super::density::DensityMap;
 use super::field::{GrassSettings, GrassSpecies};
+use super::ground_map::GroundWindUniform;
 use super::transition::TransitionDistances;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
@@ -34,6 +35,8 @@ pub struct GrassBladeParams {
     pub root_color: Vec4,
     /// rgb: tip colour (linear).
     pub tip_color: Vec4,
+    /// The ground under the field and the wind over it.
+    pub ground_wind: GroundWindUniform,
 }
 
 impl GrassBladeParams {
@@ -44,6 +47,7 @@ impl GrassBladeParams {
         species: &GrassSpecies,
         density_rect: Vec4,
         eye: Vec3,
+        ground_wind: GroundWindUniform,
     ) -> Self {
         let (distances, window) = transition_uniforms(&settings.transitions);
         let c = |c: LinearRgba| Vec4::new(c.red, c.green, c.blue, 1.0);
@@ -54,6 +58,7 @@ impl GrassBladeParams {
             density_rect,
             root_color: c(species.root_color).truncate().extend(species.root_ao),
             tip_color: c(species.tip_color),
+            ground_wind,
         }
     }
 }
@@ -82,6 +87,13 @@ pub struct GrassBladeExtension {
     /// The density map (`R32Float`, see [`density_image`]).
     #[texture(101, sample_type = "float", filterable = false)]
     pub density: Handle<Image>,
+    /// The ground's samples (`R32Float`, [`ground_image`](super::ground_map::ground_image) or
+    /// [`flat_ground_image`](super::ground_map::flat_ground_image)).
+    #[texture(103, sample_type = "float", filterable = false)]
+    pub ground: Handle<Image>,
+    /// The wind map (`Rg32Float`, [`GrassWindMap`](super::ground_map::GrassWindMap)).
+    #[texture(104, sample_type = "float", filterable = false)]
+    pub wind: Handle<Image>,
     /// A screen-space soft-shadow visibility texture (`bevy_soft_shadows`'
     /// `SsssTextures::visibility`) to use as the sun's shadow term. With one, the main pass's
     /// fragment stage is `grass_blade_soft.wgsl`, which imports
@@ -107,12 +119,22 @@ impl From<&GrassBladeExtension> for GrassBladeKey {
 }
 
 const BLADE_SHADER: &str = "embedded://bevy_foliage/grass/grass_blade.wgsl";
+const BLADE_VERTEX_SHADER: &str = "embedded://bevy_foliage/grass/grass_blade_vertex.wgsl";
 
 /// The soft-shadow main-pass stage, loaded at start-up and swapped in by `specialize`.
 static BLADE_SOFT_SHADER: std::sync::OnceLock<Handle<bevy::shader::Shader>> =
     std::sync::OnceLock::new();
 
 impl MaterialExtension for GrassBladeExtension {
+    fn vertex_shader() -> ShaderRef {
+        ShaderRef::Path(BLADE_VERTEX_SHADER.into())
+    }
+    fn prepass_vertex_shader() -> ShaderRef {
+        ShaderRef::Path(BLADE_VERTEX_SHADER.into())
+    }
+    fn deferred_vertex_shader() -> ShaderRef {
+        ShaderRef::Path(BLADE_VERTEX_SHADER.into())
+    }
     fn fragment_shader() -> ShaderRef {
         ShaderRef::Path(BLADE_SHADER.into())
     }
@@ -239,6 +261,7 @@ pub(crate) fn build(app: &mut App) {
     load_shader_library!(app, "grass_functions.wgsl");
     load_shader_library!(app, "grass_blade_functions.wgsl");
     embedded_asset!(app, "grass_blade.wgsl");
+    embedded_asset!(app, "grass_blade_vertex.wgsl");
     embedded_asset!(app, "grass_blade_soft.wgsl");
     let soft: Handle<bevy::shader::Shader> =
         bevy::asset::load_embedded_asset!(app, "grass_blade_soft.wgsl");

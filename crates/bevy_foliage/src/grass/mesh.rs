@@ -58,13 +58,12 @@ pub const HORIZONTAL_SLICE_LIFT: f32 = 0.01;
 
 /// The quads of the slices over a block of `cells × cells` cells of side `layout.size`
 /// (`grass_slice.wgsl` draws them): in every cell, `K` quads across x and `K` across z where the
-/// base patch's vertical slices stand (the slab centres, the same in every mirrored version), one
-/// quad per slab line spanning the whole block, and the horizontal quad over the block. `UV_1.x`
-/// is the quad's axis: 0 across x, 1 across z, 2 horizontal.
+/// base patch's vertical slices stand (the slab centres, the same in every mirrored version), and
+/// the horizontal quad, each cut at every cell edge. `UV_1.x` is the quad's axis: 0 across x, 1
+/// across z, 2 horizontal.
 pub fn slice_block_mesh(layout: &SliceLayout, cells: u32) -> Mesh {
     let cells = cells.max(1);
     let (size, height, k) = (layout.size, layout.height, layout.per_axis);
-    let side = size * cells as f32;
     let mut positions: Vec<[f32; 3]> = Vec::new();
     let mut normals: Vec<[f32; 3]> = Vec::new();
     let mut uv1: Vec<[f32; 2]> = Vec::new();
@@ -78,32 +77,43 @@ pub fn slice_block_mesh(layout: &SliceLayout, cells: u32) -> Mesh {
         }
         indices.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
     };
+    // One segment per cell, so the vertices lifted onto the ground (eq. 4.10) and sheared by
+    // the wind sit on cell edges, where both are linear along the quad: the lifted slices
+    // follow the blades' ground exactly.
     for c in 0..cells {
         for slab in 0..k {
             let at = (c as f32 + (slab as f32 + 0.5) / k as f32) * size;
-            quad(
-                [
-                    Vec3::new(at, 0.0, 0.0),
-                    Vec3::new(at, 0.0, side),
-                    Vec3::new(at, height, side),
-                    Vec3::new(at, height, 0.0),
-                ],
-                Vec3::X,
-                0.0,
-            );
-            quad(
-                [
-                    Vec3::new(0.0, 0.0, at),
-                    Vec3::new(side, 0.0, at),
-                    Vec3::new(side, height, at),
-                    Vec3::new(0.0, height, at),
-                ],
-                Vec3::Z,
-                1.0,
-            );
+            for s in 0..cells {
+                let (a, b) = (s as f32 * size, (s + 1) as f32 * size);
+                quad(
+                    [
+                        Vec3::new(at, 0.0, a),
+                        Vec3::new(at, 0.0, b),
+                        Vec3::new(at, height, b),
+                        Vec3::new(at, height, a),
+                    ],
+                    Vec3::X,
+                    0.0,
+                );
+                quad(
+                    [
+                        Vec3::new(a, 0.0, at),
+                        Vec3::new(b, 0.0, at),
+                        Vec3::new(b, height, at),
+                        Vec3::new(a, height, at),
+                    ],
+                    Vec3::Z,
+                    1.0,
+                );
+            }
         }
     }
-    quad(horizontal_corners(side), Vec3::Y, 2.0);
+    for z in 0..cells {
+        for x in 0..cells {
+            let offset = Vec3::new(x as f32 * size, 0.0, z as f32 * size);
+            quad(horizontal_corners(size).map(|c| c + offset), Vec3::Y, 2.0);
+        }
+    }
     build(positions, normals, uv1, indices)
 }
 

@@ -22,13 +22,15 @@
 //! [`slice_shading`] (the CPU reference of the slice shader), [`slice_mip`] (the slices' mip
 //! filter), [`slice_format`] (the `*.grassslices` cache), [`lighting`] (eq. 4.1, the blade
 //! ambient occlusion, the shadow mask's eq. 4.7, the spherical barycentric BTF weights of
-//! appendix A) and [`ground`] (the lift and frame of eq. 4.10–4.12 on curved ground, not yet
-//! used by the renderer: fields lie on flat ground so far).
+//! appendix A) and [`ground`] (the ground's corner samples, the lift of eq. 4.10 and the frame of
+//! eq. 4.11, node bounds and flatness flags, the wind's shear of the patch corners).
+//! [`ground_map`] turns a height map and the wind map into what the shaders read.
 
 pub mod bake;
 pub mod density;
 pub mod field;
 pub mod ground;
+pub mod ground_map;
 pub mod lighting;
 pub mod material;
 pub mod mesh;
@@ -44,4 +46,6 @@ pub mod systems;
 pub mod transition;
 
 pub use field::{GrassField, GrassFieldError, GrassSettings, GrassSpecies};
+pub use ground::GrassWind;
+pub use ground_map::{GrassWindMap, height_map_image};
 pub use plugin::{GrassPlugin, GrassSystems};

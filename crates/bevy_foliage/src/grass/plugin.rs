@@ -1,9 +1,11 @@
 //! Registration of grass: the settings, components, material and the main-world systems.
 
 use super::field::{GrassField, GrassSettings, GrassSpecies, sanitize_grass_settings};
+use super::ground::WindMap;
+use super::ground_map::{GrassWindMap, wind_image};
 use super::systems::{
     GEOMETRY_BLADES, GEOMETRY_CELLS, MACRO_CELLS, SELECT_MS, SLICE_BLOCKS, attach_slice_bakes,
-    prepare_grass_fields, resolve_density_maps, update_grass_cells,
+    prepare_grass_fields, resolve_density_maps, resolve_ground_maps, update_grass_cells,
 };
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::diagnostic::{Diagnostic, RegisterDiagnostic};
@@ -29,6 +31,7 @@ impl Plugin for GrassPlugin {
         app.register_type::<GrassSettings>()
             .register_type::<GrassField>()
             .register_type::<GrassSpecies>()
+            .register_type::<super::ground::GrassWind>()
             .init_resource::<GrassSettings>()
             .add_systems(
                 PreUpdate,
@@ -47,6 +50,14 @@ impl Plugin for GrassPlugin {
         ] {
             app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
         }
+        // The wind map the shaders read (a game may swap it).
+        if !app.world().contains_resource::<GrassWindMap>()
+            && let Some(mut images) = app.world_mut().get_resource_mut::<Assets<Image>>()
+        {
+            let map = WindMap::gusts(64, 0x9e37_79b9);
+            let image = images.add(wind_image(&map));
+            app.insert_resource(GrassWindMap { map, image });
+        }
         super::material::build(app);
         super::bake::build(app);
         super::slice_material::build(app);
@@ -63,6 +74,7 @@ impl Plugin for GrassPlugin {
                 (
                     prepare_grass_fields,
                     resolve_density_maps,
+                    resolve_ground_maps,
                     attach_slice_bakes,
                 )
                     .chain()

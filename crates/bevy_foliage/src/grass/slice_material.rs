@@ -4,6 +4,7 @@
 //! distant grass keeps its coverage.
 
 use super::field::{GrassSettings, GrassSpecies};
+use super::ground_map::GroundWindUniform;
 use super::material::transition_uniforms;
 use super::quadtree::CellGrid;
 use super::slice_mip::MipAlpha;
@@ -36,10 +37,13 @@ pub struct GrassSliceParams {
     pub slices: Vec4,
     /// x: the mirror seed.
     pub seed: UVec4,
+    /// The ground under the field and the wind over it.
+    pub ground_wind: GroundWindUniform,
 }
 
 impl GrassSliceParams {
     /// The parameters of a field of `species` on `grid` at `ground_y`, with slices `textures`.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         settings: &GrassSettings,
         species: &GrassSpecies,
@@ -48,6 +52,7 @@ impl GrassSliceParams {
         ground_y: f32,
         density_rect: Vec4,
         eye: Vec3,
+        ground_wind: GroundWindUniform,
     ) -> Self {
         let (distances, window) = transition_uniforms(&settings.transitions);
         let l = &textures.layout;
@@ -64,6 +69,7 @@ impl GrassSliceParams {
                 species.transmission,
             ),
             seed: UVec4::new(species.patch.seed as u32, 0, 0, 0),
+            ground_wind,
         }
     }
 }
@@ -81,11 +87,20 @@ pub struct GrassSliceMaterial {
     /// The density map (`R32Float`).
     #[texture(3, sample_type = "float", filterable = false)]
     pub density: Handle<Image>,
+    /// The ground's samples (`R32Float`), as the blade material's.
+    #[texture(4, sample_type = "float", filterable = false)]
+    pub ground: Handle<Image>,
+    /// The wind map (`Rg32Float`).
+    #[texture(5, sample_type = "float", filterable = false)]
+    pub wind: Handle<Image>,
 }
 
 const SLICE_SHADER: &str = "embedded://bevy_foliage/grass/grass_slice.wgsl";
 
 impl Material for GrassSliceMaterial {
+    fn vertex_shader() -> ShaderRef {
+        ShaderRef::Path(SLICE_SHADER.into())
+    }
     fn fragment_shader() -> ShaderRef {
         ShaderRef::Path(SLICE_SHADER.into())
     }

@@ -7,6 +7,10 @@
 use super::bake::{GrassSliceBakeRequest, GrassSliceBakeResult, source_hash};
 use super::density::DensityMap;
 use super::field::{GrassField, GrassFieldError, GrassSettings};
+use super::ground::GroundGrid;
+use super::ground_map::{
+    GrassWindMap, GroundWindUniform, HeightMap, flat_ground_image, ground_image,
+};
 use super::material::{
     GrassBladeExtension, GrassBladeMaterial, GrassBladeParams, blade_material, density_image,
     density_map_from_image,
@@ -16,7 +20,8 @@ use super::patch::{BasePatch, Mirror};
 use super::quadtree::{CellDraw, CellGrid, CellNode, CellView, GroundBounds, select_cells};
 use super::slice_material::{GrassSliceMaterial, GrassSliceParams, slice_image};
 use super::slices::SliceTextures;
-use bevy::camera::primitives::Frustum;
+use bevy::camera::primitives::{Aabb, Frustum, MeshAabb};
+use bevy::camera::visibility::NoAutoAabb;
 use bevy::diagnostic::{DiagnosticPath, Diagnostics};
 use bevy::light::NotShadowCaster;
 use bevy::platform::collections::HashMap;
@@ -54,6 +59,13 @@ pub struct GrassFieldState {
     pub density: DensityMap,
     /// The density image the map was read from (none: full density).
     density_source: Option<AssetId<Image>>,
+    /// The ground under the field (`None`: flat), and the height image it was read from.
+    pub ground: Option<std::sync::Arc<GroundGrid>>,
+    ground_source: Option<AssetId<Image>>,
+    /// The ground's samples as the shaders read them.
+    ground_image: Handle<Image>,
+    /// The patch mesh's bounds (m, in a cell's frame, on flat ground).
+    mesh_bounds: (Vec3, Vec3),
     mesh: Handle<Mesh>,
     material: Handle<GrassBladeMaterial>,
     cells: HashMap<(u32, u32), Entity>,
@@ -108,16 +120,32 @@ pub struct GrassCell {
     pub z: u32,
 }
 
-/// Flat ground at the field's height.
-struct FlatGround;
+/// A field's ground for the cell walk: its samples, or flat at the field's height.
+struct FieldGround<'a>(Option<&'a GroundGrid>);
 
-impl GroundBounds for FlatGround {
-    fn height_range(&self, _grid: &CellGrid, _node: CellNode) -> (f32, f32) {
-        (0.0, 0.0)
+impl GroundBounds for FieldGround<'_> {
+    fn height_range(&self, grid: &CellGrid, node: CellNode) -> (f32, f32) {
+        self.0.map_or((0.0, 0.0), |g| g.height_range(grid, node))
     }
-    fn is_flat(&self, _grid: &CellGrid, _node: CellNode) -> bool {
-        true
+    fn is_flat(&self, grid: &CellGrid, node: CellNode) -> bool {
+        self.0.is_none_or(|g| g.is_flat(grid, node))
     }
+}
+
+impl FieldGround<'_> {
+    fn height_at(&self, xz: Vec2) -> f32 {
+        self.0.map_or(0.0, |g| g.height_at(xz))
+    }
+}
+
+/// `bounds` (a mesh's, in its entity's frame) raised over ground from `low` to `high` and widened
+/// by the wind's `reach`, as the entity's fixed `Aabb`.
+fn lifted_aabb(bounds: (Vec3, Vec3), low: f32, high: f32, reach: f32) -> Aabb {
+    let reach = Vec3::new(reach, 0.0, reach);
+    Aabb::from_min_max(
+        bounds.0 + Vec3::Y * low - reach,
+        bounds.1 + Vec3::Y * high + reach,
+    )
 }
 
 /// Most cells a side of a field's grid (2^16: 32 km of 0.5 m patches).
@@ -163,7 +191,11 @@ pub fn prepare_grass_fields(
     mut meshes: ResMut<Assets<Mesh>>,
     mut images: ResMut<Assets<Image>>,
     mut materials: ResMut<Assets<GrassBladeMaterial>>,
+    wind_map: Option<Res<GrassWindMap>>,
 ) {
+    let Some(wind_map) = wind_map else {
+        return;
+    };
     for (entity, field, transform, state) in &mut fields {
         let (species, fixes) = field.species.sanitized();
         for fix in fixes {
@@ -185,16 +217,21 @@ pub fn prepare_grass_fields(
         let grid = field_grid(centre, size, species.patch.size);
         let density = DensityMap::uniform(1.0, min.to_array(), size.to_array())
             .expect("a positive finite rectangle");
-        let mesh = meshes.add(patch_mesh(
-            &patch,
-            species.patch.width,
-            species.patch.segments,
-        ));
+        let mesh = patch_mesh(&patch, species.patch.width, species.patch.segments);
+        let mesh_bounds = mesh.compute_aabb().map_or((Vec3::ZERO, Vec3::ZERO), |b| {
+            (b.min().into(), b.max().into())
+        });
+        let mesh = meshes.add(mesh);
+        let ground_image = images.add(flat_ground_image());
+        let ground_wind =
+            GroundWindUniform::new(&grid, None, &settings.wind, species.patch.height.1, 0.0);
         let material = materials.add(blade_material(
             &species,
             GrassBladeExtension {
-                params: GrassBladeParams::new(&settings, &species, rect, Vec3::ZERO),
+                params: GrassBladeParams::new(&settings, &species, rect, Vec3::ZERO, ground_wind),
                 density: images.add(density_image(&density)),
+                ground: ground_image.clone(),
+                wind: wind_map.image.clone(),
                 soft_visibility: None,
             },
         ));
@@ -239,6 +276,10 @@ pub fn prepare_grass_fields(
                 rect,
                 density,
                 density_source: None,
+                ground: None,
+                ground_source: None,
+                ground_image,
+                mesh_bounds,
                 mesh,
                 material,
                 cells: HashMap::default(),
@@ -289,6 +330,57 @@ pub fn resolve_density_maps(
     }
 }
 
+/// Reads each field's height map once its image has loaded, samples it at the cell corners and
+/// hands the samples to the field's materials; a map that cannot be read is an error on the
+/// entity (and in the log), and the field stays flat.
+pub fn resolve_ground_maps(
+    mut commands: Commands,
+    mut fields: Query<(Entity, &GrassField, &mut GrassFieldState)>,
+    mut images: ResMut<Assets<Image>>,
+    mut materials: ResMut<Assets<GrassBladeMaterial>>,
+) {
+    for (entity, field, mut state) in &mut fields {
+        let Some(handle) = &field.ground else {
+            continue;
+        };
+        if state.ground_source == Some(handle.id()) {
+            continue;
+        }
+        let Some(image) = images.get(handle) else {
+            continue;
+        };
+        state.ground_source = Some(handle.id());
+        let (min, size) = (state.rect.xy(), state.rect.zw());
+        match HeightMap::from_image(image, min, size) {
+            Ok(map) => {
+                let (ground, _) = GroundGrid::sample(&state.grid, |p| map.height_at(p));
+                let gpu = images.add(ground_image(&ground));
+                if let Some(mut material) = materials.get_mut(&state.material) {
+                    material.extension.ground = gpu.clone();
+                }
+                state.ground_image = gpu;
+                state.ground = Some(std::sync::Arc::new(ground));
+                // Cells and slices spawned on the flat ground go, to come back with the
+                // ground's bounds.
+                let state = &mut *state;
+                for (_, cell) in state.cells.drain() {
+                    commands.entity(cell).despawn();
+                }
+                if let Some(slices) = state.slices.as_mut() {
+                    for (_, node) in slices.nodes.drain() {
+                        commands.entity(node).despawn();
+                    }
+                }
+            }
+            Err(e) => {
+                let why = format!("grass field {entity}: height map not used: {e}");
+                error!("{why}; the field stays flat");
+                commands.entity(entity).insert(GrassFieldError(why));
+            }
+        }
+    }
+}
+
 /// Takes each field's finished slice bake into a slice material; a failed bake is logged and the
 /// field draws blade geometry only.
 #[allow(clippy::too_many_arguments)]
@@ -301,7 +393,11 @@ pub fn attach_slice_bakes(
     mut images: ResMut<Assets<Image>>,
     mut materials: ResMut<Assets<GrassSliceMaterial>>,
     blade_materials: Res<Assets<GrassBladeMaterial>>,
+    wind_map: Option<Res<GrassWindMap>>,
 ) {
+    let Some(wind_map) = wind_map else {
+        return;
+    };
     for (entity, transform, mut state) in &mut fields {
         if state.slices.is_some() {
             continue;
@@ -336,9 +432,12 @@ pub fn attach_slice_bakes(
                 transform.translation().y,
                 state.rect,
                 Vec3::ZERO,
+                GroundWindUniform::default(),
             ),
             slices: images.add(slice_image(&textures, settings.slice_mip_alpha)),
             density,
+            ground: state.ground_image.clone(),
+            wind: wind_map.image.clone(),
         });
         let block_cells = 1u32 << SLICE_BLOCK_LEVELS.min(state.grid.levels);
         let blocks = CellGrid {
@@ -379,9 +478,14 @@ pub fn update_grass_cells(
     settings: Res<GrassSettings>,
     mut materials: ResMut<Assets<GrassBladeMaterial>>,
     mut slice_materials: ResMut<Assets<GrassSliceMaterial>>,
+    wind_map: Option<Res<GrassWindMap>>,
+    time: Res<Time>,
     mut diagnostics: Diagnostics,
 ) {
     let started = Instant::now();
+    let wind_reach = wind_map
+        .as_ref()
+        .map_or(0.0, |w| GroundWindUniform::reach(&settings.wind, &w.map));
     let (mut blocks_drawn, mut macro_drawn) = (0u32, 0u32);
     let Some((camera, frustum)) = field_camera(&cameras) else {
         return;
@@ -391,6 +495,13 @@ pub fn update_grass_cells(
     let mut cells_drawn = 0u32;
     for (entity, field, transform, mut state) in &mut fields {
         let ground_y = transform.translation().y;
+        let ground_wind = GroundWindUniform::new(
+            &state.grid,
+            state.ground.as_deref(),
+            &settings.wind,
+            state.species.patch.height.1,
+            time.elapsed_secs_wrapped(),
+        );
         // The walk in the field's frame (ground at y = 0).
         let view = CellView {
             eye: eye - Vec3::Y * ground_y,
@@ -405,8 +516,10 @@ pub fn update_grass_cells(
         };
         let reach = settings.transitions.max_geom;
         let mut wanted: Vec<(u32, u32)> = Vec::new();
+        let ground_grid = state.ground.clone();
+        let ground = FieldGround(ground_grid.as_deref());
         if settings.geometry {
-            let selection = select_cells(&state.grid, &FlatGround, &view);
+            let selection = select_cells(&state.grid, &ground, &view);
             let (min, max) = (state.rect.xy(), state.rect.xy() + state.rect.zw());
             for (node, _) in selection.drawn {
                 if node.level != state.grid.levels {
@@ -425,7 +538,9 @@ pub fn update_grass_cells(
                     view.eye.x.clamp(corner.x, corner.x + side),
                     view.eye.z.clamp(corner.y, corner.y + side),
                 );
-                let distance = (nearest - view.eye.xz()).length().hypot(view.eye.y);
+                let distance = (nearest - view.eye.xz())
+                    .length()
+                    .hypot(view.eye.y - ground.height_at(nearest));
                 if distance <= reach {
                     wanted.push((node.x, node.z));
                 }
@@ -438,6 +553,7 @@ pub fn update_grass_cells(
                 &state.species,
                 material.extension.params.density_rect,
                 eye,
+                ground_wind,
             );
             if params != material.extension.params
                 && let Some(mut material) = materials.get_mut(&state.material)
@@ -467,6 +583,16 @@ pub fn update_grass_cells(
             });
             let mirror = Mirror::of_cell(x as i64, z as i64, state.species.patch.seed);
             let mut local = cell_transform(corner, side, mirror);
+            // The mesh is lifted and swayed in the vertex stage: its bounds are set here.
+            let (low, high) = ground.height_range(
+                &state.grid,
+                CellNode {
+                    level: state.grid.levels,
+                    x,
+                    z,
+                },
+            );
+            let aabb = lifted_aabb(state.mesh_bounds, low, high, wind_reach);
             local.translation -= Vec3::new(field_origin.x, 0.0, field_origin.z);
             let cell = commands
                 .spawn((
@@ -474,6 +600,8 @@ pub fn update_grass_cells(
                     GrassCell { x, z },
                     Mesh3d(state.mesh.clone()),
                     MeshMaterial3d(state.material.clone()),
+                    aabb,
+                    NoAutoAabb,
                     local,
                     // Placed now, not one frame late after the next propagation.
                     transform.mul_transform(local),
@@ -503,16 +631,21 @@ pub fn update_grass_cells(
                 ground_y,
                 state.rect,
                 eye,
+                ground_wind,
             );
-            if params != material.params || material.density != density {
+            if params != material.params
+                || material.density != density
+                || material.ground != state.ground_image
+            {
                 let mut material = slice_materials.get_mut(&slices.material).unwrap();
                 material.params = params;
                 material.density = density;
+                material.ground = state.ground_image.clone();
             }
         }
         let mut wanted_nodes: Vec<(CellNode, bool)> = Vec::new();
         if settings.slices {
-            let selection = select_cells(&slices.blocks, &FlatGround, &view);
+            let selection = select_cells(&slices.blocks, &ground, &view);
             let (min, max) = (state.rect.xy(), state.rect.xy() + state.rect.zw());
             for (node, draw) in selection.drawn {
                 let (corner, side) = slices.blocks.rect(node);
@@ -533,7 +666,7 @@ pub fn update_grass_cells(
                         .max((view.eye.z - corner.y - side).abs()),
                 )
                 .length()
-                .hypot(view.eye.y);
+                .hypot(view.eye.y - ground.height_range(&slices.blocks, node).1);
                 if far < settings.transitions.min_geom {
                     continue;
                 }
@@ -569,6 +702,24 @@ pub fn update_grass_cells(
             } else {
                 slices.block_mesh.clone()
             };
+            let (low, high) = ground.height_range(&slices.blocks, node);
+            let aabb = if is_macro {
+                // The unit quad, scaled to the node by its transform.
+                lifted_aabb(
+                    (Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0)),
+                    low,
+                    high + 0.05,
+                    0.0,
+                )
+            } else {
+                let height = slices.textures.layout.height;
+                lifted_aabb(
+                    (Vec3::ZERO, Vec3::new(side, height, side)),
+                    low,
+                    high,
+                    wind_reach,
+                )
+            };
             let id = commands
                 .spawn((
                     Name::new(if is_macro {
@@ -578,6 +729,8 @@ pub fn update_grass_cells(
                     }),
                     Mesh3d(mesh),
                     MeshMaterial3d(slices.material.clone()),
+                    aabb,
+                    NoAutoAabb,
                     local,
                     transform.mul_transform(local),
                     NotShadowCaster,

@@ -1,0 +1,54 @@
+// The blades' vertex stage, for the main pass and the prepass (depth, normals, shadow maps): the
+// base patch placed in its cell by the mesh transform (mirrored, eq. 4.9), then lifted onto the
+// ground by eq. 4.10 and sheared by the wind (§4.2.7.4) — `grass_functions.wgsl`'s `on_ground`.
+// Blades stay vertical on slopes, so their normals are the mesh's. Bevy's `mesh.wgsl` and
+// `prepass.wgsl` otherwise, for meshes with positions, normals and two uv sets (no skins,
+// morphs, tangents or colours).
+#import bevy_pbr::{mesh_functions, view_transformations::position_world_to_clip}
+#ifdef PREPASS_PIPELINE
+#import bevy_pbr::prepass_io::{Vertex, VertexOutput}
+#else
+#import bevy_pbr::forward_io::{Vertex, VertexOutput}
+#endif
+#import bevy_foliage::grass_blade::{blade, ground_heights, wind_map}
+#import bevy_foliage::grass_functions as grass
+
+@vertex
+fn vertex(vertex: Vertex) -> VertexOutput {
+    var out: VertexOutput;
+    let world_from_local = mesh_functions::get_world_from_local(vertex.instance_index);
+    let flat = mesh_functions::mesh_position_local_to_world(world_from_local, vec4(vertex.position, 1.0));
+    // The mesh's y is the height above the ground.
+    let world = vec4(grass::on_ground(ground_heights, wind_map, blade.ground_wind, flat.xyz, vertex.position.y), 1.0);
+    out.world_position = world;
+    out.position = position_world_to_clip(world.xyz);
+#ifdef UNCLIPPED_DEPTH_ORTHO_EMULATION
+    out.unclipped_depth = out.position.z;
+    out.position.z = min(out.position.z, 1.0);
+#endif
+#ifdef VERTEX_UVS_A
+    out.uv = vertex.uv;
+#endif
+#ifdef VERTEX_UVS_B
+    out.uv_b = vertex.uv_b;
+#endif
+#ifdef PREPASS_PIPELINE
+#ifdef NORMAL_PREPASS_OR_DEFERRED_PREPASS
+    out.world_normal = mesh_functions::mesh_normal_local_to_world(vertex.normal, vertex.instance_index);
+#endif
+#ifdef MOTION_VECTOR_PREPASS
+    // The wind's sway is slow beside a frame: no motion vector for it.
+    out.previous_world_position = world;
+#endif
+#else
+    out.world_normal = mesh_functions::mesh_normal_local_to_world(vertex.normal, vertex.instance_index);
+#endif
+#ifdef VERTEX_OUTPUT_INSTANCE_INDEX
+    out.instance_index = vertex.instance_index;
+#endif
+#ifdef VISIBILITY_RANGE_DITHER
+    out.visibility_range_dither = mesh_functions::get_visibility_range_dither_level(
+        vertex.instance_index, world_from_local[3]);
+#endif
+    return out;
+}
