@@ -66,9 +66,14 @@ pub fn lift_to_patch(gradient: Vec2, l: Vec3) -> Vec3 {
 }
 
 /// How far the ground's corner heights may stray from one plane for a quadtree node to count as
-/// flat (m): a flat node may be drawn as one macro-cell quad (two triangles through its lifted
-/// corners) without cutting into or floating above the ground by more than this.
+/// planar (m).
 pub const FLAT_TOLERANCE: f32 = 0.05;
+
+/// A macro-cell is drawn as a grid of `2^MACRO_FACET_LEVELS` facets a side, each lifted onto
+/// the ground at its corners (`grass::mesh::horizontal_slice_mesh`): so a node may be a
+/// macro-cell when each of those facets is planar — the thesis' flatness flag, relaxed from
+/// the whole node to its facets so that rolling hills need not be split down to single blocks.
+pub const MACRO_FACET_LEVELS: u8 = 3;
 
 /// Most corner-sample steps a side of a [`GroundGrid`]: `2^10`. Larger fields sample every
 /// `2^k`-th cell corner, the lift staying the bilinear patch of eq. 4.10 over those coarser
@@ -93,6 +98,8 @@ pub struct GroundGrid {
     low: Vec<Vec<f32>>,
     high: Vec<Vec<f32>>,
     flat: Vec<Vec<bool>>,
+    /// Per level: every descendant `MACRO_FACET_LEVELS` down (or the finest) is planar.
+    facets_flat: Vec<Vec<bool>>,
 }
 
 impl GroundGrid {
@@ -125,6 +132,7 @@ impl GroundGrid {
             low: Vec::new(),
             high: Vec::new(),
             flat: Vec::new(),
+            facets_flat: Vec::new(),
         };
         ground.build_bounds();
         (ground, bad)
@@ -207,6 +215,25 @@ impl GroundGrid {
             self.high.insert(0, high);
             self.flat.insert(0, flat);
         }
+        // Facets k levels down all planar: F_0 = planar, F_k(node) = F_{k−1} of all four
+        // children; the finest levels take the finest quads' flags.
+        let mut facets = self.flat.clone();
+        for _ in 0..MACRO_FACET_LEVELS {
+            let mut next = facets.clone();
+            for level in 0..self.levels as usize {
+                let n = 1usize << level;
+                for z in 0..n {
+                    for x in 0..n {
+                        let below = &facets[level + 1];
+                        let child = |dx: usize, dz: usize| below[(2 * z + dz) * 2 * n + 2 * x + dx];
+                        next[level][z * n + x] =
+                            child(0, 0) && child(1, 0) && child(0, 1) && child(1, 1);
+                    }
+                }
+            }
+            facets = next;
+        }
+        self.facets_flat = facets;
     }
 
     /// Eq. 4.10 over the sample grid: the bilinear patch through the four samples around world
@@ -268,10 +295,11 @@ impl super::quadtree::GroundBounds for GroundGrid {
         let (level, i) = self.entry(node);
         (self.low[level][i], self.high[level][i])
     }
+    /// Whether the node's macro-cell facets are all planar ([`MACRO_FACET_LEVELS`]).
     fn is_flat(&self, grid: &super::quadtree::CellGrid, node: super::quadtree::CellNode) -> bool {
         let _ = grid;
         let (level, i) = self.entry(node);
-        self.flat[level][i]
+        self.facets_flat[level][i]
     }
 }
 
@@ -578,18 +606,30 @@ mod tests {
                     let hi = seen.iter().copied().fold(f32::NEG_INFINITY, f32::max);
                     assert_eq!((low, high), (lo, hi), "{node:?}");
                     if ground.is_flat(&grid, node) {
-                        let (h00, h10, h01) = (
-                            ground.at(x * step, z * step),
-                            ground.at((x + 1) * step, z * step),
-                            ground.at(x * step, (z + 1) * step),
-                        );
-                        for j in 0..=step {
-                            for i in 0..=step {
-                                let plane = h00
-                                    + (h10 - h00) * i as f32 / step as f32
-                                    + (h01 - h00) * j as f32 / step as f32;
-                                let h = ground.at(x * step + i, z * step + j);
-                                assert!((h - plane).abs() <= 2.0 * FLAT_TOLERANCE, "{node:?}");
+                        // Every facet of its macro-cell lies in a plane.
+                        let fl = (level + MACRO_FACET_LEVELS).min(grid.levels);
+                        let fstep = 1u32 << (grid.levels - fl);
+                        let per = step / fstep;
+                        for fz in 0..per {
+                            for fx in 0..per {
+                                let (i0, j0) = (x * step + fx * fstep, z * step + fz * fstep);
+                                let (h00, h10, h01) = (
+                                    ground.at(i0, j0),
+                                    ground.at(i0 + fstep, j0),
+                                    ground.at(i0, j0 + fstep),
+                                );
+                                for j in 0..=fstep {
+                                    for i in 0..=fstep {
+                                        let plane = h00
+                                            + (h10 - h00) * i as f32 / fstep as f32
+                                            + (h01 - h00) * j as f32 / fstep as f32;
+                                        let h = ground.at(i0 + i, j0 + j);
+                                        assert!(
+                                            (h - plane).abs() <= 2.0 * FLAT_TOLERANCE,
+                                            "{node:?}"
+                                        );
+                                    }
+                                }
                             }
                         }
                     }

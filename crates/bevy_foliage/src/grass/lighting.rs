@@ -4,7 +4,7 @@
 //! and the spherical barycentric weights that blend the slices' five baked light directions
 //! (eq. 4.2, A.1–A.6). The shaders compute the same; these are their references.
 
-use bevy::math::Vec3;
+use bevy::math::{Vec2, Vec3};
 
 /// Eq. 4.1: radiance of a blade point of diffuse reflectance `kd`, ambient occlusion `ao`, under
 /// ambient `ia` and a light of intensity `id` at distance `d` from direction `l` (unit, from the
@@ -40,6 +40,95 @@ pub fn blade_ao(height_fraction: f32, root_ao: f32) -> f32 {
 /// fewer neighbours, the less shadow.
 pub fn masked_light(mask: f32, ld: f32) -> f32 {
     1.0 - (1.0 - mask.clamp(0.0, 1.0)) * ld.clamp(0.0, 1.0)
+}
+
+/// The blade shadow mask of §4.2.6 (fig. 4.16): the shadows a blade's neighbours cast on it,
+/// as a grey image wrapped around a cylinder about the blade — visibility 1 where light passes,
+/// 0 where a neighbour blocks it. The thesis renders a thick slab of the patch orthographically,
+/// blades black on white; the slice bake already holds exactly that image (a vertical slice's
+/// coverage), so the mask is one minus it, the slab's width wrapped once around the cylinder
+/// (radius `width / 2π`). A blade point lit from `l` reads the mask where the ray towards the
+/// light leaves the cylinder, and eq. 4.7 weakens the shadow where the grass is sparse.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShadowMask {
+    /// Texels around the cylinder.
+    pub width: u32,
+    /// Texels up it (row 0 at the top).
+    pub height: u32,
+    /// Visibility per texel, row-major.
+    pub texels: Vec<f32>,
+    /// The cylinder's height (m): the slab's.
+    pub slab_height: f32,
+    /// The cylinder's radius (m).
+    pub radius: f32,
+}
+
+impl ShadowMask {
+    /// The mask of a slab image `width × height` whose texel coverage is `coverage(x, y)`
+    /// (row 0 at the top), `slab_width` metres wide and `slab_height` tall.
+    pub fn from_coverage(
+        width: u32,
+        height: u32,
+        coverage: impl Fn(u32, u32) -> f32,
+        slab_width: f32,
+        slab_height: f32,
+    ) -> Self {
+        let texels = (0..width * height)
+            .map(|i| 1.0 - coverage(i % width, i / width).clamp(0.0, 1.0))
+            .collect();
+        Self {
+            width,
+            height,
+            texels,
+            slab_height,
+            radius: slab_width / std::f32::consts::TAU,
+        }
+    }
+
+    /// No shadow anywhere (before a patch's slices are baked).
+    pub fn clear() -> Self {
+        Self {
+            width: 1,
+            height: 1,
+            texels: vec![1.0],
+            slab_height: 1.0,
+            radius: 0.0,
+        }
+    }
+
+    /// The mask at `(u, v)`: `u` around the cylinder (one turn per unit, wrapping), `v` down it
+    /// (0 top, 1 bottom, clamped); bilinear between texel centres.
+    pub fn sample(&self, u: f32, v: f32) -> f32 {
+        let t = Vec2::new(u * self.width as f32, v * self.height as f32) - 0.5;
+        let base = t.floor();
+        let f = t - base;
+        let at = |dx: i64, dy: i64| {
+            let x = (base.x as i64 + dx).rem_euclid(self.width as i64) as u32;
+            let y = (base.y as i64 + dy).clamp(0, self.height as i64 - 1) as u32;
+            self.texels[(y * self.width + x) as usize]
+        };
+        let top = at(0, 0) + (at(1, 0) - at(0, 0)) * f.x;
+        let bottom = at(0, 1) + (at(1, 1) - at(0, 1)) * f.x;
+        top + (bottom - top) * f.y
+    }
+
+    /// The share of the light from unit direction `l` reaching a blade point `height` metres
+    /// above the ground where the local density is `ld`: the mask where the ray towards the
+    /// light leaves the cylinder (none above the slab, or with the light straight overhead),
+    /// through eq. 4.7. `grass_functions.wgsl`'s `shadow_mask_light` is its GPU twin.
+    pub fn light_through(&self, height: f32, l: Vec3, ld: f32) -> f32 {
+        let across = Vec2::new(l.x, l.z).length();
+        if across < 1e-4 || self.radius <= 0.0 {
+            return 1.0;
+        }
+        let exit = height + self.radius * l.y.max(0.0) / across;
+        if exit >= self.slab_height {
+            return 1.0;
+        }
+        let u = l.z.atan2(l.x) / std::f32::consts::TAU;
+        let v = 1.0 - exit.max(0.0) / self.slab_height;
+        masked_light(self.sample(u, v), ld)
+    }
 }
 
 /// The slices' baked light directions, in the order of [`btf_weights`]: Y+, X+, X−, Z+, Z−.
@@ -163,5 +252,30 @@ mod tests {
         // Below the horizon: as at the horizon.
         let below = btf_weights(Vec3::new(1.0, -0.5, 0.0));
         assert!((below[1] - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn the_shadow_mask_darkens_low_points_under_a_low_sun_and_thins_with_density() {
+        // A slab whose lower half is all blades, upper half clear.
+        let mask =
+            ShadowMask::from_coverage(16, 8, |_, y| if y >= 4 { 1.0 } else { 0.0 }, 0.5, 0.4);
+        assert!((mask.radius - 0.5 / std::f32::consts::TAU).abs() < 1e-6);
+        let low_sun = Vec3::new(1.0, 0.2, 0.0).normalize();
+        // A root under a low sun: the ray leaves the cylinder among the blades.
+        assert!(mask.light_through(0.02, low_sun, 1.0) < 0.05);
+        // Sparse grass lets more through (eq. 4.7), none gives no shadow.
+        let sparse = mask.light_through(0.02, low_sun, 0.3);
+        assert!((sparse - 0.7).abs() < 0.06, "{sparse}");
+        assert_eq!(mask.light_through(0.02, low_sun, 0.0), 1.0);
+        // A tip above the blades, the sun overhead, or above the slab: lit.
+        assert!(mask.light_through(0.35, low_sun, 1.0) > 0.95);
+        assert_eq!(mask.light_through(0.02, Vec3::Y, 1.0), 1.0);
+        assert_eq!(mask.light_through(0.5, low_sun, 1.0), 1.0);
+        // A higher sun lifts the exit point out of the blades.
+        let high_sun = Vec3::new(1.0, 3.0, 0.0).normalize();
+        assert!(mask.light_through(0.1, high_sun, 1.0) > mask.light_through(0.1, low_sun, 1.0));
+        // The mask wraps around the cylinder.
+        assert!((mask.sample(0.01, 0.3) - mask.sample(1.01, 0.3)).abs() < 1e-6);
+        assert_eq!(ShadowMask::clear().light_through(0.0, low_sun, 1.0), 1.0);
     }
 }

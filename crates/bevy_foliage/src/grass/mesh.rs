@@ -117,14 +117,31 @@ pub fn slice_block_mesh(layout: &SliceLayout, cells: u32) -> Mesh {
     build(positions, normals, uv1, indices)
 }
 
-/// A horizontal slice quad of `side` (a macro-cell's: scaled to the node by its transform).
-pub fn horizontal_slice_mesh(side: f32) -> Mesh {
-    let corners = horizontal_corners(side);
+/// A horizontal slice quad of `side` cut into `segments × segments` facets (a macro-cell's:
+/// scaled to the node by its transform), so that lifted onto the ground at its vertices it
+/// follows rolling ground facet by facet.
+pub fn horizontal_slice_mesh(side: f32, segments: u32) -> Mesh {
+    let n = segments.max(1);
+    let step = side / n as f32;
+    let (mut positions, mut indices) = (Vec::new(), Vec::new());
+    for j in 0..=n {
+        for i in 0..=n {
+            positions.push([i as f32 * step, HORIZONTAL_SLICE_LIFT, j as f32 * step]);
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i;
+            let (b, c, d) = (a + 1, a + n + 2, a + n + 1);
+            indices.extend_from_slice(&[a, b, c, a, c, d]);
+        }
+    }
+    let count = positions.len();
     build(
-        corners.iter().map(|c| c.to_array()).collect(),
-        vec![[0.0, 1.0, 0.0]; 4],
-        vec![[2.0, 0.0]; 4],
-        vec![0, 1, 2, 0, 2, 3],
+        positions,
+        vec![[0.0, 1.0, 0.0]; count],
+        vec![[2.0, 0.0]; count],
+        indices,
     )
 }
 

@@ -19,7 +19,7 @@
 //! cameras, triangle by triangle.
 
 use super::field::GrassSpecies;
-use super::lighting::BTF_DIRECTIONS;
+use super::lighting::{BTF_DIRECTIONS, ShadowMask};
 use super::patch::BasePatch;
 use super::slice_mip::{MipAlpha, RgbaLevel, mip_chain_with};
 use bevy::math::{Vec2, Vec3};
@@ -198,6 +198,26 @@ impl SliceTextures {
     pub fn layer(&self, s: u32, layer: u32) -> &[[f32; 4]] {
         let start = self.layout.index(s, layer, 0, 0);
         &self.texels[start..start + self.layout.texels_per_layer()]
+    }
+
+    /// The blade shadow mask (§4.2.6) these slices hold: one minus the coverage of the vertical
+    /// slices' unlit layers — each a thick slab of the patch seen orthographically — averaged
+    /// over all of them.
+    pub fn shadow_mask(&self) -> ShadowMask {
+        let l = self.layout;
+        let vertical = 2 * l.per_axis;
+        ShadowMask::from_coverage(
+            l.resolution,
+            l.resolution,
+            |c, r| {
+                (0..vertical)
+                    .map(|s| self.texels[l.index(s, LAYER_UNLIT, c, r)][3])
+                    .sum::<f32>()
+                    / vertical as f32
+            },
+            l.size,
+            l.height,
+        )
     }
 
     /// Each layer's mip chain by the slices' custom filter ([`super::slice_mip`]) with its alpha

@@ -447,7 +447,10 @@ pub fn attach_slice_bakes(
         };
         state.slices = Some(FieldSlices {
             block_mesh: meshes.add(slice_block_mesh(&textures.layout, block_cells)),
-            quad_mesh: meshes.add(horizontal_slice_mesh(1.0)),
+            quad_mesh: meshes.add(horizontal_slice_mesh(
+                1.0,
+                1 << super::ground::MACRO_FACET_LEVELS,
+            )),
             textures,
             material,
             blocks,
