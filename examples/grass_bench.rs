@@ -377,6 +377,13 @@ fn main() {
             max_distance: args.distance,
             geometry: false,
             slices: false,
+            // As the reference draws it: still air, and no blade shadow mask (which the
+            // reference's plain PBR blades lack; it darkens the lower blades).
+            shadow_mask: false,
+            wind: bevy_nature::foliage::grass::GrassWind {
+                strength: 0.0,
+                ..default()
+            },
             ..default()
         });
     {

@@ -113,9 +113,8 @@ fn cpu_coverage(field_size: Vec2, density: &DensityMap, t: &TransitionDistances)
 }
 
 /// The pixels of an image `pixels` across covered by the blades of a field of `field_size`
-/// centred on the origin: every strip triangle of every cell (mirrored as eq. 4.9 places it), its
-/// vertices moved by `deform(flat point, height above the ground)` and projected by `to_pixel`,
-/// each pixel centre inside it covered where `keep(point, blade threshold, px, py)`.
+/// centred on the origin ([`blade_fragments`]), each pixel centre inside a triangle covered
+/// where `keep(point, blade threshold, px, py)`.
 fn rasterize_blades(
     field_size: Vec2,
     pixels: UVec2,
@@ -123,6 +122,32 @@ fn rasterize_blades(
     deform: impl Fn(Vec3, f32) -> Vec3,
     keep: impl Fn(Vec3, f32, u32, u32) -> bool,
 ) -> Vec<bool> {
+    let mut covered = vec![false; (pixels.x * pixels.y) as usize];
+    blade_fragments(
+        field_size,
+        pixels,
+        to_pixel,
+        deform,
+        |px, py, p, threshold| {
+            if keep(p, threshold, px, py) {
+                covered[(py * pixels.x + px) as usize] = true;
+            }
+        },
+    );
+    covered
+}
+
+/// Every blade fragment of a field of `field_size` centred on the origin: every strip triangle
+/// of every cell (mirrored as eq. 4.9 places it), its vertices moved by `deform(flat point,
+/// height above the ground)` and projected by `to_pixel`, each pixel centre inside it visited
+/// with the point there and the blade's threshold.
+fn blade_fragments(
+    field_size: Vec2,
+    pixels: UVec2,
+    to_pixel: impl Fn(Vec3) -> Vec2,
+    deform: impl Fn(Vec3, f32) -> Vec3,
+    mut visit: impl FnMut(u32, u32, Vec3, f32),
+) {
     let species = species();
     let patch = BasePatch::generate(&species.patch);
     let mesh = patch_mesh(&patch, species.patch.width, species.patch.segments);
@@ -139,7 +164,6 @@ fn rasterize_blades(
     };
     let grid = field_grid(Vec2::ZERO, field_size, species.patch.size);
     let cells = (field_size / species.patch.size).ceil().as_uvec2();
-    let mut covered = vec![false; (pixels.x * pixels.y) as usize];
     for cz in 0..cells.y {
         for cx in 0..cells.x {
             let mirror = Mirror::of_cell(cx as i64, cz as i64, species.patch.seed);
@@ -168,16 +192,12 @@ fn rasterize_blades(
                         if b0 < 0.0 || b1 < 0.0 || b2 < 0.0 {
                             continue;
                         }
-                        let p = w[0] * b0 + w[1] * b1 + w[2] * b2;
-                        if keep(p, threshold, px, py) {
-                            covered[(py * pixels.x + px) as usize] = true;
-                        }
+                        visit(px, py, w[0] * b0 + w[1] * b1 + w[2] * b2, threshold);
                     }
                 }
             }
         }
     }
-    covered
 }
 
 fn gpu_coverage(image: &RgbaImage) -> Vec<bool> {
@@ -964,4 +984,169 @@ fn slices_on_lifted_ground_match_slices_on_a_raised_plane() {
     );
     assert!(covered > 600, "the raised field covers {covered} px");
     assert!(off * 200 < covered, "{off} px differ of {covered}");
+}
+
+/// The blade shadow mask on the GPU against its CPU reference (`ShadowMask::light_through`, the
+/// mask read from the field's own slices): seen side-on under a low sun, with no ambient light,
+/// no shadow map and no tone mapping, the blade points the mask leaves fully lit keep their
+/// colour when the mask is switched on, and those it shades to under a third of the light lose
+/// most of it. The field stands 0.7 m up on its height map, so the mask must be read at the
+/// height above the ground, not above the world's origin.
+#[test]
+fn the_blade_shadow_mask_darkens_the_points_the_cpu_shades() {
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    use bevy_foliage::grass::bake::GrassSliceBakeResult;
+    use bevy_foliage::grass::ground_map::height_map_image;
+    use bevy_foliage::grass::systems::grass_ready;
+    const W: u32 = 160;
+    const H: u32 = 48;
+    let (view_w, view_h, centre_y) = (4.4, 1.32, 0.9);
+    let Some(mut harness) = RenderHarness::for_test("grass_shadow_mask", W, H) else {
+        return;
+    };
+    let field_size = Vec2::new(4.0, 0.5);
+    let lift = 0.7;
+    harness
+        .app_mut()
+        .add_plugins(GrassPlugin)
+        .insert_resource(ClearColor(BACKGROUND))
+        .insert_resource(GlobalAmbientLight {
+            brightness: 0.0,
+            ..default()
+        })
+        .insert_resource(GrassSettings {
+            transitions: TransitionDistances {
+                min_geom: 30.0,
+                max_geom: 40.0,
+                min_btf: 50.0,
+                max_btf: 80.0,
+                ..default()
+            },
+            slices: false,
+            wind: still_air(),
+            ..default()
+        });
+    let heights = add_image(
+        &mut harness,
+        height_map_image(field_size, UVec2::new(4, 2), |_| lift),
+    );
+    harness.world_mut().spawn(GrassField {
+        size: field_size,
+        species: species(),
+        density: None,
+        ground: Some(heights),
+    });
+    // A sun from the right and in front, 46° up: the camera sees the lit faces.
+    let to_light = Vec3::new(1.0, 1.2, 0.6).normalize();
+    harness.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 8000.0,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::default().looking_to(-to_light, Vec3::Y),
+    ));
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Tonemapping::None,
+        Projection::Orthographic(OrthographicProjection {
+            scaling_mode: ScalingMode::Fixed {
+                width: view_w,
+                height: view_h,
+            },
+            ..OrthographicProjection::default_3d()
+        }),
+        Transform::from_xyz(0.0, centre_y, 10.0).looking_to(Vec3::NEG_Z, Vec3::Y),
+    ));
+    for _ in 0..300 {
+        harness.step();
+        if grass_ready(harness.world_mut()) {
+            break;
+        }
+    }
+    harness.wait_until_ready().expect("pipelines");
+    let render = |harness: &mut RenderHarness, mask: bool, name: &str| {
+        harness
+            .world_mut()
+            .resource_mut::<GrassSettings>()
+            .shadow_mask = mask;
+        for _ in 0..3 {
+            harness.step();
+        }
+        render_saved(harness, name)
+    };
+    let masked = render(&mut harness, true, "grass_shadow_mask_on");
+    let plain = render(&mut harness, false, "grass_shadow_mask_off");
+    let mask = {
+        let world = harness.world_mut();
+        let mut q = world.query::<&GrassSliceBakeResult>();
+        let bake = q
+            .iter(world)
+            .next()
+            .expect("a bake")
+            .0
+            .clone()
+            .expect("baked");
+        bake.textures.shadow_mask()
+    };
+
+    // The nearest blade point behind each pixel (the camera looks along −z).
+    let pixels = UVec2::new(W, H);
+    let mut nearest: Vec<Option<Vec3>> = vec![None; (W * H) as usize];
+    let to_pixel = |p: Vec3| {
+        Vec2::new(
+            (p.x / view_w + 0.5) * W as f32,
+            ((centre_y - p.y) / view_h + 0.5) * H as f32,
+        )
+    };
+    let half = field_size / 2.0;
+    blade_fragments(
+        field_size,
+        pixels,
+        to_pixel,
+        |p, _| p + Vec3::Y * lift,
+        |px, py, p, _| {
+            if p.x.abs() > half.x || p.z.abs() > half.y {
+                return;
+            }
+            let slot = &mut nearest[(py * W + px) as usize];
+            if slot.is_none_or(|q| p.z > q.z) {
+                *slot = Some(p);
+            }
+        },
+    );
+    let (mut lit, mut lit_kept, mut shaded, mut shaded_dark) = (0, 0, 0, 0);
+    for (i, p) in nearest.iter().enumerate() {
+        let Some(p) = p else { continue };
+        let (x, y) = (i as u32 % W, i as u32 / W);
+        let (on, off) = (masked.pixel(x, y), plain.pixel(x, y));
+        let luma = |c: [u8; 4]| c[0] as f32 + c[1] as f32 + c[2] as f32;
+        // Skip pixels showing the background in either (edge ties).
+        if luma(off) < 1.0 || (off[0] > 200 && off[2] > 200) {
+            continue;
+        }
+        let through = mask.light_through(p.y - lift, to_light, 1.0);
+        if through >= 0.999 {
+            lit += 1;
+            if (luma(on) - luma(off)).abs() <= 6.0 {
+                lit_kept += 1;
+            }
+        } else if through < 0.33 {
+            shaded += 1;
+            // sRGB-encoded: a third of the linear light is about 0.6 of the encoded value.
+            if luma(on) < 0.8 * luma(off) {
+                shaded_dark += 1;
+            }
+        }
+    }
+    eprintln!(
+        "shadow mask: fully lit {lit} px ({lit_kept} unchanged), shaded {shaded} px ({shaded_dark} darker)"
+    );
+    assert!(lit > 150 && shaded > 150, "lit {lit}, shaded {shaded}");
+    assert!(lit_kept * 100 >= lit * 97, "{lit_kept} of {lit}");
+    assert!(
+        shaded_dark * 100 >= shaded * 90,
+        "{shaded_dark} of {shaded}"
+    );
 }

@@ -136,6 +136,9 @@ pub struct GrassSettings {
     /// colour seen from higher up).
     /// Read when a field's slices are made.
     pub slice_mip_alpha: MipAlpha,
+    /// Darken the blades with the blade shadow mask (§4.2.6, eq. 4.7): the shadows of their
+    /// neighbours, which a shadow map cannot resolve, on geometry and slices alike.
+    pub shadow_mask: bool,
     /// The wind over every field (the map it reads is the [`GrassWindMap`] resource).
     ///
     /// [`GrassWindMap`]: super::ground_map::GrassWindMap
@@ -157,6 +160,7 @@ impl Default for GrassSettings {
             slice_per_axis: 4,
             slice_resolution: 64,
             slice_mip_alpha: MipAlpha::Max,
+            shadow_mask: true,
             wind: GrassWind::default(),
             slice_cache: None,
         }

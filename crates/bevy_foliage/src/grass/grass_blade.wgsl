@@ -1,6 +1,6 @@
-// Grass blades as geometry (Boulanger 2008, thesis §4.2.2, §4.2.4–4.2.5): the base patch's
+// Grass blades as geometry (Boulanger 2008, thesis §4.2.2, §4.2.4–4.2.6): the base patch's
 // strips, Bevy's PBR lighting with diffuse transmission standing for eq. 4.1's γ, ambient
-// occlusion rising with height, and each fragment kept or not by its blade's density threshold
+// occlusion rising with height, the blade shadow mask of eq. 4.7, and each fragment kept or not by its blade's density threshold
 // and the geometry opacity of eq. 4.6, turned into coverage by an ordered dither. The prepass
 // and shadow passes run the same test, so the blades' depth and shadows match what is drawn.
 //
@@ -16,6 +16,9 @@
 #import bevy_pbr::pbr_functions::{apply_pbr_lighting, main_pass_post_lighting_processing}
 #endif
 #import bevy_foliage::grass_blade::{blade, blade_kept}
+#ifndef PREPASS_PIPELINE
+#import bevy_foliage::grass_blade_light::{shadow_mask_loss, sun_visibility}
+#endif
 
 #ifdef PREPASS_PIPELINE
 #ifdef PREPASS_FRAGMENT
@@ -60,6 +63,9 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
     pbr_input.diffuse_occlusion *= ao;
     var out: FragmentOutput;
     out.color = apply_pbr_lighting(pbr_input);
+    // The neighbours' shadows (§4.2.6, eq. 4.7).
+    let loss = shadow_mask_loss(pbr_input, sun_visibility(pbr_input, in.position.xy));
+    out.color = vec4(max(out.color.rgb - loss, vec3(0.0)), out.color.a);
     out.color = main_pass_post_lighting_processing(pbr_input, out.color);
     return out;
 }

@@ -22,6 +22,8 @@ struct GrassBladeParams {
     tip_color: vec4<f32>,
     // The ground under the field and the wind over it.
     ground_wind: grass::GroundWind,
+    // The blade shadow mask's (slab height, cylinder radius, 0, 0); radius 0: no mask.
+    mask_shape: vec4<f32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> blade: GrassBladeParams;
@@ -29,6 +31,8 @@ struct GrassBladeParams {
 // The ground's samples (`grass::ground_map::ground_image`) and the wind map.
 @group(#{MATERIAL_BIND_GROUP}) @binding(103) var ground_heights: texture_2d<f32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var wind_map: texture_2d<f32>;
+// The blade shadow mask (`R32Float` visibility; `grass_blade_light.wgsl`).
+@group(#{MATERIAL_BIND_GROUP}) @binding(105) var shadow_mask: texture_2d<f32>;
 
 // Algorithm 1 / eq. 4.6 at this fragment: is the blade point drawn here?
 fn blade_kept(world: vec3<f32>, threshold: f32, frag: vec2<f32>) -> bool {

@@ -4,10 +4,12 @@
 // a soft-visibility texture.
 #import bevy_pbr::{
     pbr_fragment::pbr_input_from_standard_material,
+    pbr_functions::main_pass_post_lighting_processing,
     forward_io::{VertexOutput, FragmentOutput},
 }
-#import bevy_soft_shadows::receiver_functions::soft_shaded_color
+#import bevy_soft_shadows::receiver_functions::{apply_pbr_lighting_soft, soft_visibility_at}
 #import bevy_foliage::grass_blade::{blade, blade_kept}
+#import bevy_foliage::grass_blade_light::{shadow_mask_loss, sun_visibility}
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(102) var soft_visibility: texture_2d<f32>;
 
@@ -21,6 +23,15 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
     pbr_input.material.base_color = vec4(mix(blade.root_color.rgb, blade.tip_color.rgb, h), 1.0);
     pbr_input.diffuse_occlusion *= mix(blade.root_color.w, 1.0, h);
     var out: FragmentOutput;
-    out.color = soft_shaded_color(pbr_input, in.position.xy, soft_visibility);
+    var color = apply_pbr_lighting_soft(pbr_input, in.position.xy, soft_visibility);
+    // The neighbours' shadows (§4.2.6, eq. 4.7), under the soft shadow term where SSSS is active.
+    let soft = soft_visibility_at(soft_visibility, in.position.xy);
+    var visibility = sun_visibility(pbr_input, in.position.xy);
+    if soft.x >= 0.0 && soft.y < -0.5 && soft.y > -1.5 {
+        visibility = soft.x;
+    }
+    let loss = shadow_mask_loss(pbr_input, visibility);
+    color = vec4(max(color.rgb - loss, vec3(0.0)), color.a);
+    out.color = main_pass_post_lighting_processing(pbr_input, color);
     return out;
 }

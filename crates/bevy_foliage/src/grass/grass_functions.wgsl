@@ -148,7 +148,7 @@ struct GroundWind {
     ground: vec4<f32>,
     // (unit direction x, z, strength, speed)
     wind: vec4<f32>,
-    // (map scale, volume height, time, 0)
+    // (map scale, volume height, time, the field's plane y)
     wind_shape: vec4<f32>,
 }
 
@@ -228,8 +228,45 @@ fn on_ground(heights: texture_2d<f32>, map: texture_2d<f32>, gw: GroundWind, fla
     return vec3(flat.x + push.x, flat.y + lift, flat.z + push.y);
 }
 
+// How high above the ground a point of the lifted grass is.
+fn height_above_ground(heights: texture_2d<f32>, gw: GroundWind, world: vec3<f32>) -> f32 {
+    return world.y - gw.wind_shape.w - ground_at(heights, gw, world.xz).height;
+}
+
 // `ground::lift_to_patch`: a world direction in the unlifted patch volume (eq. 4.11 with the
 // lift's own tangents), not normalised.
 fn lift_to_patch(gradient: vec2<f32>, l: vec3<f32>) -> vec3<f32> {
     return vec3(l.x, l.y - gradient.x * l.x - gradient.y * l.z, l.z);
+}
+
+// `lighting::ShadowMask::light_through`: the share of the light from unit direction l reaching
+// a blade point `height` above the ground where the density is ld — the blade shadow mask
+// (§4.2.6) read where the ray towards the light leaves the cylinder around the blade, through
+// eq. 4.7. shape = (slab height, cylinder radius, 0, 0); a radius of 0 casts no shadow.
+fn shadow_mask_light(mask: texture_2d<f32>, shape: vec4<f32>, height: f32, l: vec3<f32>, ld: f32) -> f32 {
+    let across = length(l.xz);
+    if across < 1e-4 || shape.y <= 0.0 {
+        return 1.0;
+    }
+    let exit = height + shape.y * max(l.y, 0.0) / across;
+    if exit >= shape.x {
+        return 1.0;
+    }
+    let dims = vec2<i32>(textureDimensions(mask));
+    let uv = vec2(atan2(l.z, l.x) / 6.28318530718, 1.0 - max(exit, 0.0) / shape.x);
+    let t = uv * vec2<f32>(dims) - 0.5;
+    let base = floor(t);
+    let f = t - base;
+    let i = vec2<i32>(base);
+    let x0 = ((i.x % dims.x) + dims.x) % dims.x;
+    let x1 = (((i.x + 1) % dims.x) + dims.x) % dims.x;
+    let y0 = clamp(i.y, 0, dims.y - 1);
+    let y1 = clamp(i.y + 1, 0, dims.y - 1);
+    let a = textureLoad(mask, vec2(x0, y0), 0).r;
+    let b = textureLoad(mask, vec2(x1, y0), 0).r;
+    let c = textureLoad(mask, vec2(x0, y1), 0).r;
+    let e = textureLoad(mask, vec2(x1, y1), 0).r;
+    let m = mix(mix(a, b, f.x), mix(c, e, f.x), f.y);
+    // Eq. 4.7.
+    return 1.0 - (1.0 - clamp(m, 0.0, 1.0)) * clamp(ld, 0.0, 1.0);
 }

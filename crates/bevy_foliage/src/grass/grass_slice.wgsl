@@ -32,6 +32,8 @@ struct GrassSliceParams {
     seed: vec4<u32>,
     // The ground under the field and the wind over it.
     ground_wind: grass::GroundWind,
+    // The blade shadow mask's (slab height, cylinder radius, 0, 0); radius 0: no mask.
+    mask_shape: vec4<f32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(0) var<uniform> params: GrassSliceParams;
@@ -40,6 +42,7 @@ struct GrassSliceParams {
 @group(#{MATERIAL_BIND_GROUP}) @binding(3) var density_map: texture_2d<f32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(4) var ground_heights: texture_2d<f32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(5) var wind_map: texture_2d<f32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(6) var shadow_mask: texture_2d<f32>;
 
 const LAYERS: u32 = 12u;
 
@@ -173,6 +176,11 @@ fn fragment(in: SliceVaryings) -> @location(0) vec4<f32> {
             ), vec4(p, 1.0));
             shadow = fetch_directional_shadow(0u, vec4(p, 1.0), vec3(0.0, 1.0, 0.0), view_z, in.position.xy);
         }
+        // The neighbours' shadows on the blades here (§4.2.6, eq. 4.7), as on the blades drawn
+        // as geometry: at the texel's height in the slab.
+        let y = in.flat_position.y - params.grid.w;
+        shadow *= grass::shadow_mask_light(
+            shadow_mask, params.mask_shape, y, (*light).direction_to_light, ld);
         // Lambert's 1/π, as Bevy's diffuse lobe.
         color += (*light).color.rgb * shadow * direct * (1.0 / 3.14159265);
     }

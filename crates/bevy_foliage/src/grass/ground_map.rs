@@ -210,16 +210,17 @@ pub struct GroundWindUniform {
     pub ground: Vec4,
     /// (unit direction x, z, strength, speed).
     pub wind: Vec4,
-    /// (map scale, volume height, time, 0).
+    /// (map scale, volume height, time, the field's plane y).
     pub wind_shape: Vec4,
 }
 
 impl GroundWindUniform {
-    /// The uniforms of a field on `grid` over `ground` (`None`: flat), with grass `volume_height`
-    /// tall in `wind` at `time`.
+    /// The uniforms of a field on `grid` over `ground` (`None`: flat) above the plane
+    /// `y = plane_y`, with grass `volume_height` tall in `wind` at `time`.
     pub fn new(
         grid: &CellGrid,
         ground: Option<&GroundGrid>,
+        plane_y: f32,
         wind: &GrassWind,
         volume_height: f32,
         time: f32,
@@ -232,7 +233,7 @@ impl GroundWindUniform {
         Self {
             ground: Vec4::new(origin.x, origin.y, spacing, grid.cell),
             wind: Vec4::new(dir.x, dir.y, wind.strength, wind.speed),
-            wind_shape: Vec4::new(wind.scale, volume_height, time, 0.0),
+            wind_shape: Vec4::new(wind.scale, volume_height, time, plane_y),
         }
     }
 

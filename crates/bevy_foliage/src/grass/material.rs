@@ -7,6 +7,7 @@
 use super::density::DensityMap;
 use super::field::{GrassSettings, GrassSpecies};
 use super::ground_map::GroundWindUniform;
+use super::lighting::ShadowMask;
 use super::transition::TransitionDistances;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
@@ -37,6 +38,8 @@ pub struct GrassBladeParams {
     pub tip_color: Vec4,
     /// The ground under the field and the wind over it.
     pub ground_wind: GroundWindUniform,
+    /// The blade shadow mask's (slab height, cylinder radius, 0, 0); radius 0: no mask.
+    pub mask_shape: Vec4,
 }
 
 impl GrassBladeParams {
@@ -59,6 +62,7 @@ impl GrassBladeParams {
             root_color: c(species.root_color).truncate().extend(species.root_ao),
             tip_color: c(species.tip_color),
             ground_wind,
+            mask_shape: Vec4::ZERO,
         }
     }
 }
@@ -94,6 +98,9 @@ pub struct GrassBladeExtension {
     /// The wind map (`Rg32Float`, [`GrassWindMap`](super::ground_map::GrassWindMap)).
     #[texture(104, sample_type = "float", filterable = false)]
     pub wind: Handle<Image>,
+    /// The blade shadow mask (`R32Float` visibility, [`shadow_mask_image`]).
+    #[texture(105, sample_type = "float", filterable = false)]
+    pub shadow_mask: Handle<Image>,
     /// A screen-space soft-shadow visibility texture (`bevy_soft_shadows`'
     /// `SsssTextures::visibility`) to use as the sun's shadow term. With one, the main pass's
     /// fragment stage is `grass_blade_soft.wgsl`, which imports
@@ -179,6 +186,22 @@ pub fn blade_material(
     }
 }
 
+/// The blade shadow mask as the shaders read it (`R32Float` visibility, row 0 at the top).
+pub fn shadow_mask_image(mask: &ShadowMask) -> Image {
+    let bytes: Vec<u8> = mask.texels.iter().flat_map(|v| v.to_le_bytes()).collect();
+    Image::new(
+        Extent3d {
+            width: mask.width,
+            height: mask.height,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        bytes,
+        TextureFormat::R32Float,
+        RenderAssetUsages::RENDER_WORLD,
+    )
+}
+
 /// `map` as the `R32Float` texture the shaders read.
 pub fn density_image(map: &DensityMap) -> Image {
     let (width, height) = map.dimensions();
@@ -260,6 +283,7 @@ pub fn density_map_from_image(
 pub(crate) fn build(app: &mut App) {
     load_shader_library!(app, "grass_functions.wgsl");
     load_shader_library!(app, "grass_blade_functions.wgsl");
+    load_shader_library!(app, "grass_blade_light.wgsl");
     embedded_asset!(app, "grass_blade.wgsl");
     embedded_asset!(app, "grass_blade_vertex.wgsl");
     embedded_asset!(app, "grass_blade_soft.wgsl");

@@ -39,6 +39,8 @@ pub struct GrassSliceParams {
     pub seed: UVec4,
     /// The ground under the field and the wind over it.
     pub ground_wind: GroundWindUniform,
+    /// The blade shadow mask's (slab height, cylinder radius, 0, 0); radius 0: no mask.
+    pub mask_shape: Vec4,
 }
 
 impl GrassSliceParams {
@@ -70,6 +72,7 @@ impl GrassSliceParams {
             ),
             seed: UVec4::new(species.patch.seed as u32, 0, 0, 0),
             ground_wind,
+            mask_shape: Vec4::ZERO,
         }
     }
 }
@@ -93,6 +96,9 @@ pub struct GrassSliceMaterial {
     /// The wind map (`Rg32Float`).
     #[texture(5, sample_type = "float", filterable = false)]
     pub wind: Handle<Image>,
+    /// The blade shadow mask (`R32Float`), as the blade material's.
+    #[texture(6, sample_type = "float", filterable = false)]
+    pub shadow_mask: Handle<Image>,
 }
 
 const SLICE_SHADER: &str = "embedded://bevy_foliage/grass/grass_slice.wgsl";

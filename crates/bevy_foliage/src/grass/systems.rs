@@ -11,9 +11,10 @@ use super::ground::GroundGrid;
 use super::ground_map::{
     GrassWindMap, GroundWindUniform, HeightMap, flat_ground_image, ground_image,
 };
+use super::lighting::ShadowMask;
 use super::material::{
     GrassBladeExtension, GrassBladeMaterial, GrassBladeParams, blade_material, density_image,
-    density_map_from_image,
+    density_map_from_image, shadow_mask_image,
 };
 use super::mesh::{horizontal_slice_mesh, patch_mesh, slice_block_mesh};
 use super::patch::{BasePatch, Mirror};
@@ -66,6 +67,9 @@ pub struct GrassFieldState {
     ground_image: Handle<Image>,
     /// The patch mesh's bounds (m, in a cell's frame, on flat ground).
     mesh_bounds: (Vec3, Vec3),
+    /// The blade shadow mask's image and (slab height, radius, 0, 0), once the slices are
+    /// baked (the mask is read from them).
+    shadow_mask: (Handle<Image>, Vec4),
     mesh: Handle<Mesh>,
     material: Handle<GrassBladeMaterial>,
     cells: HashMap<(u32, u32), Entity>,
@@ -223,8 +227,15 @@ pub fn prepare_grass_fields(
         });
         let mesh = meshes.add(mesh);
         let ground_image = images.add(flat_ground_image());
-        let ground_wind =
-            GroundWindUniform::new(&grid, None, &settings.wind, species.patch.height.1, 0.0);
+        let shadow_mask = images.add(shadow_mask_image(&ShadowMask::clear()));
+        let ground_wind = GroundWindUniform::new(
+            &grid,
+            None,
+            transform.translation().y,
+            &settings.wind,
+            species.patch.height.1,
+            0.0,
+        );
         let material = materials.add(blade_material(
             &species,
             GrassBladeExtension {
@@ -232,6 +243,7 @@ pub fn prepare_grass_fields(
                 density: images.add(density_image(&density)),
                 ground: ground_image.clone(),
                 wind: wind_map.image.clone(),
+                shadow_mask: shadow_mask.clone(),
                 soft_visibility: None,
             },
         ));
@@ -280,6 +292,7 @@ pub fn prepare_grass_fields(
                 ground_source: None,
                 ground_image,
                 mesh_bounds,
+                shadow_mask: (shadow_mask, Vec4::ZERO),
                 mesh,
                 material,
                 cells: HashMap::default(),
@@ -337,7 +350,6 @@ pub fn resolve_ground_maps(
     mut commands: Commands,
     mut fields: Query<(Entity, &GrassField, &mut GrassFieldState)>,
     mut images: ResMut<Assets<Image>>,
-    mut materials: ResMut<Assets<GrassBladeMaterial>>,
 ) {
     for (entity, field, mut state) in &mut fields {
         let Some(handle) = &field.ground else {
@@ -354,11 +366,11 @@ pub fn resolve_ground_maps(
         match HeightMap::from_image(image, min, size) {
             Ok(map) => {
                 let (ground, _) = GroundGrid::sample(&state.grid, |p| map.height_at(p));
-                let gpu = images.add(ground_image(&ground));
-                if let Some(mut material) = materials.get_mut(&state.material) {
-                    material.extension.ground = gpu.clone();
+                // Written into the image the materials already hold (a new handle would leave
+                // them without a bind group for a frame).
+                if let Some(mut image) = images.get_mut(&state.ground_image) {
+                    *image = ground_image(&ground);
                 }
-                state.ground_image = gpu;
                 state.ground = Some(std::sync::Arc::new(ground));
                 // Cells and slices spawned on the flat ground go, to come back with the
                 // ground's bounds.
@@ -423,6 +435,16 @@ pub fn attach_slice_bakes(
         };
         let textures = bake.textures.clone();
         let species = state.species.clone();
+        // The blade shadow mask, read from the slices (§4.2.6).
+        // Written into the image the materials already hold: a new handle would leave the
+        // blades without a bind group for the frame its image takes to upload.
+        let mask = textures.shadow_mask();
+        let mask_image = state.shadow_mask.0.clone();
+        match images.get_mut(&mask_image) {
+            Some(mut image) => *image = shadow_mask_image(&mask),
+            None => continue,
+        }
+        state.shadow_mask.1 = Vec4::new(mask.slab_height, mask.radius, 0.0, 0.0);
         let material = materials.add(GrassSliceMaterial {
             params: GrassSliceParams::new(
                 &settings,
@@ -438,6 +460,7 @@ pub fn attach_slice_bakes(
             density,
             ground: state.ground_image.clone(),
             wind: wind_map.image.clone(),
+            shadow_mask: mask_image,
         });
         let block_cells = 1u32 << SLICE_BLOCK_LEVELS.min(state.grid.levels);
         let blocks = CellGrid {
@@ -501,6 +524,7 @@ pub fn update_grass_cells(
         let ground_wind = GroundWindUniform::new(
             &state.grid,
             state.ground.as_deref(),
+            ground_y,
             &settings.wind,
             state.species.patch.height.1,
             time.elapsed_secs_wrapped(),
@@ -550,18 +574,28 @@ pub fn update_grass_cells(
             }
         }
         // The material follows the camera (the shadow pass measures from it too).
+        let mask_shape = if settings.shadow_mask {
+            state.shadow_mask.1
+        } else {
+            Vec4::ZERO
+        };
         if let Some(material) = materials.get(&state.material) {
-            let params = GrassBladeParams::new(
-                &settings,
-                &state.species,
-                material.extension.params.density_rect,
-                eye,
-                ground_wind,
-            );
-            if params != material.extension.params
+            let params = GrassBladeParams {
+                mask_shape,
+                ..GrassBladeParams::new(
+                    &settings,
+                    &state.species,
+                    material.extension.params.density_rect,
+                    eye,
+                    ground_wind,
+                )
+            };
+            if (params != material.extension.params
+                || material.extension.shadow_mask != state.shadow_mask.0)
                 && let Some(mut material) = materials.get_mut(&state.material)
             {
                 material.extension.params = params;
+                material.extension.shadow_mask = state.shadow_mask.0.clone();
             }
         }
         let state = &mut *state;
@@ -636,6 +670,10 @@ pub fn update_grass_cells(
                 eye,
                 ground_wind,
             );
+            let params = GrassSliceParams {
+                mask_shape,
+                ..params
+            };
             if params != material.params
                 || material.density != density
                 || material.ground != state.ground_image

@@ -1,0 +1,48 @@
+#define_import_path bevy_foliage::grass_blade_light
+
+// The blade shadow mask in the blades' main pass (Boulanger 2008, thesis §4.2.6, eq. 4.7): the
+// shadows neighbouring blades cast on a blade, which a shadow map cannot resolve. Bevy's PBR
+// lights the blade; the share of the sun's direct light the mask holds back is then taken off —
+// eq. 4.1's diffuse as Bevy splits it ((1 − γ) on the lit face, γ through to the other, Lambert's
+// 1/π), times the sun's shadow term. Main-pass stages only (it reads the view's lights).
+#import bevy_pbr::{
+    pbr_types::PbrInput,
+    mesh_view_bindings as view_bindings,
+    mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
+    shadows::fetch_directional_shadow,
+}
+#import bevy_foliage::grass_blade::{blade, density_map, ground_heights, shadow_mask}
+#import bevy_foliage::grass_functions as grass
+
+// Bevy's shadow term for the sun (the first directional light) at the fragment.
+fn sun_visibility(pbr_input: PbrInput, frag_xy: vec2<f32>) -> f32 {
+    if view_bindings::lights.n_directional_lights == 0u {
+        return 0.0;
+    }
+    let light = &view_bindings::lights.directional_lights[0];
+    if ((*light).flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
+        return 1.0;
+    }
+    let view = view_bindings::view.view_from_world;
+    let view_z = dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), pbr_input.world_position);
+    return fetch_directional_shadow(0u, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
+}
+
+// The sun's light the shadow mask holds back at this blade point, exposed, given the sun's
+// shadow term `visibility`.
+fn shadow_mask_loss(pbr_input: PbrInput, visibility: f32) -> vec3<f32> {
+    if view_bindings::lights.n_directional_lights == 0u || visibility <= 0.0 {
+        return vec3(0.0);
+    }
+    let light = &view_bindings::lights.directional_lights[0];
+    let l = (*light).direction_to_light;
+    let world = pbr_input.world_position.xyz;
+    let h = grass::height_above_ground(ground_heights, blade.ground_wind, world);
+    let ld = grass::density_at(density_map, blade.density_rect, world.xz);
+    let through = grass::shadow_mask_light(shadow_mask, blade.mask_shape, h, l, ld);
+    let c = dot(pbr_input.N, l);
+    let g = pbr_input.material.diffuse_transmission;
+    let diffuse = pbr_input.material.base_color.rgb * ((1.0 - g) * max(c, 0.0) + g * max(-c, 0.0))
+        * (1.0 / 3.14159265);
+    return view_bindings::view.exposure * (*light).color.rgb * diffuse * visibility * (1.0 - through);
+}
