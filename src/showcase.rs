@@ -193,7 +193,7 @@ fn spawn_showcase(
         }
     }
     if options.grass {
-        spawn_meadow(&mut commands, &mut trees.images);
+        spawn_meadow(&mut commands, &mut trees.images, options.terrain);
     }
     let mut sun = commands.spawn((
         Name::new("sun"),
@@ -227,13 +227,15 @@ fn spawn_showcase(
     }
 }
 
-/// Side of the showcase meadow (m): inside the flat ground.
-const MEADOW: f32 = 40.0;
+/// Side of the showcase meadow (m): the flat ground and, with the terrain on, the foot of the
+/// hills around it.
+const MEADOW: f32 = 64.0;
 
 /// The meadow: the default grass species over [`MEADOW`] metres, cleared at the box and the
-/// olive tree's trunk.
-fn spawn_meadow(commands: &mut Commands, images: &mut Assets<Image>) {
-    use bevy_foliage::grass::{GrassField, GrassSpecies, density::meadow};
+/// olive tree's trunk; with the terrain on, lifted onto its relief ([`layout::ground_height`]
+/// sampled every 0.5 m).
+fn spawn_meadow(commands: &mut Commands, images: &mut Assets<Image>, relief: bool) {
+    use bevy_foliage::grass::{GrassField, GrassSpecies, density::meadow, height_map_image};
     use layout::*;
     let clearings = [
         ([BOX_CENTER.x, BOX_CENTER.z], BOX_SIZE * 0.75),
@@ -252,7 +254,13 @@ fn spawn_meadow(commands: &mut Commands, images: &mut Assets<Image>) {
             size: Vec2::splat(MEADOW),
             species: GrassSpecies::default(),
             density,
-            ground: None,
+            ground: relief.then(|| {
+                images.add(height_map_image(
+                    Vec2::splat(MEADOW),
+                    UVec2::splat(129),
+                    |p| ground_height(p.x as f64, p.y as f64) as f32,
+                ))
+            }),
         },
     ));
 }

@@ -59,10 +59,13 @@ pub const HORIZONTAL_SLICE_LIFT: f32 = 0.01;
 /// The quads of the slices over a block of `cells × cells` cells of side `layout.size`
 /// (`grass_slice.wgsl` draws them): in every cell, `K` quads across x and `K` across z where the
 /// base patch's vertical slices stand (the slab centres, the same in every mirrored version), and
-/// the horizontal quad, each cut at every cell edge. `UV_1.x` is the quad's axis: 0 across x, 1
-/// across z, 2 horizontal.
-pub fn slice_block_mesh(layout: &SliceLayout, cells: u32) -> Mesh {
+/// the horizontal quad over the block. `UV_1.x` is the quad's axis: 0 across x, 1 across z, 2
+/// horizontal. `per_cell`: each quad cut at every cell edge, for ground with relief (see below);
+/// else each spans the block (a fraction of the vertices, for flat ground).
+pub fn slice_block_mesh(layout: &SliceLayout, cells: u32, per_cell: bool) -> Mesh {
     let cells = cells.max(1);
+    let segments = if per_cell { cells } else { 1 };
+    let span = cells as f32 / segments as f32;
     let (size, height, k) = (layout.size, layout.height, layout.per_axis);
     let mut positions: Vec<[f32; 3]> = Vec::new();
     let mut normals: Vec<[f32; 3]> = Vec::new();
@@ -77,14 +80,16 @@ pub fn slice_block_mesh(layout: &SliceLayout, cells: u32) -> Mesh {
         }
         indices.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
     };
-    // One segment per cell, so the vertices lifted onto the ground (eq. 4.10) and sheared by
-    // the wind sit on cell edges, where both are linear along the quad: the lifted slices
-    // follow the blades' ground exactly.
+    // Per cell, the vertices lifted onto the ground (eq. 4.10) sit on cell edges, where the lift
+    // is linear along the quad: the lifted slices follow the blades' ground exactly. (The wind's
+    // shear, bilinear per cell too, is only sampled at the quads' ends on flat ground — beyond
+    // the blades' reach, a few centimetres of sway between block corners is lost in the
+    // distance.)
     for c in 0..cells {
         for slab in 0..k {
             let at = (c as f32 + (slab as f32 + 0.5) / k as f32) * size;
-            for s in 0..cells {
-                let (a, b) = (s as f32 * size, (s + 1) as f32 * size);
+            for s in 0..segments {
+                let (a, b) = (s as f32 * span * size, (s + 1) as f32 * span * size);
                 quad(
                     [
                         Vec3::new(at, 0.0, a),
@@ -108,10 +113,14 @@ pub fn slice_block_mesh(layout: &SliceLayout, cells: u32) -> Mesh {
             }
         }
     }
-    for z in 0..cells {
-        for x in 0..cells {
-            let offset = Vec3::new(x as f32 * size, 0.0, z as f32 * size);
-            quad(horizontal_corners(size).map(|c| c + offset), Vec3::Y, 2.0);
+    for z in 0..segments {
+        for x in 0..segments {
+            let offset = Vec3::new(x as f32, 0.0, z as f32) * span * size;
+            quad(
+                horizontal_corners(span * size).map(|c| c + offset),
+                Vec3::Y,
+                2.0,
+            );
         }
     }
     build(positions, normals, uv1, indices)

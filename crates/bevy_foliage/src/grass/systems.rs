@@ -106,6 +106,8 @@ struct FieldSlices {
     textures: SliceTextures,
     material: Handle<GrassSliceMaterial>,
     block_mesh: Handle<Mesh>,
+    /// The block mesh cut at every cell edge, for ground with relief.
+    block_mesh_per_cell: Handle<Mesh>,
     quad_mesh: Handle<Mesh>,
     /// The grid of slice blocks (`SLICE_BLOCK` cells a side).
     blocks: CellGrid,
@@ -469,7 +471,8 @@ pub fn attach_slice_bakes(
             levels: state.grid.levels - SLICE_BLOCK_LEVELS.min(state.grid.levels),
         };
         state.slices = Some(FieldSlices {
-            block_mesh: meshes.add(slice_block_mesh(&textures.layout, block_cells)),
+            block_mesh: meshes.add(slice_block_mesh(&textures.layout, block_cells, false)),
+            block_mesh_per_cell: meshes.add(slice_block_mesh(&textures.layout, block_cells, true)),
             quad_mesh: meshes.add(horizontal_slice_mesh(
                 1.0,
                 1 << super::ground::MACRO_FACET_LEVELS,
@@ -741,7 +744,11 @@ pub fn update_grass_cells(
             let mesh = if is_macro {
                 slices.quad_mesh.clone()
             } else {
-                slices.block_mesh.clone()
+                if ground_grid.is_some() {
+                    slices.block_mesh_per_cell.clone()
+                } else {
+                    slices.block_mesh.clone()
+                }
             };
             let (low, high) = ground.height_range(&slices.blocks, node);
             let aabb = if is_macro {
