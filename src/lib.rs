@@ -47,8 +47,8 @@ impl PluginGroup for NaturePlugins {
 }
 
 /// Connects the suite's crates where they meet (each works without the others): the clipmap
-/// terrain, leaf and grass-blade materials receive Screen Space Soft Shadows while a light has
-/// them.
+/// terrain, leaf, grass-blade and grass-slice materials receive Screen Space Soft Shadows while a
+/// light has them.
 #[derive(Default)]
 pub struct NatureGluePlugin;
 
@@ -60,6 +60,7 @@ impl bevy::app::Plugin for NatureGluePlugin {
                 receive_soft_shadows::<terrain_clip::material::ClipmapExtension>,
                 receive_soft_shadows::<foliage::pruning::material::LeafExtension>,
                 receive_soft_shadows::<foliage::grass::material::GrassBladeExtension>,
+                grass_slices_receive_soft_shadows,
             ),
         );
     }
@@ -123,6 +124,34 @@ fn receive_soft_shadows<E: SoftShadowReceiving>(
     for id in stale {
         if let Some(mut material) = materials.get_mut(id) {
             *material.extension.soft_visibility() = Some(textures.visibility.clone());
+        }
+    }
+}
+
+/// Gives the grass slice material the SSSS visibility texture once SSSS is on.
+fn grass_slices_receive_soft_shadows(
+    active: Option<bevy::prelude::Res<soft_shadows::ssss::receiver::SsssActive>>,
+    textures: Option<bevy::prelude::Res<soft_shadows::ssss::receiver::SsssTextures>>,
+    materials: Option<
+        bevy::prelude::ResMut<
+            bevy::prelude::Assets<foliage::grass::slice_material::GrassSliceMaterial>,
+        >,
+    >,
+) {
+    let (Some(active), Some(textures), Some(mut materials)) = (active, textures, materials) else {
+        return;
+    };
+    if !active.0 || textures.size == bevy::math::UVec2::ZERO {
+        return;
+    }
+    let stale: Vec<_> = materials
+        .iter()
+        .filter(|(_, m)| m.soft_visibility.as_ref() != Some(&textures.visibility))
+        .map(|(id, _)| id)
+        .collect();
+    for id in stale {
+        if let Some(mut material) = materials.get_mut(id) {
+            material.soft_visibility = Some(textures.visibility.clone());
         }
     }
 }

@@ -296,12 +296,14 @@ fn showcase_terrain_receives_soft_shadows() {
     assert!(material.height_layers.is_some() && material.height_base.is_some());
 }
 
-/// The main scene's meadow receives the soft shadows: the blade material holds the SSSS
-/// visibility texture, and its soft-shadow fragment stage compiles and renders.
+/// The main scene's meadow receives the soft shadows: the blade and slice materials hold the
+/// SSSS visibility texture, and their soft-shadow fragment stages compile and render.
 #[test]
 fn showcase_grass_receives_soft_shadows() {
+    use bevy_nature::foliage::grass::GrassSettings;
     use bevy_nature::foliage::grass::material::GrassBladeMaterial;
-    use bevy_nature::foliage::grass::{GrassSettings, systems::GrassFieldState};
+    use bevy_nature::foliage::grass::slice_material::GrassSliceMaterial;
+    use bevy_nature::foliage::grass::systems::{GrassFieldState, grass_ready};
     use bevy_nature::soft_shadows::ssss::receiver::SsssTextures;
     let Some(mut harness) = RenderHarness::for_test("showcase_grass_ssss", W, H) else {
         return;
@@ -328,16 +330,25 @@ fn showcase_grass_receives_soft_shadows() {
         .resource_mut::<GrassSettings>()
         .transitions
         .max_geom = 8.0;
+    // The slices too, once baked: their soft-shadow pipeline must compile before the render.
+    for _ in 0..300 {
+        harness.step();
+        if grass_ready(harness.world_mut()) {
+            break;
+        }
+    }
+    harness.run_frames(2).unwrap();
     harness.wait_until_ready().unwrap();
     harness.run_frames(3).unwrap();
     harness.render().unwrap();
     let world = harness.world_mut();
-    let cells = world
+    let state = world
         .query::<&GrassFieldState>()
         .single(world)
-        .expect("one meadow")
-        .geometry_cells;
+        .expect("one meadow");
+    let (cells, (blocks, _)) = (state.geometry_cells, state.slice_nodes);
     assert!(cells > 20, "{cells} cells of blades");
+    assert!(blocks > 0, "no slice blocks");
     let visibility = world.resource::<SsssTextures>().visibility.clone();
     let materials = world.resource::<Assets<GrassBladeMaterial>>();
     assert!(!materials.is_empty());
@@ -346,6 +357,11 @@ fn showcase_grass_receives_soft_shadows() {
             material.extension.soft_visibility.as_ref(),
             Some(&visibility)
         );
+    }
+    let slices = world.resource::<Assets<GrassSliceMaterial>>();
+    assert!(!slices.is_empty());
+    for (_, material) in slices.iter() {
+        assert_eq!(material.soft_visibility.as_ref(), Some(&visibility));
     }
 }
 

@@ -31,7 +31,7 @@ fn sun_visibility(pbr_input: PbrInput, frag_xy: vec2<f32>) -> f32 {
 // The sun's light the shadow mask holds back at this blade point, exposed, given the sun's
 // shadow term `visibility`.
 fn shadow_mask_loss(pbr_input: PbrInput, visibility: f32) -> vec3<f32> {
-    if view_bindings::lights.n_directional_lights == 0u || visibility <= 0.0 {
+    if view_bindings::lights.n_directional_lights == 0u || visibility <= 0.0 || blade.mask_shape.y <= 0.0 {
         return vec3(0.0);
     }
     let light = &view_bindings::lights.directional_lights[0];

@@ -43,6 +43,11 @@ struct GrassSliceParams {
 @group(#{MATERIAL_BIND_GROUP}) @binding(4) var ground_heights: texture_2d<f32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(5) var wind_map: texture_2d<f32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(6) var shadow_mask: texture_2d<f32>;
+#ifdef SOFT_SHADOWS
+// Screen-space soft shadows (bevy_soft_shadows' visibility texture: .r the visibility, negative
+// where inactive; .g the light, −1 for the directional one).
+@group(#{MATERIAL_BIND_GROUP}) @binding(7) var soft_visibility: texture_2d<f32>;
+#endif
 
 const LAYERS: u32 = 12u;
 
@@ -73,11 +78,14 @@ fn vertex(vertex: Vertex) -> SliceVaryings {
     let world_from_local = mesh_functions::get_world_from_local(vertex.instance_index);
     let flat = mesh_functions::mesh_position_local_to_world(world_from_local, vec4(vertex.position, 1.0)).xyz;
     let gw = params.ground_wind;
-    let world = grass::on_ground(ground_heights, wind_map, gw, flat, vertex.position.y);
+    // `on_ground`, keeping the ground's slope for the fragment stage.
+    let ground = grass::ground_at(ground_heights, gw, flat.xz);
+    let push = grass::wind_offset(wind_map, gw, flat.xz, vertex.position.y);
+    let world = vec3(flat.x + push.x, flat.y + ground.height, flat.z + push.y);
     out.position = position_world_to_clip(world);
     out.world_position = world;
     out.flat_position = flat;
-    out.slope_axis = vec3(grass::ground_at(ground_heights, gw, flat.xz).gradient, vertex.uv_b.x);
+    out.slope_axis = vec3(ground.gradient, vertex.uv_b.x);
     return out;
 }
 
@@ -175,6 +183,15 @@ fn fragment(in: SliceVaryings) -> @location(0) vec4<f32> {
                 view_bindings::view.view_from_world[3].z
             ), vec4(p, 1.0));
             shadow = fetch_directional_shadow(0u, vec4(p, 1.0), vec3(0.0, 1.0, 0.0), view_z, in.position.xy);
+#ifdef SOFT_SHADOWS
+            let pixel = vec2<u32>(in.position.xy);
+            if all(pixel < textureDimensions(soft_visibility)) {
+                let soft = textureLoad(soft_visibility, pixel, 0).rg;
+                if soft.x >= 0.0 && soft.y < -0.5 && soft.y > -1.5 {
+                    shadow = soft.x;
+                }
+            }
+#endif
         }
         // The neighbours' shadows on the blades here (§4.2.6, eq. 4.7), as on the blades drawn
         // as geometry: at the texel's height in the slab.

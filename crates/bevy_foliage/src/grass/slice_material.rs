@@ -79,6 +79,7 @@ impl GrassSliceParams {
 
 /// The slice material.
 #[derive(Asset, TypePath, AsBindGroup, Clone, Debug)]
+#[bind_group_data(GrassSliceKey)]
 pub struct GrassSliceMaterial {
     /// Transitions, grid, eye.
     #[uniform(0)]
@@ -99,6 +100,27 @@ pub struct GrassSliceMaterial {
     /// The blade shadow mask (`R32Float`), as the blade material's.
     #[texture(6, sample_type = "float", filterable = false)]
     pub shadow_mask: Handle<Image>,
+    /// A screen-space soft-shadow visibility texture (`bevy_soft_shadows`'
+    /// `SsssTextures::visibility`: .r the sun's soft visibility, negative where inactive; .g the
+    /// light, −1 for the directional one) to use as the sun's shadow term where it is active;
+    /// `bevy_nature`'s glue sets it while a light has soft shadows.
+    #[texture(7, sample_type = "float", filterable = false)]
+    pub soft_visibility: Option<Handle<Image>>,
+}
+
+/// What the slice pipeline is specialised on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct GrassSliceKey {
+    /// The slices receive screen-space soft shadows.
+    pub soft_shadows: bool,
+}
+
+impl From<&GrassSliceMaterial> for GrassSliceKey {
+    fn from(material: &GrassSliceMaterial) -> Self {
+        Self {
+            soft_shadows: material.soft_visibility.is_some(),
+        }
+    }
 }
 
 const SLICE_SHADER: &str = "embedded://bevy_foliage/grass/grass_slice.wgsl";
@@ -120,10 +142,15 @@ impl Material for GrassSliceMaterial {
         _pipeline: &MaterialPipeline,
         descriptor: &mut RenderPipelineDescriptor,
         _layout: &bevy::mesh::MeshVertexBufferLayoutRef,
-        _key: MaterialPipelineKey<Self>,
+        key: MaterialPipelineKey<Self>,
     ) -> Result<(), SpecializedMeshPipelineError> {
         // Slices are seen from both sides.
         descriptor.primitive.cull_mode = None;
+        if key.bind_group_data.soft_shadows
+            && let Some(fragment) = descriptor.fragment.as_mut()
+        {
+            fragment.shader_defs.push("SOFT_SHADOWS".into());
+        }
         Ok(())
     }
 }

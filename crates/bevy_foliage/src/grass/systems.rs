@@ -463,6 +463,7 @@ pub fn attach_slice_bakes(
             ground: state.ground_image.clone(),
             wind: wind_map.image.clone(),
             shadow_mask: mask_image,
+            soft_visibility: None,
         });
         let block_cells = 1u32 << SLICE_BLOCK_LEVELS.min(state.grid.levels);
         let blocks = CellGrid {
