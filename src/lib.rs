@@ -99,6 +99,34 @@ impl SoftShadowReceiving for foliage::grass::material::GrassBladeExtension {
     }
 }
 
+/// The SSSS visibility texture, while SSSS is on and has one.
+fn ssss_visibility(
+    active: Option<bevy::prelude::Res<soft_shadows::ssss::receiver::SsssActive>>,
+    textures: Option<bevy::prelude::Res<soft_shadows::ssss::receiver::SsssTextures>>,
+) -> Option<bevy::prelude::Handle<bevy::prelude::Image>> {
+    let (active, textures) = (active?, textures?);
+    (active.0 && textures.size != bevy::math::UVec2::ZERO).then(|| textures.visibility.clone())
+}
+
+/// Puts `texture` in the soft-visibility `slot` of every material in `materials` not holding it.
+fn hand_over_visibility<M: bevy::asset::Asset>(
+    materials: &mut bevy::prelude::Assets<M>,
+    texture: &bevy::prelude::Handle<bevy::prelude::Image>,
+    slot: impl Fn(&mut M) -> &mut Option<bevy::prelude::Handle<bevy::prelude::Image>>,
+    holds: impl Fn(&M) -> bool,
+) {
+    let stale: Vec<_> = materials
+        .iter()
+        .filter(|(_, m)| !holds(m))
+        .map(|(id, _)| id)
+        .collect();
+    for id in stale {
+        if let Some(mut material) = materials.get_mut(id) {
+            *slot(&mut material) = Some(texture.clone());
+        }
+    }
+}
+
 /// Gives every `ExtendedMaterial<StandardMaterial, E>` the SSSS visibility texture once SSSS is
 /// on.
 fn receive_soft_shadows<E: SoftShadowReceiving>(
@@ -110,22 +138,16 @@ fn receive_soft_shadows<E: SoftShadowReceiving>(
         >,
     >,
 ) {
-    let (Some(active), Some(textures), Some(mut materials)) = (active, textures, materials) else {
+    let (Some(texture), Some(mut materials)) = (ssss_visibility(active, textures), materials)
+    else {
         return;
     };
-    if !active.0 || textures.size == bevy::math::UVec2::ZERO {
-        return;
-    }
-    let stale: Vec<_> = materials
-        .iter()
-        .filter(|(_, m)| !m.extension.holds(&textures.visibility))
-        .map(|(id, _)| id)
-        .collect();
-    for id in stale {
-        if let Some(mut material) = materials.get_mut(id) {
-            *material.extension.soft_visibility() = Some(textures.visibility.clone());
-        }
-    }
+    hand_over_visibility(
+        &mut materials,
+        &texture,
+        |m| m.extension.soft_visibility(),
+        |m| m.extension.holds(&texture),
+    );
 }
 
 /// Gives the grass slice material the SSSS visibility texture once SSSS is on.
@@ -138,22 +160,16 @@ fn grass_slices_receive_soft_shadows(
         >,
     >,
 ) {
-    let (Some(active), Some(textures), Some(mut materials)) = (active, textures, materials) else {
+    let (Some(texture), Some(mut materials)) = (ssss_visibility(active, textures), materials)
+    else {
         return;
     };
-    if !active.0 || textures.size == bevy::math::UVec2::ZERO {
-        return;
-    }
-    let stale: Vec<_> = materials
-        .iter()
-        .filter(|(_, m)| m.soft_visibility.as_ref() != Some(&textures.visibility))
-        .map(|(id, _)| id)
-        .collect();
-    for id in stale {
-        if let Some(mut material) = materials.get_mut(id) {
-            material.soft_visibility = Some(textures.visibility.clone());
-        }
-    }
+    hand_over_visibility(
+        &mut materials,
+        &texture,
+        |m| &mut m.soft_visibility,
+        |m| m.soft_visibility.as_ref() == Some(&texture),
+    );
 }
 
 /// Everything a game usually imports.

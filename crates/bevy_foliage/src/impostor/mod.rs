@@ -5,7 +5,7 @@
 //! Split by role like the pruning pass:
 //! - plain Rust, no render types: [`cloud`] (plane selection in the discretised (θ, φ, ρ) space,
 //!   greedy cover, vegetation extensions), [`atlas`] (one texture atlas per species),
-//!   [`texture`] (what is baked from, and the CPU reference of the bake), [`format`] (the
+//!   [`texture`] (what is baked from, and the CPU reference of the bake), [`format`](mod@format) (the
 //!   versioned, checksummed `*.bbcloud` file);
 //! - main world: [`bake`] (the GPU bake: orthographic cameras into the atlas, read back),
 //!   [`assets`] (the `AssetServer` loader, the quads and their `StandardMaterial`),

@@ -30,7 +30,7 @@ use bevy::prelude::*;
 pub struct TreeImpostor(pub Handle<BillboardCloudAsset>);
 
 /// Put on a forest tree: it gets the billboard cloud baked by the named entity (an
-/// [`ImpostorBakeRequest`](super::bake::ImpostorBakeRequest), usually one per species) as its
+/// [`ImpostorBakeRequest`], usually one per species) as its
 /// [`TreeImpostor`] once that bake is done. A failed bake leaves the tree on its pruned geometry
 /// (the bake logged why).
 #[derive(Component, Clone, Copy, Debug)]
