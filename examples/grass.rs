@@ -13,7 +13,8 @@
 //! `wind`.
 
 use bevy::prelude::*;
-use bevy_nature::foliage::grass::density::meadow;
+use bevy_nature::foliage::grass::density::{DensityMap, meadow};
+use bevy_nature::foliage::grass::ground::ambient_occlusion_map;
 use bevy_nature::foliage::grass::material::density_map_image;
 use bevy_nature::foliage::grass::systems::grass_ready;
 use bevy_nature::foliage::grass::{GrassField, GrassSettings, GrassSpecies, height_map_image};
@@ -105,6 +106,16 @@ fn setup(
                 UVec2::splat(267),
                 |p| hills(p.x, p.y),
             ))),
+            // The hills' own ambient occlusion, computed once (§4.2.6): hollows darker.
+            ambient_occlusion: {
+                let half = Vec2::splat(FIELD / 2.0);
+                let texels = UVec2::splat(200);
+                let ao =
+                    ambient_occlusion_map(|p| hills(p.x, p.y), -half, 2.0 * half, texels, 20.0);
+                DensityMap::new(texels.x, texels.y, ao, (-half).to_array(), [FIELD; 2])
+                    .ok()
+                    .map(|map| images.add(density_map_image(&map)))
+            },
         },
     ));
     commands.spawn((

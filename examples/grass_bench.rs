@@ -495,6 +495,7 @@ fn main() {
         species: species.clone(),
         density: None,
         ground: None,
+        ambient_occlusion: None,
     });
     // Ours is swept over its transitions and over the blade shadow mask: the reference's blades
     // shade each other through Bevy's shadow map, which ours beyond the blades' reach cannot

@@ -235,7 +235,9 @@ const MEADOW: f32 = 64.0;
 /// olive tree's trunk; with the terrain on, lifted onto its relief ([`layout::ground_height`]
 /// sampled every 0.5 m).
 fn spawn_meadow(commands: &mut Commands, images: &mut Assets<Image>, relief: bool) {
-    use bevy_foliage::grass::{GrassField, GrassSpecies, density::meadow, height_map_image};
+    use bevy_foliage::grass::density::{DensityMap, meadow};
+    use bevy_foliage::grass::ground::ambient_occlusion_map;
+    use bevy_foliage::grass::{GrassField, GrassSpecies, height_map_image};
     use layout::*;
     let clearings = [
         ([BOX_CENTER.x, BOX_CENTER.z], BOX_SIZE * 0.75),
@@ -260,6 +262,21 @@ fn spawn_meadow(commands: &mut Commands, images: &mut Assets<Image>, relief: boo
                     UVec2::splat(129),
                     |p| ground_height(p.x as f64, p.y as f64) as f32,
                 ))
+            }),
+            // The terrain's own ambient occlusion, computed once (§4.2.6).
+            ambient_occlusion: relief.then(|| {
+                let half = Vec2::splat(MEADOW / 2.0);
+                let texels = UVec2::splat(64);
+                let ao = ambient_occlusion_map(
+                    |p| ground_height(p.x as f64, p.y as f64) as f32,
+                    -half,
+                    2.0 * half,
+                    texels,
+                    12.0,
+                );
+                let map = DensityMap::new(texels.x, texels.y, ao, (-half).to_array(), [MEADOW; 2])
+                    .expect("a finite map");
+                images.add(bevy_foliage::grass::material::density_map_image(&map))
             }),
         },
     ));

@@ -273,6 +273,7 @@ fn blade_pass_keeps_the_blades_the_cpu_keeps() {
         species: species(),
         density: Some(density),
         ground: None,
+        ambient_occlusion: None,
     });
     harness.world_mut().spawn((
         DirectionalLight::default(),
@@ -519,6 +520,7 @@ fn transitions_keep_the_coverage_of_the_all_geometry_field() {
         species,
         density: None,
         ground: None,
+        ambient_occlusion: None,
     });
     harness.world_mut().spawn((
         DirectionalLight::default(),
@@ -638,6 +640,7 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
         species: species.clone(),
         density: Some(density),
         ground: None,
+        ambient_occlusion: None,
     });
     spawn_top_down_camera(&mut harness, view);
     let mut bake = None;
@@ -727,6 +730,7 @@ fn an_unreadable_density_map_is_an_error_and_the_field_still_grows() {
         species: species(),
         density: Some(density),
         ground: None,
+        ambient_occlusion: None,
     };
     let (broken, fine) = (
         harness.world_mut().spawn(field(bad)).id(),
@@ -798,6 +802,7 @@ fn blades_stand_on_the_ground_and_lean_in_the_wind() {
         species: species(),
         density: None,
         ground: Some(heights_handle),
+        ambient_occlusion: None,
     });
     harness.world_mut().spawn((
         DirectionalLight::default(),
@@ -931,6 +936,7 @@ fn slices_on_lifted_ground_match_slices_on_a_raised_plane() {
                     species: species(),
                     density: None,
                     ground,
+                    ambient_occlusion: None,
                 },
                 Transform::from_xyz(0.0, y, 0.0),
             ))
@@ -1035,6 +1041,7 @@ fn the_blade_shadow_mask_darkens_the_points_the_cpu_shades() {
         species: species(),
         density: None,
         ground: Some(heights),
+        ambient_occlusion: None,
     });
     // A sun from the right and in front, 46° up: the camera sees the lit faces.
     let to_light = Vec3::new(1.0, 1.2, 0.6).normalize();
@@ -1149,4 +1156,127 @@ fn the_blade_shadow_mask_darkens_the_points_the_cpu_shades() {
         shaded_dark * 100 >= shaded * 90,
         "{shaded_dark} of {shaded}"
     );
+}
+
+/// The terrain's ambient occlusion on the blades (§4.2.6): under ambient light alone, with no
+/// tone mapping, each blade pixel drawn with an occlusion map is the same pixel drawn without it
+/// with its reflected ambient (the 1 − γ Bevy does not transmit) times the map's value there
+/// (bilinear between texel centres, as `DensityMap::density_at`) — 1 at −x falling to 0.5 at +x.
+#[test]
+fn terrain_occlusion_scales_the_blades_ambient_light() {
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    use bevy_foliage::grass::systems::grass_ready;
+    let Some(mut harness) = RenderHarness::for_test("grass_terrain_ao", SIZE, SIZE) else {
+        return;
+    };
+    harness
+        .app_mut()
+        .add_plugins(GrassPlugin)
+        .insert_resource(ClearColor(BACKGROUND))
+        .insert_resource(GlobalAmbientLight {
+            brightness: 4000.0,
+            ..default()
+        })
+        .insert_resource(GrassSettings {
+            transitions: TransitionDistances {
+                min_geom: 30.0,
+                max_geom: 40.0,
+                min_btf: 50.0,
+                max_btf: 80.0,
+                ..default()
+            },
+            slices: false,
+            wind: still_air(),
+            ..default()
+        });
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Tonemapping::None,
+        Projection::Orthographic(OrthographicProjection {
+            scaling_mode: ScalingMode::Fixed {
+                width: VIEW,
+                height: VIEW,
+            },
+            ..OrthographicProjection::default_3d()
+        }),
+        Transform::from_translation(EYE).looking_to(Vec3::NEG_Y, Vec3::NEG_Z),
+    ));
+    let occlusion = add_image(
+        &mut harness,
+        Image::new(
+            bevy::render::render_resource::Extent3d {
+                width: 2,
+                height: 1,
+                depth_or_array_layers: 1,
+            },
+            bevy::render::render_resource::TextureDimension::D2,
+            vec![255, 128],
+            bevy::render::render_resource::TextureFormat::R8Unorm,
+            bevy::asset::RenderAssetUsages::all(),
+        ),
+    );
+    let render = |harness: &mut RenderHarness, ao: Option<Handle<Image>>| {
+        let field = harness
+            .world_mut()
+            .spawn(GrassField {
+                size: Vec2::splat(2.0),
+                species: species(),
+                density: None,
+                ground: None,
+                ambient_occlusion: ao,
+            })
+            .id();
+        for _ in 0..300 {
+            harness.step();
+            if grass_ready(harness.world_mut()) {
+                break;
+            }
+        }
+        harness.wait_until_ready().expect("pipelines");
+        for _ in 0..3 {
+            harness.step();
+        }
+        let image = harness.render().unwrap();
+        harness.world_mut().entity_mut(field).despawn();
+        image
+    };
+    let open = render(&mut harness, None);
+    let occluded = render(&mut harness, Some(occlusion));
+    let map = DensityMap::new(2, 1, vec![1.0, 128.0 / 255.0], [-1.0, -1.0], [2.0, 2.0]).unwrap();
+    let linear = |v: u8| {
+        let c = v as f32 / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let (mut checked, mut agree) = (0, 0);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let (a, b) = (open.pixel(x, y), occluded.pixel(x, y));
+            // Blade pixels in both, bright enough for 8 bits to carry a ratio.
+            let green = |p: [u8; 4]| p[1] > 60 && p[2] < 200;
+            if !(green(a) && green(b)) {
+                continue;
+            }
+            let world = Vec2::new(
+                (x as f32 + 0.5) / SIZE as f32 * VIEW - VIEW / 2.0,
+                (y as f32 + 0.5) / SIZE as f32 * VIEW - VIEW / 2.0,
+            );
+            // Bevy lights the share γ transmitted through a blade without its occlusion
+            // (`bevy_pbr`'s transmitted ambient): the occlusion darkens the reflected 1 − γ.
+            let gamma = species().transmission;
+            let want = (1.0 - gamma) * map.density_at(world.x, world.y) + gamma;
+            let got = linear(b[1]) / linear(a[1]);
+            checked += 1;
+            if (got - want).abs() < 0.06 {
+                agree += 1;
+            }
+        }
+    }
+    eprintln!("terrain occlusion: {agree} of {checked} blade pixels scaled as the map says");
+    assert!(checked > 1000, "{checked}");
+    assert!(agree * 100 >= checked * 90, "{agree} of {checked}");
 }

@@ -93,6 +93,14 @@ pub struct GrassField {
     ///
     /// [`height_map_image`]: super::ground_map::height_map_image
     pub ground: Option<Handle<Image>>,
+    /// The terrain's ambient occlusion over the field (§4.2.6, fig. 4.17: the share of the sky
+    /// each ground point sees past the terrain and other objects; first channel 0 … 1, read as a
+    /// density map is; [`ambient_occlusion_map`] computes one from the ground's heights): the
+    /// ambient light on blades and slices is multiplied by it. `None`: no occlusion. A map that
+    /// cannot be read is a logged error and a [`GrassFieldError`].
+    ///
+    /// [`ambient_occlusion_map`]: super::ground::ambient_occlusion_map
+    pub ambient_occlusion: Option<Handle<Image>>,
 }
 
 impl Default for GrassField {
@@ -102,6 +110,7 @@ impl Default for GrassField {
             species: GrassSpecies::default(),
             density: None,
             ground: None,
+            ambient_occlusion: None,
         }
     }
 }

@@ -15,7 +15,7 @@
 #import bevy_pbr::forward_io::{VertexOutput, FragmentOutput}
 #import bevy_pbr::pbr_functions::{apply_pbr_lighting, main_pass_post_lighting_processing}
 #endif
-#import bevy_foliage::grass_blade::{blade, blade_kept}
+#import bevy_foliage::grass_blade::{blade, blade_kept, terrain_occlusion}
 #ifndef PREPASS_PIPELINE
 #import bevy_foliage::grass_blade_light::{shadow_mask_loss, sun_visibility}
 #endif
@@ -56,10 +56,10 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
     }
     var pbr_input = pbr_input_from_standard_material(in, is_front);
     // kd rising from root to tip; the ambient term darkened by the blade's occlusion (eq. 4.1's
-    // ao, §4.2.2), the direct light not.
+    // ao, §4.2.2) and the terrain's (§4.2.6), the direct light not.
     let h = clamp(in.uv_b.y, 0.0, 1.0);
     pbr_input.material.base_color = vec4(mix(blade.root_color.rgb, blade.tip_color.rgb, h), 1.0);
-    let ao = mix(blade.root_color.w, 1.0, h);
+    let ao = mix(blade.root_color.w, 1.0, h) * terrain_occlusion(in.world_position.xyz);
     pbr_input.diffuse_occlusion *= ao;
     var out: FragmentOutput;
     out.color = apply_pbr_lighting(pbr_input);

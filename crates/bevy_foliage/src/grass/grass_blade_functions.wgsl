@@ -33,6 +33,14 @@ struct GrassBladeParams {
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var wind_map: texture_2d<f32>;
 // The blade shadow mask (`R32Float` visibility; `grass_blade_light.wgsl`).
 @group(#{MATERIAL_BIND_GROUP}) @binding(105) var shadow_mask: texture_2d<f32>;
+// The terrain's ambient occlusion over the field (`R32Float`, §4.2.6).
+@group(#{MATERIAL_BIND_GROUP}) @binding(106) var terrain_occlusion_map: texture_2d<f32>;
+
+// The terrain's ambient occlusion under a blade point (the thesis reads it at the root; a blade
+// is short beside the map's texels).
+fn terrain_occlusion(world: vec3<f32>) -> f32 {
+    return grass::density_at(terrain_occlusion_map, blade.density_rect, world.xz);
+}
 
 // Algorithm 1 / eq. 4.6 at this fragment: is the blade point drawn here?
 fn blade_kept(world: vec3<f32>, threshold: f32, frag: vec2<f32>) -> bool {

@@ -8,7 +8,7 @@
     forward_io::{VertexOutput, FragmentOutput},
 }
 #import bevy_soft_shadows::receiver_functions::{apply_pbr_lighting_soft, soft_visibility_at}
-#import bevy_foliage::grass_blade::{blade, blade_kept}
+#import bevy_foliage::grass_blade::{blade, blade_kept, terrain_occlusion}
 #import bevy_foliage::grass_blade_light::{shadow_mask_loss, sun_visibility}
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(102) var soft_visibility: texture_2d<f32>;
@@ -21,7 +21,8 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
     var pbr_input = pbr_input_from_standard_material(in, is_front);
     let h = clamp(in.uv_b.y, 0.0, 1.0);
     pbr_input.material.base_color = vec4(mix(blade.root_color.rgb, blade.tip_color.rgb, h), 1.0);
-    pbr_input.diffuse_occlusion *= mix(blade.root_color.w, 1.0, h);
+    pbr_input.diffuse_occlusion *=
+        mix(blade.root_color.w, 1.0, h) * terrain_occlusion(in.world_position.xyz);
     var out: FragmentOutput;
     var color = apply_pbr_lighting_soft(pbr_input, in.position.xy, soft_visibility);
     // The neighbours' shadows (§4.2.6, eq. 4.7), under the soft shadow term where SSSS is active.

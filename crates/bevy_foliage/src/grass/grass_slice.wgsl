@@ -43,6 +43,7 @@ struct GrassSliceParams {
 @group(#{MATERIAL_BIND_GROUP}) @binding(4) var ground_heights: texture_2d<f32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(5) var wind_map: texture_2d<f32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(6) var shadow_mask: texture_2d<f32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(8) var terrain_occlusion_map: texture_2d<f32>;
 #ifdef SOFT_SHADOWS
 // Screen-space soft shadows (bevy_soft_shadows' visibility texture: .r the visibility, negative
 // where inactive; .g the light, −1 for the directional one).
@@ -160,7 +161,9 @@ fn fragment(in: SliceVaryings) -> @location(0) vec4<f32> {
     }
     let gamma = params.slices.w;
     // Ambient: the blades' kd·ao, the lit share (1 − γ) as Bevy's diffuse transmission keeps it.
-    var color = view_bindings::lights.ambient_color.rgb * unlit.rgb * (1.0 - gamma);
+    // and the terrain's ambient occlusion there (§4.2.6).
+    let terrain_ao = grass::density_at(terrain_occlusion_map, params.density_rect, in.flat_position.xz);
+    var color = view_bindings::lights.ambient_color.rgb * unlit.rgb * (1.0 - gamma) * terrain_ao;
     // The sun through the five baked directions.
     if view_bindings::lights.n_directional_lights > 0u {
         let light = &view_bindings::lights.directional_lights[0];

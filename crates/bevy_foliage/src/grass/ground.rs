@@ -303,6 +303,54 @@ impl super::quadtree::GroundBounds for GroundGrid {
     }
 }
 
+/// The terrain's ambient occlusion map (§4.2.6, fig. 4.17): for each of `texels` points over
+/// the rectangle `[min, min + size]` (texel centres), the share of the sky its ground point sees
+/// past the ground around it — `height(x, z)` marched outwards `radius` metres in 8 directions,
+/// each direction's horizon elevation `θ` taking `sin θ` of the sky (horizon-based, as screen-space
+/// AO does). Flat ground and crests see it all (1), hollows less. The thesis precomputes such a
+/// map once and multiplies the grass's ambient light by it at each blade's root; paint external
+/// occluders (rocks, tree trunks) into it as well.
+pub fn ambient_occlusion_map(
+    height: impl Fn(Vec2) -> f32,
+    min: Vec2,
+    size: Vec2,
+    texels: bevy::math::UVec2,
+    radius: f32,
+) -> Vec<f32> {
+    const DIRECTIONS: usize = 8;
+    const STEPS: usize = 8;
+    let texels = texels.max(bevy::math::UVec2::ONE);
+    let radius = if radius.is_finite() && radius > 0.0 {
+        radius
+    } else {
+        1.0
+    };
+    let mut out = Vec::with_capacity((texels.x * texels.y) as usize);
+    for j in 0..texels.y {
+        for i in 0..texels.x {
+            let p = min + (Vec2::new(i as f32, j as f32) + 0.5) / texels.as_vec2() * size;
+            let h0 = height(p);
+            let mut occluded = 0.0;
+            for d in 0..DIRECTIONS {
+                let angle = d as f32 / DIRECTIONS as f32 * std::f32::consts::TAU;
+                let dir = Vec2::new(angle.cos(), angle.sin());
+                let mut slope = 0.0f32;
+                for k in 1..=STEPS {
+                    let s = radius * k as f32 / STEPS as f32;
+                    let rise = height(p + dir * s) - h0;
+                    if rise.is_finite() {
+                        slope = slope.max(rise / s);
+                    }
+                }
+                // sin of the horizon's elevation.
+                occluded += slope / (1.0 + slope * slope).sqrt();
+            }
+            out.push((1.0 - occluded / DIRECTIONS as f32).clamp(0.0, 1.0));
+        }
+    }
+    out
+}
+
 /// How the wind blows over the grass (§4.2.7.4): the [`WindMap`] is laid over the ground, one
 /// repeat every `scale` metres, turned so that its x axis points along `direction`, and slid
 /// downwind at `speed`; at each cell corner it gives the lean of the grass volume's top.
@@ -748,5 +796,41 @@ mod tests {
         .sanitized();
         assert_eq!(fixes.len(), 4);
         assert_eq!(fixed.sanitized().1.len(), 0);
+    }
+
+    #[test]
+    fn terrain_occlusion_darkens_hollows_and_spares_flats_and_crests() {
+        use bevy::math::UVec2;
+        let flat =
+            ambient_occlusion_map(|_| 0.0, Vec2::ZERO, Vec2::splat(10.0), UVec2::splat(3), 4.0);
+        assert!(flat.iter().all(|&a| a == 1.0));
+        // A bowl: its bottom sees less sky than its rim; a hill's top sees it all.
+        let bowl = |p: Vec2| 0.3 * p.length_squared();
+        let ao = ambient_occlusion_map(
+            bowl,
+            Vec2::splat(-5.0),
+            Vec2::splat(10.0),
+            UVec2::splat(5),
+            2.0,
+        );
+        let centre = ao[12];
+        assert!(centre < 0.7, "{centre}");
+        let hill = ambient_occlusion_map(
+            |p| -bowl(p),
+            Vec2::splat(-5.0),
+            Vec2::splat(10.0),
+            UVec2::splat(5),
+            2.0,
+        );
+        assert_eq!(hill[12], 1.0);
+        // A pit under a vertical wall all round sees almost nothing.
+        let pit = ambient_occlusion_map(
+            |p| if p.length() < 0.1 { 0.0 } else { 100.0 },
+            Vec2::splat(-0.05),
+            Vec2::splat(0.1),
+            UVec2::ONE,
+            1.0,
+        );
+        assert!(pit[0] < 0.02, "{}", pit[0]);
     }
 }

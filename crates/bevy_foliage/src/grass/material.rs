@@ -101,6 +101,9 @@ pub struct GrassBladeExtension {
     /// The blade shadow mask (`R32Float` visibility, [`shadow_mask_image`]).
     #[texture(105, sample_type = "float", filterable = false)]
     pub shadow_mask: Handle<Image>,
+    /// The terrain's ambient occlusion over the field (`R32Float`, as [`density_image`] makes).
+    #[texture(106, sample_type = "float", filterable = false)]
+    pub terrain_occlusion: Handle<Image>,
     /// A screen-space soft-shadow visibility texture (`bevy_soft_shadows`'
     /// `SsssTextures::visibility`) to use as the sun's shadow term. With one, the main pass's
     /// fragment stage is `grass_blade_soft.wgsl`, which imports

@@ -5,7 +5,8 @@ use super::ground::WindMap;
 use super::ground_map::{GrassWindMap, wind_image};
 use super::systems::{
     GEOMETRY_BLADES, GEOMETRY_CELLS, MACRO_CELLS, SELECT_MS, SLICE_BLOCKS, attach_slice_bakes,
-    prepare_grass_fields, resolve_density_maps, resolve_ground_maps, update_grass_cells,
+    prepare_grass_fields, resolve_density_maps, resolve_ground_maps, resolve_occlusion_maps,
+    update_grass_cells,
 };
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::diagnostic::{Diagnostic, RegisterDiagnostic};
@@ -75,6 +76,7 @@ impl Plugin for GrassPlugin {
                     prepare_grass_fields,
                     resolve_density_maps,
                     resolve_ground_maps,
+                    resolve_occlusion_maps,
                     attach_slice_bakes,
                 )
                     .chain()

@@ -106,6 +106,9 @@ pub struct GrassSliceMaterial {
     /// `bevy_nature`'s glue sets it while a light has soft shadows.
     #[texture(7, sample_type = "float", filterable = false)]
     pub soft_visibility: Option<Handle<Image>>,
+    /// The terrain's ambient occlusion (`R32Float`), as the blade material's.
+    #[texture(8, sample_type = "float", filterable = false)]
+    pub terrain_occlusion: Handle<Image>,
 }
 
 /// What the slice pipeline is specialised on.

@@ -65,6 +65,9 @@ pub struct GrassFieldState {
     ground_source: Option<AssetId<Image>>,
     /// The ground's samples as the shaders read them.
     ground_image: Handle<Image>,
+    /// The terrain's ambient occlusion as the shaders read it, and the image it was read from.
+    occlusion_image: Handle<Image>,
+    occlusion_source: Option<AssetId<Image>>,
     /// The patch mesh's bounds (m, in a cell's frame, on flat ground).
     mesh_bounds: (Vec3, Vec3),
     /// The blade shadow mask's image and (slab height, radius, 0, 0), once the slices are
@@ -229,6 +232,10 @@ pub fn prepare_grass_fields(
         });
         let mesh = meshes.add(mesh);
         let ground_image = images.add(flat_ground_image());
+        let occlusion_image = images.add(density_image(
+            &DensityMap::uniform(1.0, min.to_array(), size.to_array())
+                .expect("a positive finite rectangle"),
+        ));
         let shadow_mask = images.add(shadow_mask_image(&ShadowMask::clear()));
         let ground_wind = GroundWindUniform::new(
             &grid,
@@ -246,6 +253,7 @@ pub fn prepare_grass_fields(
                 ground: ground_image.clone(),
                 wind: wind_map.image.clone(),
                 shadow_mask: shadow_mask.clone(),
+                terrain_occlusion: occlusion_image.clone(),
                 soft_visibility: None,
             },
         ));
@@ -293,6 +301,8 @@ pub fn prepare_grass_fields(
                 ground: None,
                 ground_source: None,
                 ground_image,
+                occlusion_image,
+                occlusion_source: None,
                 mesh_bounds,
                 shadow_mask: (shadow_mask, Vec4::ZERO),
                 mesh,
@@ -339,6 +349,41 @@ pub fn resolve_density_maps(
             Err(e) => {
                 let why = format!("grass field {entity}: density map not used: {e}");
                 error!("{why}; the field grows at full density");
+                commands.entity(entity).insert(GrassFieldError(why));
+            }
+        }
+    }
+}
+
+/// Reads each field's terrain ambient-occlusion map once its image has loaded, into the image its
+/// materials already hold; a map that cannot be read is an error on the entity (and in the log),
+/// and the grass stays unoccluded.
+pub fn resolve_occlusion_maps(
+    mut commands: Commands,
+    mut fields: Query<(Entity, &GrassField, &mut GrassFieldState)>,
+    mut images: ResMut<Assets<Image>>,
+) {
+    for (entity, field, mut state) in &mut fields {
+        let Some(handle) = &field.ambient_occlusion else {
+            continue;
+        };
+        if state.occlusion_source == Some(handle.id()) {
+            continue;
+        }
+        let Some(image) = images.get(handle) else {
+            continue;
+        };
+        state.occlusion_source = Some(handle.id());
+        let (min, size) = ([state.rect.x, state.rect.y], [state.rect.z, state.rect.w]);
+        match density_map_from_image(image, min, size) {
+            Ok(map) => {
+                if let Some(mut target) = images.get_mut(&state.occlusion_image) {
+                    *target = density_image(&map);
+                }
+            }
+            Err(e) => {
+                let why = format!("grass field {entity}: ambient occlusion map not used: {e}");
+                error!("{why}; the grass stays unoccluded");
                 commands.entity(entity).insert(GrassFieldError(why));
             }
         }
@@ -464,6 +509,7 @@ pub fn attach_slice_bakes(
             wind: wind_map.image.clone(),
             shadow_mask: mask_image,
             soft_visibility: None,
+            terrain_occlusion: state.occlusion_image.clone(),
         });
         let block_cells = 1u32 << SLICE_BLOCK_LEVELS.min(state.grid.levels);
         let blocks = CellGrid {
