@@ -601,12 +601,17 @@ fn transitions_keep_the_coverage_of_the_all_geometry_field() {
 /// The slice pass keeps, pixel for pixel, the horizontal-slice texels its CPU reference keeps:
 /// seen straight down from far enough that only the horizontal slice is drawn, each pixel
 /// centre on a texel centre, every cell's mirrored version, the density gradient and algorithm
-/// 1's opacity dithered.
+/// 1's opacity dithered; and lights them as `slice_shading::slice_radiance` does (the five baked
+/// directions blended by appendix A, the blade shadow mask, the ambient light), within 3 levels.
 #[test]
 fn slice_pass_keeps_the_texels_the_cpu_keeps() {
+    use bevy::camera::Exposure;
+    use bevy::core_pipeline::tonemapping::Tonemapping;
     use bevy_foliage::grass::bake::GrassSliceBakeResult;
     use bevy_foliage::grass::mesh::HORIZONTAL_SLICE_LIFT;
-    use bevy_foliage::grass::slice_shading::{fragment_opacity, slice_point};
+    use bevy_foliage::grass::slice_shading::{
+        fragment_opacity, light_in_patch, slice_point, slice_radiance,
+    };
     use bevy_foliage::grass::slices::{LAYER_THRESHOLD, LAYER_UNLIT, SliceAxis};
     let Some(mut harness) = RenderHarness::for_test("grass_slice_pass", SIZE, SIZE) else {
         return;
@@ -643,6 +648,29 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
         ambient_occlusion: None,
     });
     spawn_top_down_camera(&mut harness, view);
+    // Known light, no tone mapping: the colour is checked too.
+    let to_light = Vec3::new(0.4, 0.8, -0.3).normalize();
+    let (illuminance, ambient) = (2000.0, 300.0);
+    harness.world_mut().spawn((
+        DirectionalLight {
+            illuminance,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::default().looking_to(-to_light, Vec3::Y),
+    ));
+    harness.app_mut().insert_resource(GlobalAmbientLight {
+        brightness: ambient,
+        ..default()
+    });
+    {
+        let world = harness.world_mut();
+        let camera = world
+            .query_filtered::<Entity, With<Camera3d>>()
+            .single(world)
+            .unwrap();
+        world.entity_mut(camera).insert(Tonemapping::None);
+    }
     let mut bake = None;
     for _ in 0..300 {
         harness.step();
@@ -663,6 +691,9 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
     let grid = field_grid(Vec2::ZERO, Vec2::splat(2.0), 0.5);
     let map = DensityMap::new(2, 1, vec![64.0 / 255.0, 1.0], [-1.0, -1.0], [2.0, 2.0]).unwrap();
     let mut cpu = vec![false; (SIZE * SIZE) as usize];
+    let mut colour = vec![None; (SIZE * SIZE) as usize];
+    let mask = bake.textures.shadow_mask();
+    let exposure = Exposure::default().exposure();
     for py in 0..SIZE {
         for px in 0..SIZE {
             let p = Vec3::new(
@@ -697,6 +728,19 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
                 1.0,
             );
             cpu[(py * SIZE + px) as usize] = o >= DISCARD && o > ordered_dither(px, py);
+            // `slice_shading::slice_radiance` under the sun (through the blade shadow mask at the
+            // slice's height) and the ambient light.
+            let layer = |l: u32| bake.textures.layer(sp.slice, l)[at];
+            let radiance = slice_radiance(
+                &sp,
+                layer,
+                species.transmission,
+                Vec3::splat(ambient),
+                Vec3::splat(illuminance),
+                mask.light_through(HORIZONTAL_SLICE_LIFT, to_light, ld),
+                light_in_patch(to_light, sp.mirror),
+            ) * exposure;
+            colour[(py * SIZE + px) as usize] = Some(radiance);
         }
     }
     let (differ, g, c) = compare(&gpu, &cpu);
@@ -705,6 +749,29 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
     assert!(c > 1500, "{c}");
     assert!(cl < 0.75 * cr, "{cl} vs {cr}");
     assert!(differ * 100 < c, "{differ} px differ of {c}");
+    // The colour where both cover a pixel: the CPU's radiance, sRGB-encoded, within 3 levels.
+    let encode = |v: f32| {
+        let v = v.clamp(0.0, 1.0);
+        let e = if v <= 0.0031308 {
+            12.92 * v
+        } else {
+            1.055 * v.powf(1.0 / 2.4) - 0.055
+        };
+        e * 255.0
+    };
+    let (mut both, mut close) = (0, 0);
+    for i in 0..(SIZE * SIZE) as usize {
+        let (true, true, Some(want)) = (gpu[i], cpu[i], colour[i]) else {
+            continue;
+        };
+        let got = image.pixel(i as u32 % SIZE, i as u32 / SIZE);
+        both += 1;
+        if (0..3).all(|k| (got[k] as f32 - encode(want[k])).abs() <= 3.0) {
+            close += 1;
+        }
+    }
+    eprintln!("slice colour: {close} of {both} pixels within 3 levels of the CPU radiance");
+    assert!(close * 100 >= both * 95, "{close} of {both}");
 }
 
 /// A density map that cannot be read (here an `Rgba8Snorm` image) is an error on the field naming
