@@ -57,19 +57,57 @@ fn gradient_image() -> Image {
 
 /// An orthographic camera at [`EYE`] looking straight down over `view` metres: image x along
 /// +x, image y along +z.
-fn spawn_top_down_camera(harness: &mut RenderHarness, view: f32) {
-    harness.world_mut().spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Projection::Orthographic(OrthographicProjection {
-            scaling_mode: ScalingMode::Fixed {
-                width: view,
-                height: view,
-            },
-            ..OrthographicProjection::default_3d()
-        }),
+fn spawn_top_down_camera(harness: &mut RenderHarness, view: f32) -> Entity {
+    spawn_ortho_camera(
+        harness,
         Transform::from_translation(EYE).looking_to(Vec3::NEG_Y, Vec3::NEG_Z),
-    ));
+        Vec2::splat(view),
+    )
+}
+
+/// An orthographic camera, no MSAA, placed by `transform`, seeing `view` metres across.
+fn spawn_ortho_camera(harness: &mut RenderHarness, transform: Transform, view: Vec2) -> Entity {
+    harness
+        .world_mut()
+        .spawn((
+            Camera3d::default(),
+            Msaa::Off,
+            Projection::Orthographic(OrthographicProjection {
+                scaling_mode: ScalingMode::Fixed {
+                    width: view.x,
+                    height: view.y,
+                },
+                ..OrthographicProjection::default_3d()
+            }),
+            transform,
+        ))
+        .id()
+}
+
+/// Blade geometry only, in full, out to 30 m.
+fn geometry_only() -> TransitionDistances {
+    TransitionDistances {
+        min_geom: 30.0,
+        max_geom: 40.0,
+        min_btf: 50.0,
+        max_btf: 80.0,
+        ..default()
+    }
+}
+
+/// Steps until every field has its slices (or gave up on them) and the pipelines are ready,
+/// then a few frames more.
+fn settle(harness: &mut RenderHarness) {
+    for _ in 0..300 {
+        harness.step();
+        if bevy_foliage::grass::systems::grass_ready(harness.world_mut()) {
+            break;
+        }
+    }
+    harness.wait_until_ready().expect("pipelines");
+    for _ in 0..3 {
+        harness.step();
+    }
 }
 
 /// Renders, and keeps the image in the artifacts folder as `name.png`.
@@ -249,13 +287,7 @@ fn blade_pass_keeps_the_blades_the_cpu_keeps() {
         return;
     };
     let field_size = Vec2::splat(2.0);
-    let near = TransitionDistances {
-        min_geom: 30.0,
-        max_geom: 40.0,
-        min_btf: 50.0,
-        max_btf: 80.0,
-        ..default()
-    };
+    let near = geometry_only();
     harness
         .app_mut()
         .add_plugins(GrassPlugin)
@@ -647,7 +679,7 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
         ground: None,
         ambient_occlusion: None,
     });
-    spawn_top_down_camera(&mut harness, view);
+    let camera = spawn_top_down_camera(&mut harness, view);
     // Known light, no tone mapping: the colour is checked too.
     let to_light = Vec3::new(0.4, 0.8, -0.3).normalize();
     let (illuminance, ambient) = (2000.0, 300.0);
@@ -663,14 +695,10 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
         brightness: ambient,
         ..default()
     });
-    {
-        let world = harness.world_mut();
-        let camera = world
-            .query_filtered::<Entity, With<Camera3d>>()
-            .single(world)
-            .unwrap();
-        world.entity_mut(camera).insert(Tonemapping::None);
-    }
+    harness
+        .world_mut()
+        .entity_mut(camera)
+        .insert(Tonemapping::None);
     let mut bake = None;
     for _ in 0..300 {
         harness.step();
@@ -844,13 +872,7 @@ fn blades_stand_on_the_ground_and_lean_in_the_wind() {
         speed: 0.0,
         scale: 3.0,
     };
-    let near = TransitionDistances {
-        min_geom: 30.0,
-        max_geom: 40.0,
-        min_btf: 50.0,
-        max_btf: 80.0,
-        ..default()
-    };
+    let near = geometry_only();
     harness
         .app_mut()
         .add_plugins(GrassPlugin)
@@ -876,18 +898,11 @@ fn blades_stand_on_the_ground_and_lean_in_the_wind() {
         Transform::from_xyz(1.0, 3.0, 2.0).looking_at(Vec3::ZERO, Vec3::Y),
     ));
     // Side-on, looking along −z: image x along +x, image y down −y.
-    harness.world_mut().spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Projection::Orthographic(OrthographicProjection {
-            scaling_mode: ScalingMode::Fixed {
-                width: view_w,
-                height: view_h,
-            },
-            ..OrthographicProjection::default_3d()
-        }),
+    spawn_ortho_camera(
+        &mut harness,
         Transform::from_xyz(0.0, centre_y, 10.0).looking_to(Vec3::NEG_Z, Vec3::Y),
-    ));
+        Vec2::new(view_w, view_h),
+    );
     harness.wait_until_ready().expect("pipelines");
     let image = render_saved(&mut harness, "grass_relief");
     let gpu = covered_pixels(&image, UVec2::new(W, H));
@@ -952,7 +967,6 @@ fn blades_stand_on_the_ground_and_lean_in_the_wind() {
 #[test]
 fn slices_on_lifted_ground_match_slices_on_a_raised_plane() {
     use bevy_foliage::grass::ground_map::height_map_image;
-    use bevy_foliage::grass::systems::grass_ready;
     const W: u32 = 128;
     const H: u32 = 48;
     let Some(mut harness) = RenderHarness::for_test("grass_slice_relief", W, H) else {
@@ -982,18 +996,11 @@ fn slices_on_lifted_ground_match_slices_on_a_raised_plane() {
         DirectionalLight::default(),
         Transform::from_xyz(1.0, 3.0, 2.0).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    harness.world_mut().spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Projection::Orthographic(OrthographicProjection {
-            scaling_mode: ScalingMode::Fixed {
-                width: 4.4,
-                height: 1.65,
-            },
-            ..OrthographicProjection::default_3d()
-        }),
+    spawn_ortho_camera(
+        &mut harness,
         Transform::from_xyz(0.3, 2.7, 10.0).looking_to(Vec3::new(-0.03, -0.1, -1.0), Vec3::Y),
-    ));
+        Vec2::new(4.4, 1.65),
+    );
     let render_field = |harness: &mut RenderHarness, y: f32, ground: Option<Handle<Image>>| {
         let field = harness
             .world_mut()
@@ -1008,16 +1015,7 @@ fn slices_on_lifted_ground_match_slices_on_a_raised_plane() {
                 Transform::from_xyz(0.0, y, 0.0),
             ))
             .id();
-        for _ in 0..300 {
-            harness.step();
-            if grass_ready(harness.world_mut()) {
-                break;
-            }
-        }
-        harness.wait_until_ready().expect("pipelines");
-        for _ in 0..4 {
-            harness.step();
-        }
+        settle(harness);
         let image = harness.render().unwrap();
         harness.world_mut().entity_mut(field).despawn();
         image
@@ -1070,7 +1068,6 @@ fn the_blade_shadow_mask_darkens_the_points_the_cpu_shades() {
     use bevy::core_pipeline::tonemapping::Tonemapping;
     use bevy_foliage::grass::bake::GrassSliceBakeResult;
     use bevy_foliage::grass::ground_map::height_map_image;
-    use bevy_foliage::grass::systems::grass_ready;
     const W: u32 = 160;
     const H: u32 = 48;
     let (view_w, view_h, centre_y) = (4.4, 1.32, 0.9);
@@ -1088,13 +1085,7 @@ fn the_blade_shadow_mask_darkens_the_points_the_cpu_shades() {
             ..default()
         })
         .insert_resource(GrassSettings {
-            transitions: TransitionDistances {
-                min_geom: 30.0,
-                max_geom: 40.0,
-                min_btf: 50.0,
-                max_btf: 80.0,
-                ..default()
-            },
+            transitions: geometry_only(),
             slices: false,
             wind: still_air(),
             ..default()
@@ -1120,26 +1111,16 @@ fn the_blade_shadow_mask_darkens_the_points_the_cpu_shades() {
         },
         Transform::default().looking_to(-to_light, Vec3::Y),
     ));
-    harness.world_mut().spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Tonemapping::None,
-        Projection::Orthographic(OrthographicProjection {
-            scaling_mode: ScalingMode::Fixed {
-                width: view_w,
-                height: view_h,
-            },
-            ..OrthographicProjection::default_3d()
-        }),
+    let camera = spawn_ortho_camera(
+        &mut harness,
         Transform::from_xyz(0.0, centre_y, 10.0).looking_to(Vec3::NEG_Z, Vec3::Y),
-    ));
-    for _ in 0..300 {
-        harness.step();
-        if grass_ready(harness.world_mut()) {
-            break;
-        }
-    }
-    harness.wait_until_ready().expect("pipelines");
+        Vec2::new(view_w, view_h),
+    );
+    harness
+        .world_mut()
+        .entity_mut(camera)
+        .insert(Tonemapping::None);
+    settle(&mut harness);
     let render = |harness: &mut RenderHarness, mask: bool, name: &str| {
         harness
             .world_mut()
@@ -1232,7 +1213,6 @@ fn the_blade_shadow_mask_darkens_the_points_the_cpu_shades() {
 #[test]
 fn terrain_occlusion_scales_the_blades_ambient_light() {
     use bevy::core_pipeline::tonemapping::Tonemapping;
-    use bevy_foliage::grass::systems::grass_ready;
     let Some(mut harness) = RenderHarness::for_test("grass_terrain_ao", SIZE, SIZE) else {
         return;
     };
@@ -1245,30 +1225,20 @@ fn terrain_occlusion_scales_the_blades_ambient_light() {
             ..default()
         })
         .insert_resource(GrassSettings {
-            transitions: TransitionDistances {
-                min_geom: 30.0,
-                max_geom: 40.0,
-                min_btf: 50.0,
-                max_btf: 80.0,
-                ..default()
-            },
+            transitions: geometry_only(),
             slices: false,
             wind: still_air(),
             ..default()
         });
-    harness.world_mut().spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Tonemapping::None,
-        Projection::Orthographic(OrthographicProjection {
-            scaling_mode: ScalingMode::Fixed {
-                width: VIEW,
-                height: VIEW,
-            },
-            ..OrthographicProjection::default_3d()
-        }),
+    let camera = spawn_ortho_camera(
+        &mut harness,
         Transform::from_translation(EYE).looking_to(Vec3::NEG_Y, Vec3::NEG_Z),
-    ));
+        Vec2::new(VIEW, VIEW),
+    );
+    harness
+        .world_mut()
+        .entity_mut(camera)
+        .insert(Tonemapping::None);
     let occlusion = add_image(
         &mut harness,
         Image::new(
@@ -1294,16 +1264,7 @@ fn terrain_occlusion_scales_the_blades_ambient_light() {
                 ambient_occlusion: ao,
             })
             .id();
-        for _ in 0..300 {
-            harness.step();
-            if grass_ready(harness.world_mut()) {
-                break;
-            }
-        }
-        harness.wait_until_ready().expect("pipelines");
-        for _ in 0..3 {
-            harness.step();
-        }
+        settle(harness);
         let image = harness.render().unwrap();
         harness.world_mut().entity_mut(field).despawn();
         image
