@@ -60,6 +60,8 @@ pub struct GrassFieldState {
     pub density: DensityMap,
     /// The density image the map was read from (none: full density).
     density_source: Option<AssetId<Image>>,
+    /// The density map as the shaders read it.
+    density_image: Handle<Image>,
     /// The ground under the field (`None`: flat), and the height image it was read from.
     pub ground: Option<std::sync::Arc<GroundGrid>>,
     ground_source: Option<AssetId<Image>>,
@@ -232,6 +234,7 @@ pub fn prepare_grass_fields(
         });
         let mesh = meshes.add(mesh);
         let ground_image = images.add(flat_ground_image());
+        let density_gpu = images.add(density_image(&density));
         let occlusion_image = images.add(density_image(
             &DensityMap::uniform(1.0, min.to_array(), size.to_array())
                 .expect("a positive finite rectangle"),
@@ -249,7 +252,7 @@ pub fn prepare_grass_fields(
             &species,
             GrassBladeExtension {
                 params: GrassBladeParams::new(&settings, &species, rect, Vec3::ZERO, ground_wind),
-                density: images.add(density_image(&density)),
+                density: density_gpu.clone(),
                 ground: ground_image.clone(),
                 wind: wind_map.image.clone(),
                 shadow_mask: shadow_mask.clone(),
@@ -298,6 +301,7 @@ pub fn prepare_grass_fields(
                 rect,
                 density,
                 density_source: None,
+                density_image: density_gpu,
                 ground: None,
                 ground_source: None,
                 ground_image,
@@ -317,32 +321,42 @@ pub fn prepare_grass_fields(
     }
 }
 
+/// The map image `handle` names, once it has loaded and if it is not the one already read
+/// (`source`, which then names it).
+fn newly_loaded<'a>(
+    handle: Option<&Handle<Image>>,
+    source: &mut Option<AssetId<Image>>,
+    images: &'a Assets<Image>,
+) -> Option<&'a Image> {
+    let handle = handle?;
+    if *source == Some(handle.id()) {
+        return None;
+    }
+    let image = images.get(handle)?;
+    *source = Some(handle.id());
+    Some(image)
+}
+
 /// Reads each field's density map once its image has loaded; a map that cannot be read is an
 /// error on the entity (and in the log), and the field keeps full density.
 pub fn resolve_density_maps(
     mut commands: Commands,
     mut fields: Query<(Entity, &GrassField, &mut GrassFieldState)>,
     mut images: ResMut<Assets<Image>>,
-    mut materials: ResMut<Assets<GrassBladeMaterial>>,
 ) {
     for (entity, field, mut state) in &mut fields {
-        let Some(handle) = &field.density else {
+        let (min, size) = ([state.rect.x, state.rect.y], [state.rect.z, state.rect.w]);
+        let state = &mut *state;
+        let Some(image) = newly_loaded(field.density.as_ref(), &mut state.density_source, &images)
+        else {
             continue;
         };
-        if state.density_source == Some(handle.id()) {
-            continue;
-        }
-        let Some(image) = images.get(handle) else {
-            continue;
-        };
-        let min = [state.rect.x, state.rect.y];
-        let size = [state.rect.z, state.rect.w];
-        state.density_source = Some(handle.id());
         match density_map_from_image(image, min, size) {
             Ok(map) => {
-                let gpu = images.add(density_image(&map));
-                if let Some(mut material) = materials.get_mut(&state.material) {
-                    material.extension.density = gpu;
+                // Written into the image the materials already hold (a new handle would leave
+                // them without a bind group for a frame).
+                if let Some(mut target) = images.get_mut(&state.density_image) {
+                    *target = density_image(&map);
                 }
                 state.density = map;
             }
@@ -364,17 +378,15 @@ pub fn resolve_occlusion_maps(
     mut images: ResMut<Assets<Image>>,
 ) {
     for (entity, field, mut state) in &mut fields {
-        let Some(handle) = &field.ambient_occlusion else {
-            continue;
-        };
-        if state.occlusion_source == Some(handle.id()) {
-            continue;
-        }
-        let Some(image) = images.get(handle) else {
-            continue;
-        };
-        state.occlusion_source = Some(handle.id());
         let (min, size) = ([state.rect.x, state.rect.y], [state.rect.z, state.rect.w]);
+        let state = &mut *state;
+        let Some(image) = newly_loaded(
+            field.ambient_occlusion.as_ref(),
+            &mut state.occlusion_source,
+            &images,
+        ) else {
+            continue;
+        };
         match density_map_from_image(image, min, size) {
             Ok(map) => {
                 if let Some(mut target) = images.get_mut(&state.occlusion_image) {
@@ -399,16 +411,11 @@ pub fn resolve_ground_maps(
     mut images: ResMut<Assets<Image>>,
 ) {
     for (entity, field, mut state) in &mut fields {
-        let Some(handle) = &field.ground else {
+        let state = &mut *state;
+        let Some(image) = newly_loaded(field.ground.as_ref(), &mut state.ground_source, &images)
+        else {
             continue;
         };
-        if state.ground_source == Some(handle.id()) {
-            continue;
-        }
-        let Some(image) = images.get(handle) else {
-            continue;
-        };
-        state.ground_source = Some(handle.id());
         let (min, size) = (state.rect.xy(), state.rect.zw());
         match HeightMap::from_image(image, min, size) {
             Ok(map) => {
@@ -421,7 +428,6 @@ pub fn resolve_ground_maps(
                 state.ground = Some(std::sync::Arc::new(ground));
                 // Cells and slices spawned on the flat ground go, to come back with the
                 // ground's bounds.
-                let state = &mut *state;
                 for (_, cell) in state.cells.drain() {
                     commands.entity(cell).despawn();
                 }
