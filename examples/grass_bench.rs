@@ -9,7 +9,8 @@
 //! - `geometry`: the baseline — the base patch mesh instanced per cell (mirrored as ours) with
 //!   Bevy's `StandardMaterial`, opaque, no discard, no dither, nothing of ours switched on; swept
 //!   over blade segments and how far it reaches (beyond: bare ground);
-//! - `ours`: a `GrassField`, swept over the transition distances.
+//! - `ours`: a `GrassField`, swept over the transition distances, the vertical slices per axis
+//!   and the silhouette slices.
 //!
 //! Both draw the same blades in the same colours (the species' root-to-tip gradient as vertex
 //! colours for the baseline, with no ambient occlusion on either side), so the reference is the
@@ -35,13 +36,14 @@
 //! all-geometry reference is some 10^9 triangles, for a GPU. `--preset quick`: 40 m of a sparser
 //! species at 160×90, what a software rasteriser can finish. `--ours-only` skips the baseline and
 //! the reference (no RMSE): the count of virtual blades ours draws in view. `--no-shadow-maps`:
-//! the sun casts no shadow map on either side (ours keeps its blade shadow mask where swept on).
-//! Ours is swept over its transitions and the blade shadow mask; both sides draw in still air.
+//! the sun casts no shadow map on either side (ours keeps its blade shadow mask). Both sides
+//! draw in still air; each measurement follows a few unmeasured frames.
 
 use bevy::camera::primitives::Frustum;
 use bevy::prelude::*;
 use bevy_nature::bench_curves::{matched_speedups, speedups_at_baseline_points};
 use bevy_nature::foliage::grass::bake::GrassSliceBakeCamera;
+use bevy_nature::foliage::grass::lighting::{BLADE_PERCEPTUAL_ROUGHNESS, BLADE_REFLECTANCE};
 use bevy_nature::foliage::grass::mesh::patch_mesh;
 use bevy_nature::foliage::grass::patch::{BasePatch, Mirror, PatchSettings};
 use bevy_nature::foliage::grass::quadtree::{
@@ -80,6 +82,11 @@ fn distances(min_geom: f32, max_geom: f32, min_btf: f32, max_btf: f32) -> Transi
         ..default()
     }
 }
+
+/// Unmeasured GPU-synchronised frames before each measurement: the software rasteriser compiles
+/// a pipeline's shaders at its first draws, and a new configuration's first frames run up to
+/// twice as long as its steady ones.
+const WARM_UP_FRAMES: u32 = 5;
 
 fn parse_args() -> Args {
     let mut args = Args {
@@ -157,7 +164,7 @@ fn parse_args() -> Args {
             args.distance = 40.0;
             args.strata = 8;
             args.size = UVec2::new(160, 90);
-            args.frames = 3;
+            args.frames = 10;
             args.ours_sweep = vec![
                 distances(2.0, 4.0, 8.0, 16.0),
                 distances(1.0, 2.0, 4.0, 8.0),
@@ -281,8 +288,8 @@ fn spawn_baseline(
         .resource_mut::<Assets<StandardMaterial>>()
         .add(StandardMaterial {
             base_color: Color::WHITE,
-            perceptual_roughness: 0.8,
-            reflectance: 0.3,
+            perceptual_roughness: BLADE_PERCEPTUAL_ROUGHNESS,
+            reflectance: BLADE_REFLECTANCE,
             diffuse_transmission: species.transmission,
             double_sided: true,
             cull_mode: None,
@@ -337,6 +344,9 @@ fn measure(
     for _ in 0..2 {
         harness.step();
     }
+    harness
+        .run_frames_gpu_synchronised(WARM_UP_FRAMES)
+        .expect("warm-up frames");
     harness.reset_timing();
     harness
         .run_frames_gpu_synchronised(frames)
@@ -489,58 +499,81 @@ fn main() {
         spawn_baseline(&mut harness, &[], &grid, &patch, &species, 1, 0.0);
         Some(image)
     };
-    // Ours.
-    harness.world_mut().spawn(GrassField {
-        size: field_size,
-        species: species.clone(),
-        density: None,
-        ground: None,
-        ambient_occlusion: None,
-    });
-    // Ours is swept over its transitions and over the blade shadow mask: the reference's blades
-    // shade each other through Bevy's shadow map, which ours beyond the blades' reach cannot
-    // (slices cast no shadow map); the mask is the thesis' stand-in for those shadows.
-    for t in &args.ours_sweep {
-        for shadow_mask in [false, true] {
-            {
-                let mut settings = harness.world_mut().resource_mut::<GrassSettings>();
-                settings.transitions = *t;
-                settings.geometry = true;
-                settings.slices = true;
-                settings.shadow_mask = shadow_mask;
-            }
-            let name = format!(
-                "ours_g{}-{}_v{}-{}{}",
-                t.min_geom,
-                t.max_geom,
-                t.min_btf,
-                t.max_btf,
-                if shadow_mask { "_mask" } else { "" }
-            );
-            let (ms, p95, rmse) =
-                measure(&mut harness, args.frames, reference.as_ref(), &name, shots);
-            let geometry_blades = harness.diagnostic(&GEOMETRY_BLADES).unwrap_or(0.0) as u64;
-            eprintln!(
-                "grass_bench: {name}: {ms:.1} ms, {geometry_blades} geometry blades, rmse {rmse:?}"
-            );
-            rows.push(Row {
-                mode: "ours",
-                params: format!(
-                    "geometry {}–{} m, vertical slices to {}–{} m, shadow mask {}",
+    // Ours, swept over its transitions, the slices per axis (K: fewer slices, fewer fragments
+    // where they overlap) and the silhouette slices of eq. 4.14 (at a grazing view even flat
+    // ground has them out to `max_silhouettes`; off: the horizontal slice alone beyond
+    // `max_btf`). The blade shadow mask stays on: the reference's blades shade each other
+    // through Bevy's shadow map, which ours beyond the blades' reach cannot (slices cast none).
+    for per_axis in [2, 4] {
+        harness
+            .world_mut()
+            .resource_mut::<GrassSettings>()
+            .slice_per_axis = per_axis;
+        let field = harness
+            .world_mut()
+            .spawn(GrassField {
+                size: field_size,
+                species: species.clone(),
+                density: None,
+                ground: None,
+                ambient_occlusion: None,
+            })
+            .id();
+        for t in &args.ours_sweep {
+            for silhouettes in [true, false] {
+                let t = TransitionDistances {
+                    max_silhouettes: if silhouettes {
+                        t.max_silhouettes
+                    } else {
+                        t.max_btf
+                    },
+                    ..*t
+                };
+                {
+                    let mut settings = harness.world_mut().resource_mut::<GrassSettings>();
+                    settings.transitions = t;
+                    settings.geometry = true;
+                    settings.slices = true;
+                    settings.shadow_mask = true;
+                }
+                let name = format!(
+                    "ours_g{}-{}_v{}-{}_k{per_axis}{}",
                     t.min_geom,
                     t.max_geom,
                     t.min_btf,
                     t.max_btf,
-                    if shadow_mask { "on" } else { "off" }
-                ),
-                virtual_blades,
-                geometry_blades,
-                frame_ms: ms,
-                frame_ms_p95: p95,
-                rmse: rmse.map(|r| r.0),
-                rmse_4x4: rmse.map(|r| r.1),
-            });
+                    if silhouettes { "_sil" } else { "" }
+                );
+                let (ms, p95, rmse) =
+                    measure(&mut harness, args.frames, reference.as_ref(), &name, shots);
+                let geometry_blades = harness.diagnostic(&GEOMETRY_BLADES).unwrap_or(0.0) as u64;
+                eprintln!(
+                    "grass_bench: {name}: {ms:.1} ms, {geometry_blades} geometry blades, rmse {rmse:?}"
+                );
+                rows.push(Row {
+                    mode: "ours",
+                    params: format!(
+                        "geometry {}–{} m, vertical slices to {}–{} m, K = {per_axis}, silhouettes {}",
+                        t.min_geom,
+                        t.max_geom,
+                        t.min_btf,
+                        t.max_btf,
+                        if silhouettes {
+                            format!("to {} m", t.max_silhouettes)
+                        } else {
+                            "off".to_string()
+                        }
+                    ),
+                    virtual_blades,
+                    geometry_blades,
+                    frame_ms: ms,
+                    frame_ms_p95: p95,
+                    rmse: rmse.map(|r| r.0),
+                    rmse_4x4: rmse.map(|r| r.1),
+                });
+            }
         }
+        harness.world_mut().despawn(field);
     }
     let points = |mode: &str| -> Vec<(f64, f64)> {
         rows.iter()

@@ -28,6 +28,7 @@ pub use bevy_terrain_clip as terrain_clip;
 
 pub mod bench_curves;
 pub mod forest_scene;
+pub mod grass_terrain;
 pub mod shadow_scene;
 pub mod showcase;
 

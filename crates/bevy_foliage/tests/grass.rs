@@ -633,8 +633,10 @@ fn transitions_keep_the_coverage_of_the_all_geometry_field() {
 /// The slice pass keeps, pixel for pixel, the horizontal-slice texels its CPU reference keeps:
 /// seen straight down from far enough that only the horizontal slice is drawn, each pixel
 /// centre on a texel centre, every cell's mirrored version, the density gradient and algorithm
-/// 1's opacity dithered; and lights them as `slice_shading::slice_radiance` does (the five baked
-/// directions blended by appendix A, the blade shadow mask, the ambient light), within 3 levels.
+/// 1's opacity dithered under each quad's own shift (to within 0.1 % of the pixels: a shared
+/// threshold differs on 0.6 %); and lights them as `slice_shading::slice_radiance` does (the
+/// five baked directions blended by appendix A, the blade shadow mask, the ambient light as
+/// Bevy's PBR gives it to the blades), within 3 levels.
 #[test]
 fn slice_pass_keeps_the_texels_the_cpu_keeps() {
     use bevy::camera::Exposure;
@@ -642,9 +644,10 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
     use bevy_foliage::grass::bake::GrassSliceBakeResult;
     use bevy_foliage::grass::mesh::HORIZONTAL_SLICE_LIFT;
     use bevy_foliage::grass::slice_shading::{
-        fragment_opacity, light_in_patch, slice_point, slice_radiance,
+        blade_n_dot_v, fragment_opacity, light_in_patch, slice_point, slice_radiance,
     };
     use bevy_foliage::grass::slices::{LAYER_THRESHOLD, LAYER_UNLIT, SliceAxis};
+    use bevy_foliage::grass::transition::shifted_dither;
     let Some(mut harness) = RenderHarness::for_test("grass_slice_pass", SIZE, SIZE) else {
         return;
     };
@@ -755,14 +758,17 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
                 ld,
                 1.0,
             );
-            cpu[(py * SIZE + px) as usize] = o >= DISCARD && o > ordered_dither(px, py);
+            cpu[(py * SIZE + px) as usize] =
+                o >= DISCARD && o > shifted_dither(px, py, sp.dither_key);
             // `slice_shading::slice_radiance` under the sun (through the blade shadow mask at the
             // slice's height) and the ambient light.
             let layer = |l: u32| bake.textures.layer(sp.slice, l)[at];
+            let to_eye = (EYE - p).normalize();
             let radiance = slice_radiance(
                 &sp,
                 layer,
                 species.transmission,
+                blade_n_dot_v(SliceAxis::Horizontal, to_eye),
                 Vec3::splat(ambient),
                 Vec3::splat(illuminance),
                 mask.light_through(HORIZONTAL_SLICE_LIFT, to_light, ld),
@@ -776,7 +782,7 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
     eprintln!("slice pass: differ {differ}, GPU {g} px, CPU {c} px, CPU thirds {cl:.3}/{cr:.3}");
     assert!(c > 1500, "{c}");
     assert!(cl < 0.75 * cr, "{cl} vs {cr}");
-    assert!(differ * 100 < c, "{differ} px differ of {c}");
+    assert!(differ * 1000 < c, "{differ} px differ of {c}");
     // The colour where both cover a pixel: the CPU's radiance, sRGB-encoded, within 3 levels.
     let encode = |v: f32| {
         let v = v.clamp(0.0, 1.0);

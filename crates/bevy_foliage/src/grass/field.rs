@@ -140,10 +140,10 @@ pub struct GrassSettings {
     pub slice_per_axis: u32,
     /// Texels a side of each slice image (8..=1024).
     pub slice_resolution: u32,
-    /// How the slices' coarser mips make their alpha ([`MipAlpha`]: the thesis' maximum by
-    /// default, so distant grass keeps its coverage at grazing views; the mean is closer in
-    /// colour seen from higher up).
-    /// Read when a field's slices are made.
+    /// How the slices' coarser mips make their alpha ([`MipAlpha`]: the mean by default, the
+    /// blades' expected coverage, which the slices' per-quad dither adds up across layers as
+    /// the blades do; the thesis' maximum keeps distant slices opaque whatever the ground
+    /// between the blades). Read when a field's slices are made.
     pub slice_mip_alpha: MipAlpha,
     /// Darken the blades with the blade shadow mask (§4.2.6, eq. 4.7): the shadows of their
     /// neighbours, which a shadow map cannot resolve, on geometry and slices alike.
@@ -168,7 +168,7 @@ impl Default for GrassSettings {
             slices: true,
             slice_per_axis: 4,
             slice_resolution: 64,
-            slice_mip_alpha: MipAlpha::Max,
+            slice_mip_alpha: MipAlpha::Mean,
             shadow_mask: true,
             wind: GrassWind::default(),
             slice_cache: None,

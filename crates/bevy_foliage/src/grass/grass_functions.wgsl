@@ -74,6 +74,12 @@ fn dither(frag: vec2<f32>) -> f32 {
     return (f32(m[p.y * 4u + p.x]) + 0.5) / 16.0;
 }
 
+// `grass::transition::shifted_dither`: the dither shifted by key's low four bits (sixteenths),
+// so the slice quads a view ray crosses keep their blades independently.
+fn shifted_dither(frag: vec2<f32>, key: u32) -> f32 {
+    return fract(dither(frag) + f32(key & 15u) / 16.0);
+}
+
 // `grass::patch::hash32`.
 fn hash32(v: u32) -> u32 {
     var x = v;

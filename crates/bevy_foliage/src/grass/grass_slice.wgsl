@@ -5,7 +5,9 @@
 // there (the unlit, threshold and five lit layers of the side it is seen from); keeps the blades
 // the density map and the slice's weight keep (algorithm 1), dithered; and lights them by the
 // five baked directions blended by appendix A's spherical barycentric weights, with Bevy's sun,
-// its shadow map and the ambient light. `grass::slice_shading` is the CPU reference.
+// its shadow map and the ambient light as Bevy's PBR gives it to the blades. Each quad of each
+// cell dithers with its own shift, so crossed layers combine as independent coverage.
+// `grass::slice_shading` is the CPU reference.
 
 #import bevy_pbr::forward_io::Vertex
 #import bevy_pbr::{
@@ -14,6 +16,7 @@
     mesh_view_bindings as view_bindings,
     mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
     shadows::fetch_directional_shadow,
+    lighting::{F_AB, EnvBRDFApprox},
 }
 #import bevy_foliage::grass_functions as grass
 
@@ -34,6 +37,8 @@ struct GrassSliceParams {
     ground_wind: grass::GroundWind,
     // The blade shadow mask's (slab height, cylinder radius, 0, 0); radius 0: no mask.
     mask_shape: vec4<f32>,
+    // The blades' (perceptual roughness, reflectance at normal incidence, 0, 0) in Bevy's PBR.
+    surface: vec4<f32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(0) var<uniform> params: GrassSliceParams;
@@ -59,6 +64,8 @@ struct SlicePoint {
     back: bool,
     // Mirror signs of the cell (−1 mirrors that axis).
     mirror: vec2<f32>,
+    // Which quad of which cell: the key of its dither's shift (`slice_shading::dither_key`).
+    dither_key: u32,
 }
 
 struct SliceVaryings {
@@ -124,6 +131,8 @@ fn slice_point(p: vec3<f32>, axis: u32, to_eye: vec3<f32>) -> SlicePoint {
         out.base_layer = 2u * k * LAYERS;
         out.uv = local_xz / size;
     }
+    out.dither_key = grass::hash32(
+        bitcast<u32>(cell.x) ^ grass::hash32(bitcast<u32>(cell.y) ^ grass::hash32(out.base_layer)));
     return out;
 }
 
@@ -145,25 +154,51 @@ fn fragment(in: SliceVaryings) -> @location(0) vec4<f32> {
     let footprint = max(length(dpdx(p)), length(dpdy(p)));
     let texel = params.grid.z / params.slices.z;
     let lod = max(log2(max(footprint, 1e-9) / texel), 0.0);
-    let unlit = layer(sp.uv, sp.base_layer, lod);
-    let threshold = layer(sp.uv, sp.base_layer + 1u, lod).r;
     // Algorithm 1: this slice's weight, the density here, the blade's threshold.
     let d = distance(p, eye);
     var w = grass::horizontal_weight(params.distances, d);
     if axis < 2u {
         // Eq. 4.14 against the ground's normal: the eye's height in the patch frame.
         w = grass::vertical_weight(params.distances, params.window, d, to_eye.y);
+        // Where their weight is zero the horizontal slice carries the window's complement
+        // alone: out before any texture is read, since a view along the ground crosses many
+        // such quads.
+        if w <= 0.0 {
+            discard;
+        }
     }
+    // No blade here (most of a slice): out before the threshold and the density are read.
+    let unlit = layer(sp.uv, sp.base_layer, lod);
+    if unlit.a < grass::DISCARD {
+        discard;
+    }
+    let threshold = layer(sp.uv, sp.base_layer + 1u, lod).r;
     let ld = grass::density_at(density_map, params.density_rect, in.flat_position.xz);
     let opacity = unlit.a * grass::slice_opacity(params.window, w, ld, threshold);
-    if opacity < grass::DISCARD || opacity <= grass::dither(in.position.xy) {
+    if opacity < grass::DISCARD || opacity <= grass::shifted_dither(in.position.xy, sp.dither_key) {
         discard;
     }
     let gamma = params.slices.w;
-    // Ambient: the blades' kd·ao, the lit share (1 − γ) as Bevy's diffuse transmission keeps it.
-    // and the terrain's ambient occlusion there (§4.2.6).
+    // Ambient: the blades' kd·ao lit as Bevy's PBR lights the blades (`lighting::slice_ambient`):
+    // the reflected share (1 − γ) through the environment BRDF, with the blades' specular, under
+    // the terrain's ambient occlusion there (§4.2.6); the transmitted share γ unoccluded. The
+    // blades' normals face along a vertical slice's axis and lie level under the horizontal one
+    // (`slice_shading::blade_n_dot_v`).
     let terrain_ao = grass::density_at(terrain_occlusion_map, params.density_rect, in.flat_position.xz);
-    var color = view_bindings::lights.ambient_color.rgb * unlit.rgb * (1.0 - gamma) * terrain_ao;
+    var n_dot_v = length(to_eye.xz);
+    if axis == 0u {
+        n_dot_v = abs(to_eye.x);
+    } else if axis == 1u {
+        n_dot_v = abs(to_eye.z);
+    }
+    n_dot_v = max(n_dot_v, 1e-4);
+    let lit_ambient = EnvBRDFApprox(unlit.rgb * (1.0 - gamma), F_AB(1.0, n_dot_v));
+    let through_ambient = EnvBRDFApprox(unlit.rgb * gamma, F_AB(1.0, 1.0));
+    let f0 = vec3(params.surface.y);
+    let specular_occlusion = saturate(dot(f0, vec3(50.0 * 0.33)));
+    let specular_ambient = EnvBRDFApprox(f0, F_AB(params.surface.x, n_dot_v)) * specular_occlusion;
+    var color = view_bindings::lights.ambient_color.rgb
+        * ((lit_ambient + specular_ambient) * terrain_ao + through_ambient);
     // The sun through the five baked directions.
     if view_bindings::lights.n_directional_lights > 0u {
         let light = &view_bindings::lights.directional_lights[0];

@@ -27,6 +27,54 @@ pub fn blade_radiance(
     kd * ao * ia + kd * direct * id / (1.0 + beta * d * d)
 }
 
+/// The blades' perceptual roughness in Bevy's PBR (the blade material's, and what the slices'
+/// ambient and specular terms assume).
+pub const BLADE_PERCEPTUAL_ROUGHNESS: f32 = 0.8;
+
+/// The blades' specular reflectance in Bevy's PBR (`StandardMaterial::reflectance`; the
+/// reflectance at normal incidence is `0.16 · r²`).
+pub const BLADE_REFLECTANCE: f32 = 0.3;
+
+/// Bevy's split-sum scale and bias at `perceptual_roughness` and `n·v` (`bevy_pbr::lighting::F_AB`,
+/// its polynomial fit, the form a build without the `dfg_lut` feature uses): the environment
+/// BRDF of a reflectance `f0` is `f0 · x + y`.
+pub fn f_ab(perceptual_roughness: f32, n_dot_v: f32) -> Vec2 {
+    let r = [
+        1.0 - perceptual_roughness,
+        perceptual_roughness * -0.0275 + 0.0425,
+        perceptual_roughness * -0.572 + 1.04,
+        perceptual_roughness * 0.022 - 0.04,
+    ];
+    let a004 = (r[0] * r[0]).min((-9.28 * n_dot_v).exp2()) * r[0] + r[1];
+    Vec2::new(-1.04 * a004 + r[2], 1.04 * a004 + r[3]).max(Vec2::splat(0.00005))
+}
+
+/// The ambient light (`ambient`, before exposure) a slice texel of blade colour `kd_ao` (kd
+/// times the blade's occlusion, the unlit layer) sends to the eye, as Bevy's PBR lights the
+/// blade it stands for (`bevy_pbr::ambient::ambient_light`): the reflected share `1 − γ` of the
+/// diffuse through the environment BRDF at roughness 1, and its specular at the blades'
+/// roughness and reflectance, both under the terrain's occlusion `terrain_ao`; the transmitted
+/// share `γ`, which Bevy lights from behind at normal incidence and never occludes. `n_dot_v`:
+/// the blade normal's cosine with the view.
+pub fn slice_ambient(
+    kd_ao: Vec3,
+    gamma: f32,
+    n_dot_v: f32,
+    ambient: Vec3,
+    terrain_ao: f32,
+) -> Vec3 {
+    let n_dot_v = n_dot_v.max(1e-4);
+    let diffuse = f_ab(1.0, n_dot_v);
+    let lit = kd_ao * (1.0 - gamma) * diffuse.x + Vec3::splat(diffuse.y);
+    let through_ab = f_ab(1.0, 1.0);
+    let through = kd_ao * gamma * through_ab.x + Vec3::splat(through_ab.y);
+    let f0 = 0.16 * BLADE_REFLECTANCE * BLADE_REFLECTANCE;
+    let specular_ab = f_ab(BLADE_PERCEPTUAL_ROUGHNESS, n_dot_v);
+    let specular_occlusion = (f0 * 3.0 * 50.0 * 0.33).clamp(0.0, 1.0);
+    let specular = (f0 * specular_ab.x + specular_ab.y) * specular_occlusion;
+    ambient * ((lit + Vec3::splat(specular)) * terrain_ao + through)
+}
+
 /// The ambient occlusion of a blade point `height_fraction` of the way up the blade (0 root,
 /// 1 tip): `root_ao` at the ground rising linearly to 1 at the tip (§4.2.2: neighbours occlude
 /// the bottom of a blade most).
@@ -182,6 +230,29 @@ pub fn btf_weights(l: Vec3) -> [f32; 5] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Bevy's polynomial, worked by hand: at roughness 1 the scale is 0.4524 whatever the angle
+    /// (the bias clamps to 5e-5); the blades' specular at normal incidence.
+    #[test]
+    fn the_ambient_follows_bevy_s_environment_brdf() {
+        for n_dot_v in [0.05, 0.3, 1.0] {
+            let ab = f_ab(1.0, n_dot_v);
+            assert!((ab - Vec2::new(0.4524, 0.00005)).length() < 1e-6, "{ab}");
+        }
+        let ab = f_ab(0.8, 1.0);
+        assert!((ab - Vec2::new(0.560745, 0.00005)).length() < 1e-5, "{ab}");
+        // kd·ao 0.2, γ 0.25, no terrain occlusion: 0.4524·0.2 + 2·5e-5 diffuse, the specular.
+        let specular = (0.0144 * 0.560745 + 0.00005) * 0.7128;
+        let c = slice_ambient(Vec3::splat(0.2), 0.25, 1.0, Vec3::ONE, 1.0);
+        let want = 0.4524 * 0.2 + 2.0 * 0.00005 + specular;
+        assert!((c - Vec3::splat(want)).length() < 1e-5, "{c} vs {want}");
+        // The terrain's occlusion darkens the reflected share only.
+        let dark = slice_ambient(Vec3::splat(0.2), 0.25, 1.0, Vec3::ONE, 0.0);
+        assert!(
+            (dark - Vec3::splat(0.4524 * 0.2 * 0.25 + 0.00005)).length() < 1e-5,
+            "{dark}"
+        );
+    }
     use crate::rng::SplitMix64;
 
     #[test]

@@ -7,7 +7,7 @@
 use super::density::DensityMap;
 use super::field::{GrassSettings, GrassSpecies};
 use super::ground_map::GroundWindUniform;
-use super::lighting::ShadowMask;
+use super::lighting::{BLADE_PERCEPTUAL_ROUGHNESS, BLADE_REFLECTANCE, ShadowMask};
 use super::transition::TransitionDistances;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
@@ -177,8 +177,8 @@ pub fn blade_material(
     GrassBladeMaterial {
         base: StandardMaterial {
             base_color: Color::WHITE,
-            perceptual_roughness: 0.8,
-            reflectance: 0.3,
+            perceptual_roughness: BLADE_PERCEPTUAL_ROUGHNESS,
+            reflectance: BLADE_REFLECTANCE,
             diffuse_transmission: species.transmission,
             double_sided: true,
             cull_mode: None,

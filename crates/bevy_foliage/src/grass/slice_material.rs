@@ -5,6 +5,7 @@
 
 use super::field::{GrassSettings, GrassSpecies};
 use super::ground_map::GroundWindUniform;
+use super::lighting::{BLADE_PERCEPTUAL_ROUGHNESS, BLADE_REFLECTANCE};
 use super::material::transition_uniforms;
 use super::quadtree::CellGrid;
 use super::slice_mip::MipAlpha;
@@ -41,6 +42,11 @@ pub struct GrassSliceParams {
     pub ground_wind: GroundWindUniform,
     /// The blade shadow mask's (slab height, cylinder radius, 0, 0); radius 0: no mask.
     pub mask_shape: Vec4,
+    /// The blades' (perceptual roughness, reflectance at normal incidence, 0, 0) in Bevy's PBR,
+    /// for the slices' ambient light ([`slice_ambient`]).
+    ///
+    /// [`slice_ambient`]: super::lighting::slice_ambient
+    pub surface: Vec4,
 }
 
 impl GrassSliceParams {
@@ -73,6 +79,12 @@ impl GrassSliceParams {
             seed: UVec4::new(species.patch.seed as u32, 0, 0, 0),
             ground_wind,
             mask_shape: Vec4::ZERO,
+            surface: Vec4::new(
+                BLADE_PERCEPTUAL_ROUGHNESS,
+                0.16 * BLADE_REFLECTANCE * BLADE_REFLECTANCE,
+                0.0,
+                0.0,
+            ),
         }
     }
 }

@@ -7,23 +7,27 @@
 //!
 //! The slices here are drawn with their opacity *dithered* rather than alpha-tested, which
 //! makes the box filter's mean alpha the expected top-down coverage of the blades a texel stands
-//! for — and the question is which coverage the view needs. Measured both ways: against an
-//! all-geometry render of the same field (`grass_bench --preset quick`, camera 1.7 m up), the
-//! mean brought the 4 × 4-block colour error of ours from 0.042–0.057 down to 0.027–0.038; but
-//! on the grazing dolly of the transition test, where a view ray crosses many blades' depth, the
-//! mean thinned the distant grass by up to 0.41 of a screen region's coverage (a hole), the
-//! maximum by none. The maximum stays the default; [`MipAlpha`] picks.
+//! for — and with each quad of each cell dithering under its own shift (the layers a view ray
+//! crosses then keep their blades independently, `1 − Π(1 − αᵢ)`, as real blades do), the mean is
+//! also what a grazing view needs. Measured against an all-geometry render of the same field
+//! (`grass_bench --preset quick`, camera 1.7 m up, 4 × 4-block colour error): with one dither
+//! threshold shared by all layers, the maximum kept the distant grass whole but overcovered it
+//! (0.045–0.052: the ground between the blades all but vanished), the mean thinned it (the
+//! grazing dolly of the transition test lost up to 0.41 of a region's coverage); with per-quad
+//! shifts the mean gives 0.020–0.030 and the dolly keeps its coverage. So the mean is the
+//! default here, and the thesis' maximum stays a [`MipAlpha`] choice.
 
 use bevy::reflect::Reflect;
 
 /// How a coarser mip's alpha is made from the four finer texels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Reflect)]
 pub enum MipAlpha {
-    /// Their maximum (thesis §4.3.3): distant grass keeps its coverage at grazing views.
-    #[default]
+    /// Their maximum (thesis §4.3.3, eq. 4.18): distant slices never thin out, but overcover
+    /// where the blades leave ground between them.
     Max,
-    /// Their mean: the expected top-down coverage; closer in colour from above, thinner at
-    /// grazing views.
+    /// Their mean: the expected coverage of the blades a texel stands for; with the slices'
+    /// per-quad dither, crossed layers add up as the blades do.
+    #[default]
     Mean,
 }
 

@@ -4,8 +4,8 @@
 //! the opacity algorithm 1 gives the blades drawn there, and their radiance from the five baked
 //! light directions blended by appendix A's weights.
 
-use super::lighting::btf_weights;
-use super::patch::Mirror;
+use super::lighting::{btf_weights, slice_ambient};
+use super::patch::{Mirror, hash32};
 use super::quadtree::CellGrid;
 use super::slices::{LAYER_UNLIT, LAYERS, SliceAxis, SliceLayout, lit_layer};
 use super::transition::{TransitionDistances, slice_opacity};
@@ -22,6 +22,10 @@ pub struct SlicePoint {
     pub uv: Vec2,
     /// The cell's mirrored version.
     pub mirror: Mirror,
+    /// The key of this quad's dither shift ([`shifted_dither`]): its cell and slice hashed.
+    ///
+    /// [`shifted_dither`]: super::transition::shifted_dither
+    pub dither_key: u32,
 }
 
 impl SlicePoint {
@@ -56,7 +60,7 @@ pub fn slice_point(
     let sign = |m: bool| if m { -1.0 } else { 1.0 };
     let v = (eye - p).normalize_or(Vec3::Y) * Vec3::new(sign(mirror.x), 1.0, sign(mirror.z));
     let slab = size / k as f32;
-    match axis {
+    let point = match axis {
         SliceAxis::X => {
             let back = v.x < 0.0;
             SlicePoint {
@@ -71,6 +75,7 @@ pub fn slice_point(
                     row,
                 ),
                 mirror,
+                dither_key: 0,
             }
         }
         SliceAxis::Z => {
@@ -87,6 +92,7 @@ pub fn slice_point(
                     row,
                 ),
                 mirror,
+                dither_key: 0,
             }
         }
         SliceAxis::Horizontal => SlicePoint {
@@ -94,7 +100,29 @@ pub fn slice_point(
             back: false,
             uv: local / size,
             mirror,
+            dither_key: 0,
         },
+    };
+    SlicePoint {
+        dither_key: dither_key(cell.x as i64, cell.y as i64, point.slice),
+        ..point
+    }
+}
+
+/// The dither key of `slice` in cell `(i, j)` (32-bit, as the shader computes it).
+pub fn dither_key(i: i64, j: i64, slice: u32) -> u32 {
+    hash32((i as u32) ^ hash32((j as u32) ^ hash32(slice * LAYERS)))
+}
+
+/// The cosine between the view and the normals of the blades a slice texel shows, as the
+/// slice's lighting takes it: the blades stand across a vertical slice's quad, facing along its
+/// axis, and stand upright under the horizontal slice, their normals level; `to_eye` is the
+/// unit view vector in the base patch's frame.
+pub fn blade_n_dot_v(axis: SliceAxis, to_eye: Vec3) -> f32 {
+    match axis {
+        SliceAxis::X => to_eye.x.abs(),
+        SliceAxis::Z => to_eye.z.abs(),
+        SliceAxis::Horizontal => Vec2::new(to_eye.x, to_eye.z).length(),
     }
 }
 
@@ -114,24 +142,38 @@ pub fn fragment_opacity(
         SliceAxis::Horizontal => t.horizontal_weight(d),
         _ => t.vertical_weight(d, n_dot_v),
     };
+    // Where the vertical slices' weight is zero the horizontal slice carries the window's
+    // complement alone.
+    if axis != SliceAxis::Horizontal && w <= 0.0 {
+        return 0.0;
+    }
     coverage * slice_opacity(t, w, ld, dth)
 }
 
-/// The slice radiance before exposure: the ambient light on the unlit row (`kd·ao`, its lit share
-/// `1 − γ`) and the sun (`sun` colour × `shadow`) through the baked directions blended by
-/// appendix A for the light direction `l` in the base patch's frame, with Lambert's 1/π.
-/// `layer(i)` reads layer `i` of the slice point's image.
+/// The slice radiance before exposure: the ambient light on the unlit row (`kd·ao`) as Bevy's
+/// PBR lights the blades ([`slice_ambient`], the blades' normals at `n_dot_v` to the view, no
+/// terrain occlusion) and the sun (`sun` colour × `shadow`) through the baked directions
+/// blended by appendix A for the light direction `l` in the base patch's frame, with Lambert's
+/// 1/π. `layer(i)` reads layer `i` of the slice point's image.
+#[allow(clippy::too_many_arguments)]
 pub fn slice_radiance(
     point: &SlicePoint,
     layer: impl Fn(u32) -> [f32; 4],
     gamma: f32,
+    n_dot_v: f32,
     ambient: Vec3,
     sun: Vec3,
     shadow: f32,
     l: Vec3,
 ) -> Vec3 {
     let unlit = layer(LAYER_UNLIT);
-    let mut color = ambient * Vec3::new(unlit[0], unlit[1], unlit[2]) * (1.0 - gamma);
+    let mut color = slice_ambient(
+        Vec3::new(unlit[0], unlit[1], unlit[2]),
+        gamma,
+        n_dot_v,
+        ambient,
+        1.0,
+    );
     let weights = btf_weights(l);
     let mut direct = Vec3::ZERO;
     for (i, w) in weights.iter().enumerate() {
@@ -232,6 +274,29 @@ mod tests {
         );
     }
 
+    /// A quad's dither key follows its cell and slice, and seen across a slice the blades face
+    /// the eye as the slice's axis does.
+    #[test]
+    fn each_quad_of_each_cell_has_its_own_dither_key() {
+        let (layout, grid) = setup();
+        let at = |p: Vec3, axis| slice_point(&layout, &grid, 0.0, 4, p, axis, Vec3::Y * 10.0);
+        let a = at(Vec3::new(-0.9, 0.1, -0.9), SliceAxis::Horizontal);
+        assert_eq!(a.dither_key, dither_key(0, 0, 8));
+        let b = at(Vec3::new(-0.4, 0.1, -0.9), SliceAxis::Horizontal);
+        assert_eq!(b.dither_key, dither_key(1, 0, 8));
+        let keys: std::collections::HashSet<u32> = (0..4i64)
+            .flat_map(|i| (0..4i64).flat_map(move |j| (0..9).map(move |s| dither_key(i, j, s))))
+            .map(|k| k & 15)
+            .collect();
+        assert_eq!(keys.len(), 16, "the shifts spread over all sixteen");
+        let v = Vec3::new(0.6, 0.0, 0.8);
+        assert_eq!(blade_n_dot_v(SliceAxis::X, v), 0.6);
+        assert_eq!(blade_n_dot_v(SliceAxis::Z, -v), 0.8);
+        assert!(
+            (blade_n_dot_v(SliceAxis::Horizontal, Vec3::new(0.6, 0.8, 0.0)) - 0.6).abs() < 1e-6
+        );
+    }
+
     #[test]
     fn the_sun_straight_above_reads_the_top_layer_only() {
         let point = SlicePoint {
@@ -239,6 +304,7 @@ mod tests {
             back: true,
             uv: Vec2::ZERO,
             mirror: Mirror { x: false, z: false },
+            dither_key: 0,
         };
         let layer = |i: u32| {
             if i == lit_layer(0, true) {
@@ -249,16 +315,24 @@ mod tests {
                 [9.0, 9.0, 9.0, 1.0]
             }
         };
-        let c = slice_radiance(
-            &point,
-            layer,
-            0.25,
-            Vec3::ONE,
-            Vec3::splat(std::f32::consts::PI),
-            1.0,
-            Vec3::Y,
-        );
-        assert!((c - Vec3::splat(0.2 * 0.75 + 0.5)).length() < 1e-5, "{c}");
+        let sun = |ambient: Vec3| {
+            slice_radiance(
+                &point,
+                layer,
+                0.25,
+                1.0,
+                ambient,
+                Vec3::splat(std::f32::consts::PI),
+                1.0,
+                Vec3::Y,
+            )
+        };
+        let c = sun(Vec3::ZERO);
+        assert!((c - Vec3::splat(0.5)).length() < 1e-5, "{c}");
+        // The ambient light on top, as `slice_ambient` has it.
+        let with_ambient = sun(Vec3::ONE) - c;
+        let want = slice_ambient(Vec3::splat(0.2), 0.25, 1.0, Vec3::ONE, 1.0);
+        assert!((with_ambient - want).length() < 1e-6, "{with_ambient}");
         assert_eq!(
             light_in_patch(Vec3::new(1.0, 2.0, 3.0), Mirror { x: true, z: false }),
             Vec3::new(-1.0, 2.0, 3.0)

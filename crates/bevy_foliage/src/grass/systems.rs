@@ -21,6 +21,7 @@ use super::patch::{BasePatch, Mirror};
 use super::quadtree::{CellDraw, CellGrid, CellNode, CellView, GroundBounds, select_cells};
 use super::slice_material::{GrassSliceMaterial, GrassSliceParams, slice_image};
 use super::slices::SliceTextures;
+use super::transition::TransitionDistances;
 use bevy::camera::primitives::{Aabb, Frustum, MeshAabb};
 use bevy::camera::visibility::NoAutoAabb;
 use bevy::diagnostic::{DiagnosticPath, Diagnostics};
@@ -538,6 +539,39 @@ pub fn attach_slice_bakes(
     }
 }
 
+/// Whether the vertical slices can show anywhere over `node` of the slice blocks, seen from
+/// `eye` (the field's frame): its box (ground to `height` above it) spans distances `near` to
+/// `far`; over horizontal ground `|N·V̂|` is at least the eye's height over the box's top over
+/// `far`, and anywhere else (relief: the slope turns the normal) it may reach zero.
+fn vertical_slices_may_show(
+    transitions: &TransitionDistances,
+    blocks: &CellGrid,
+    ground: &FieldGround,
+    node: CellNode,
+    eye: Vec3,
+    height: f32,
+) -> bool {
+    let (corner, side) = blocks.rect(node);
+    let (low, high) = ground.height_range(blocks, node);
+    let (min, max) = (
+        Vec3::new(corner.x, low, corner.y),
+        Vec3::new(corner.x + side, high + height, corner.y + side),
+    );
+    let near = eye.clamp(min, max).distance(eye);
+    let far = Vec3::new(
+        (eye.x - min.x).abs().max((eye.x - max.x).abs()),
+        (eye.y - min.y).abs().max((eye.y - max.y).abs()),
+        (eye.z - min.z).abs().max((eye.z - max.z).abs()),
+    )
+    .length();
+    let min_n_dot_v = if ground.0.is_none() && eye.y > max.y && far > 0.0 {
+        (eye.y - max.y) / far
+    } else {
+        0.0
+    };
+    transitions.vertical_may_show(near, far, min_n_dot_v)
+}
+
 /// The camera fields are walked from: one marked [`GrassCamera`], else the active 3D camera of
 /// lowest order.
 fn field_camera<'a>(
@@ -767,7 +801,18 @@ pub fn update_grass_cells(
                 if far < settings.transitions.min_geom {
                     continue;
                 }
-                wanted_nodes.push((node, draw == CellDraw::MacroCell));
+                // A block where the vertical slices' weight is zero throughout draws its
+                // horizontal slice alone, as a macro-cell does.
+                let horizontal_only = draw == CellDraw::MacroCell
+                    || !vertical_slices_may_show(
+                        &settings.transitions,
+                        &slices.blocks,
+                        &ground,
+                        node,
+                        view.eye,
+                        slices.textures.layout.height,
+                    );
+                wanted_nodes.push((node, horizontal_only));
             }
         }
         let wanted_set: bevy::platform::collections::HashSet<(CellNode, bool)> =

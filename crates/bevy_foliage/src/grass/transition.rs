@@ -137,6 +137,19 @@ impl TransitionDistances {
         (distance + silhouette).min(1.0)
     }
 
+    /// Whether the vertical slices' weight (eq. 4.4 / 4.14) can be above zero somewhere in a
+    /// region whose points lie `near` to `far` from the eye, where `|N·V̂|` is at least
+    /// `min_n_dot_v` — else the region needs only its horizontal slice, and the vertical quads
+    /// there would rasterise fragments that all discard (a view along the ground crosses
+    /// hundreds of them).
+    pub fn vertical_may_show(&self, near: f32, far: f32, min_n_dot_v: f32) -> bool {
+        let between_transitions = near < self.max_btf && far > self.min_geom;
+        let silhouette = far >= self.max_btf
+            && near <= self.max_silhouettes
+            && min_n_dot_v < self.silhouette_epsilon;
+        between_transitions || silhouette
+    }
+
     /// Eq. 4.5: the weight of the horizontal slice at distance `d`.
     pub fn horizontal_weight(&self, d: f32) -> f32 {
         ramp(d, self.min_geom, self.max_geom)
@@ -187,6 +200,14 @@ pub fn geometry_opacity(t: &TransitionDistances, d: f32, ld: f32, dth: f32) -> f
 pub fn ordered_dither(x: u32, y: u32) -> f32 {
     const M: [u32; 16] = [0, 8, 2, 10, 12, 4, 14, 6, 3, 11, 1, 9, 15, 7, 13, 5];
     (M[((y & 3) * 4 + (x & 3)) as usize] as f32 + 0.5) / 16.0
+}
+
+/// [`ordered_dither`] shifted by `key`'s low four bits (sixteenths): each slice quad of each cell
+/// dithers with its own shift, so the layers a view ray crosses keep their blades independently
+/// — their coverages combine as `1 − Π(1 − αᵢ)`, as the blades' do — where one shared
+/// threshold would keep the same pixels of every layer and show only the densest.
+pub fn shifted_dither(x: u32, y: u32, key: u32) -> f32 {
+    (ordered_dither(x, y) + (key & 15) as f32 / 16.0).fract()
 }
 
 /// The opacities a blade gets from each representation at distance `d` (before the discard).
@@ -278,6 +299,44 @@ mod tests {
         );
     }
 
+    /// A region where the vertical slices' weight is above zero at some distance and view angle
+    /// inside it is never one `vertical_may_show` rules out; and it does rule regions out
+    /// (between the transitions' reach and the silhouettes', and off silhouettes).
+    #[test]
+    fn vertical_slices_are_ruled_out_only_where_their_weight_is_zero() {
+        let t = TransitionDistances {
+            max_silhouettes: 200.0,
+            ..TransitionDistances::default()
+        };
+        let mut rng = SplitMix64::new(7);
+        let (mut ruled_out, mut showing) = (0, 0);
+        for _ in 0..100_000 {
+            let near = rng.range(0.0, 250.0);
+            let far = near + rng.range(0.0, 40.0);
+            let min_n_dot_v = rng.range(0.0, 1.0);
+            let may = t.vertical_may_show(near, far, min_n_dot_v);
+            if !may {
+                ruled_out += 1;
+            }
+            for _ in 0..8 {
+                let d = rng.range(near, far);
+                let n_dot_v = rng.range(min_n_dot_v, 1.0);
+                if t.vertical_weight(d, n_dot_v) > 0.0 {
+                    showing += 1;
+                    assert!(may, "weight > 0 at {d} m, N·V {n_dot_v} in {near}..{far}");
+                }
+            }
+        }
+        assert!(
+            ruled_out > 30_000 && showing > 30_000,
+            "{ruled_out} {showing}"
+        );
+        assert!(!t.vertical_may_show(100.0, 120.0, 0.5));
+        assert!(t.vertical_may_show(100.0, 120.0, 0.1));
+        assert!(!t.vertical_may_show(0.0, 7.9, 1.0));
+        assert!(t.vertical_may_show(70.0, 90.0, 1.0));
+    }
+
     /// The property of §4.2.5: wherever geometry is drawn (d < max_geom), a blade that the local
     /// density keeps gets opacities from geometry and the slices that sum to one, at any
     /// distance, density and threshold; one the density removes gets none. Over the whole field
@@ -353,6 +412,42 @@ mod tests {
                 .filter(|&(x, y)| alpha > ordered_dither(x + 8, y + 4))
                 .count();
             assert_eq!(kept, k, "opacity {alpha}");
+        }
+    }
+
+    /// Every shift still keeps the opacity's fraction of each 4 × 4 block; two layers under
+    /// shifts drawn from two keys cover, on average over the keys, `1 − (1 − α)²` of it — as two
+    /// independent layers of blades — where one shared threshold covers only `α`.
+    #[test]
+    fn shifted_dithers_combine_layers_as_independent_coverage() {
+        let block = || (0..4u32).flat_map(|y| (0..4u32).map(move |x| (x, y)));
+        for k in 0..=16u32 {
+            let alpha = k as f32 / 16.0;
+            for key in 0..16 {
+                let kept = block()
+                    .filter(|&(x, y)| alpha > shifted_dither(x, y, key))
+                    .count();
+                assert_eq!(kept as u32, k, "opacity {alpha}, key {key}");
+            }
+            let mut union = 0.0;
+            for a in 0..16 {
+                for b in 0..16 {
+                    union += block()
+                        .filter(|&(x, y)| {
+                            alpha > shifted_dither(x, y, a) || alpha > shifted_dither(x, y, b)
+                        })
+                        .count() as f32
+                        / 16.0;
+                }
+            }
+            let union = union / 256.0;
+            let independent = 1.0 - (1.0 - alpha) * (1.0 - alpha);
+            assert!((union - independent).abs() < 1e-5, "{alpha}: {union}");
+            let shared = block()
+                .filter(|&(x, y)| alpha > shifted_dither(x, y, 3))
+                .count() as f32
+                / 16.0;
+            assert!((shared - alpha).abs() < 1e-6);
         }
     }
 }
