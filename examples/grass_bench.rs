@@ -29,13 +29,15 @@
 //!
 //! ```text
 //! cargo run --release --example grass_bench -- [--preset gpu|quick] [--distance M]
-//!     [--strata N] [--frames N] [--size WxH] [--ours-only] [--no-shadow-maps]
-//!     [--screenshot DIR] [--stats FILE]
+//!     [--strata N] [--frames N] [--size WxH] [--transitions G0,G1,V0,V1]...
+//!     [--ours-only] [--no-shadow-maps] [--screenshot DIR] [--stats FILE]
 //! ```
 //! `--preset gpu` (default): 400 m of the default species (576 blades per 0.5 m patch); the
 //! all-geometry reference is some 10^9 triangles, for a GPU. `--preset quick`: 40 m of a sparser
-//! species at 160×90, what a software rasteriser can finish. `--ours-only` skips the baseline and
-//! the reference (no RMSE): the count of virtual blades ours draws in view. `--no-shadow-maps`:
+//! species at 160×90, what a software rasteriser can finish. `--transitions` (repeatable)
+//! replaces the preset's sweep of ours' transitions (`min_geom,max_geom,min_btf,max_btf`, m).
+//! `--ours-only` skips the baseline and the reference (no RMSE): the count of virtual blades
+//! ours draws in view. `--no-shadow-maps`:
 //! the sun casts no shadow map on either side (ours keeps its blade shadow mask). Both sides
 //! draw in still air; each measurement follows a few unmeasured frames.
 
@@ -102,8 +104,9 @@ fn parse_args() -> Args {
     };
     let mut preset = "gpu".to_string();
     let (mut distance, mut strata, mut size) = (None, None, None);
+    let mut transitions: Vec<TransitionDistances> = Vec::new();
     let mut it = std::env::args().skip(1);
-    let usage = "flags: [--preset gpu|quick] [--distance M] [--strata N] [--frames N] [--size WxH] [--ours-only] [--no-shadow-maps] [--screenshot DIR] [--stats FILE]";
+    let usage = "flags: [--preset gpu|quick] [--distance M] [--strata N] [--frames N] [--size WxH] [--transitions G0,G1,V0,V1]... [--ours-only] [--no-shadow-maps] [--screenshot DIR] [--stats FILE]";
     let fail = |m: String| -> ! {
         eprintln!("{m}; {usage}");
         std::process::exit(2)
@@ -145,6 +148,20 @@ fn parse_args() -> Args {
                     bevy_nature_harness::runner::parse_size(&value()).unwrap_or_else(|e| fail(e)),
                 )
             }
+            "--transitions" => {
+                let v: Vec<f32> = value()
+                    .split(',')
+                    .filter_map(|x| x.trim().parse::<f32>().ok())
+                    .collect();
+                let t = match v[..] {
+                    [a, b, c, d] => distances(a, b, c, d),
+                    _ => fail("--transitions takes min_geom,max_geom,min_btf,max_btf".into()),
+                };
+                if let Err(e) = t.validate() {
+                    fail(format!("--transitions: {e}"));
+                }
+                transitions.push(t);
+            }
             "--ours-only" => args.ours_only = true,
             "--no-shadow-maps" => args.no_shadow_maps = true,
             "--screenshot" => args.screenshots = Some(value().into()),
@@ -172,6 +189,9 @@ fn parse_args() -> Args {
             ];
         }
         other => fail(format!("unknown preset {other}")),
+    }
+    if !transitions.is_empty() {
+        args.ours_sweep = transitions;
     }
     args.distance = distance.unwrap_or(args.distance);
     args.strata = strata.unwrap_or(args.strata);

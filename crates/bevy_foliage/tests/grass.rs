@@ -630,65 +630,55 @@ fn transitions_keep_the_coverage_of_the_all_geometry_field() {
     assert!(worst_gain <= 0.2, "a region gained {worst_gain}");
 }
 
-/// The slice pass keeps, pixel for pixel, the horizontal-slice texels its CPU reference keeps:
-/// seen straight down from far enough that only the horizontal slice is drawn, each pixel
-/// centre on a texel centre, every cell's mirrored version, the density gradient and algorithm
-/// 1's opacity dithered under each quad's own shift (to within 0.1 % of the pixels: a shared
-/// threshold differs on 0.6 %); and lights them as `slice_shading::slice_radiance` does (the
-/// five baked directions blended by appendix A, the blade shadow mask, the ambient light as
-/// Bevy's PBR gives it to the blades), within 3 levels.
-#[test]
-fn slice_pass_keeps_the_texels_the_cpu_keeps() {
+/// The slice tests' scene, known light and no tone mapping so the colour can be checked: a 2 m
+/// field of [`species`] (its slices K = 2 at 32 texels a side, `density`), seen by an
+/// orthographic camera at `camera` over `view` metres, under a sun (no shadow maps) and an
+/// ambient light; stepped until the slices are baked and the pipelines ready.
+struct SliceScene {
+    bake: std::sync::Arc<bevy_foliage::grass::slice_format::SliceBake>,
+    to_light: Vec3,
+    sun: f32,
+    ambient: f32,
+    exposure: f32,
+}
+
+const SLICE_RESOLUTION: u32 = 32;
+
+fn slice_scene(
+    harness: &mut RenderHarness,
+    transitions: TransitionDistances,
+    density: Option<Image>,
+    camera: Transform,
+    view: f32,
+) -> SliceScene {
     use bevy::camera::Exposure;
     use bevy::core_pipeline::tonemapping::Tonemapping;
     use bevy_foliage::grass::bake::GrassSliceBakeResult;
-    use bevy_foliage::grass::mesh::HORIZONTAL_SLICE_LIFT;
-    use bevy_foliage::grass::slice_shading::{
-        blade_n_dot_v, fragment_opacity, light_in_patch, slice_point, slice_radiance,
-    };
-    use bevy_foliage::grass::slices::{LAYER_THRESHOLD, LAYER_UNLIT, SliceAxis};
-    use bevy_foliage::grass::transition::shifted_dither;
-    let Some(mut harness) = RenderHarness::for_test("grass_slice_pass", SIZE, SIZE) else {
-        return;
-    };
-    let resolution = 32u32;
-    let texel = 0.5 / resolution as f32;
-    let view = texel * SIZE as f32;
-    let far = TransitionDistances {
-        min_geom: 1.0,
-        max_geom: 2.0,
-        min_btf: 3.0,
-        max_btf: 4.0,
-        max_silhouettes: 5.0,
-        ..default()
-    };
     harness
         .app_mut()
         .add_plugins(GrassPlugin)
         .insert_resource(ClearColor(BACKGROUND))
         .insert_resource(GrassSettings {
-            transitions: far,
+            transitions,
             slice_per_axis: 2,
-            slice_resolution: resolution,
+            slice_resolution: SLICE_RESOLUTION,
             wind: still_air(),
             ..default()
         });
-    let density = add_image(&mut harness, gradient_image());
-    let species = species();
+    let density = density.map(|image| add_image(harness, image));
     harness.world_mut().spawn(GrassField {
         size: Vec2::splat(2.0),
-        species: species.clone(),
-        density: Some(density),
+        species: species(),
+        density,
         ground: None,
         ambient_occlusion: None,
     });
-    let camera = spawn_top_down_camera(&mut harness, view);
-    // Known light, no tone mapping: the colour is checked too.
+    let camera = spawn_ortho_camera(harness, camera, Vec2::splat(view));
     let to_light = Vec3::new(0.4, 0.8, -0.3).normalize();
-    let (illuminance, ambient) = (2000.0, 300.0);
+    let (sun, ambient) = (2000.0, 300.0);
     harness.world_mut().spawn((
         DirectionalLight {
-            illuminance,
+            illuminance: sun,
             shadow_maps_enabled: false,
             ..default()
         },
@@ -716,6 +706,84 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
     for _ in 0..4 {
         harness.step();
     }
+    SliceScene {
+        bake,
+        to_light,
+        sun,
+        ambient,
+        exposure: Exposure::default().exposure(),
+    }
+}
+
+/// How many of the pixels both the GPU and the CPU cover come within 3 levels of the CPU's
+/// radiance (linear, before the sRGB encoding), and of how many.
+fn colour_agreement(
+    image: &RgbaImage,
+    gpu: &[bool],
+    cpu: &[bool],
+    colour: &[Option<Vec3>],
+) -> (usize, usize) {
+    let encode = |v: f32| {
+        let v = v.clamp(0.0, 1.0);
+        let e = if v <= 0.0031308 {
+            12.92 * v
+        } else {
+            1.055 * v.powf(1.0 / 2.4) - 0.055
+        };
+        e * 255.0
+    };
+    let (mut both, mut close) = (0, 0);
+    for i in 0..(SIZE * SIZE) as usize {
+        let (true, true, Some(want)) = (gpu[i], cpu[i], colour[i]) else {
+            continue;
+        };
+        let got = image.pixel(i as u32 % SIZE, i as u32 / SIZE);
+        both += 1;
+        if (0..3).all(|k| (got[k] as f32 - encode(want[k])).abs() <= 3.0) {
+            close += 1;
+        }
+    }
+    (close, both)
+}
+
+/// The slice pass keeps, pixel for pixel, the horizontal-slice texels its CPU reference keeps:
+/// seen straight down from far enough that only the horizontal slice is drawn, each pixel
+/// centre on a texel centre, every cell's mirrored version, the density gradient and algorithm
+/// 1's opacity dithered under each quad's own shift (to within 0.1 % of the pixels: a shared
+/// threshold differs on 0.6 %); and lights them as `slice_shading::slice_radiance` does (the
+/// five baked directions blended by appendix A, the blade shadow mask, the ambient light as
+/// Bevy's PBR gives it to the blades), within 3 levels.
+#[test]
+fn slice_pass_keeps_the_texels_the_cpu_keeps() {
+    use bevy_foliage::grass::mesh::HORIZONTAL_SLICE_LIFT;
+    use bevy_foliage::grass::slice_shading::{
+        blade_n_dot_v, fragment_opacity, light_in_patch, slice_point, slice_radiance,
+    };
+    use bevy_foliage::grass::slices::{LAYER_THRESHOLD, LAYER_UNLIT, SliceAxis};
+    use bevy_foliage::grass::transition::shifted_dither;
+    let Some(mut harness) = RenderHarness::for_test("grass_slice_pass", SIZE, SIZE) else {
+        return;
+    };
+    let resolution = SLICE_RESOLUTION;
+    let texel = 0.5 / resolution as f32;
+    let view = texel * SIZE as f32;
+    let far = TransitionDistances {
+        min_geom: 1.0,
+        max_geom: 2.0,
+        min_btf: 3.0,
+        max_btf: 4.0,
+        max_silhouettes: 5.0,
+        ..default()
+    };
+    let species = species();
+    let scene = slice_scene(
+        &mut harness,
+        far,
+        Some(gradient_image()),
+        Transform::from_translation(EYE).looking_to(Vec3::NEG_Y, Vec3::NEG_Z),
+        view,
+    );
+    let (bake, to_light) = (&scene.bake, scene.to_light);
     let image = render_saved(&mut harness, "grass_slice_pass");
     let gpu = gpu_coverage(&image);
     let layout = bake.textures.layout;
@@ -724,7 +792,6 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
     let mut cpu = vec![false; (SIZE * SIZE) as usize];
     let mut colour = vec![None; (SIZE * SIZE) as usize];
     let mask = bake.textures.shadow_mask();
-    let exposure = Exposure::default().exposure();
     for py in 0..SIZE {
         for px in 0..SIZE {
             let p = Vec3::new(
@@ -769,11 +836,11 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
                 layer,
                 species.transmission,
                 blade_n_dot_v(SliceAxis::Horizontal, to_eye),
-                Vec3::splat(ambient),
-                Vec3::splat(illuminance),
+                Vec3::splat(scene.ambient),
+                Vec3::splat(scene.sun),
                 mask.light_through(HORIZONTAL_SLICE_LIFT, to_light, ld),
                 light_in_patch(to_light, sp.mirror),
-            ) * exposure;
+            ) * scene.exposure;
             colour[(py * SIZE + px) as usize] = Some(radiance);
         }
     }
@@ -783,28 +850,141 @@ fn slice_pass_keeps_the_texels_the_cpu_keeps() {
     assert!(c > 1500, "{c}");
     assert!(cl < 0.75 * cr, "{cl} vs {cr}");
     assert!(differ * 1000 < c, "{differ} px differ of {c}");
-    // The colour where both cover a pixel: the CPU's radiance, sRGB-encoded, within 3 levels.
-    let encode = |v: f32| {
-        let v = v.clamp(0.0, 1.0);
-        let e = if v <= 0.0031308 {
-            12.92 * v
-        } else {
-            1.055 * v.powf(1.0 / 2.4) - 0.055
-        };
-        e * 255.0
+    let (close, both) = colour_agreement(&image, &gpu, &cpu, &colour);
+    eprintln!("slice colour: {close} of {both} pixels within 3 levels of the CPU radiance");
+    assert!(close * 100 >= both * 95, "{close} of {both}");
+}
+
+/// The vertical slices, seen side on: an orthographic camera level with the field looks along
+/// −z through every slice across z (those across x and the horizontal slice are edge-on), and
+/// each pixel shows the nearest slice texel that algorithm 1's opacity keeps under that quad's
+/// own dither shift — the texels read bilinearly, as the GPU's sampler does, every cell's
+/// mirrored version and the eye's side of the slice — lit as `slice_radiance` lights it (the
+/// five baked directions of the side seen, the shadow mask at the texel's height, the ambient
+/// light at the blades' angle to the view). Within 0.5 % of the pixels (one dither threshold
+/// shared by every quad differs on 2.5 %) and 3 levels of colour.
+#[test]
+fn vertical_slices_show_the_nearest_texels_the_cpu_keeps() {
+    use bevy_foliage::grass::slice_shading::{
+        blade_n_dot_v, fragment_opacity, light_in_patch, slice_point, slice_radiance,
     };
-    let (mut both, mut close) = (0, 0);
-    for i in 0..(SIZE * SIZE) as usize {
-        let (true, true, Some(want)) = (gpu[i], cpu[i], colour[i]) else {
-            continue;
+    use bevy_foliage::grass::slices::{LAYER_THRESHOLD, LAYER_UNLIT, SliceAxis};
+    use bevy_foliage::grass::transition::shifted_dither;
+    let Some(mut harness) = RenderHarness::for_test("grass_vertical_slices", SIZE, SIZE) else {
+        return;
+    };
+    let res = SLICE_RESOLUTION;
+    // A pixel a texel wide; the view 1.5 m across, the ground a few pixels above its bottom.
+    let pixel = 0.5 / res as f32;
+    let view = pixel * SIZE as f32;
+    let eye = Vec3::new(0.0, view / 2.0 - 4.0 * pixel, 50.0);
+    // The vertical slices at full weight around 50 m (and the horizontal one, edge-on).
+    let side_on = TransitionDistances {
+        min_geom: 0.1,
+        max_geom: 0.2,
+        min_btf: 500.0,
+        max_btf: 600.0,
+        max_silhouettes: 700.0,
+        ..default()
+    };
+    let species = species();
+    let scene = slice_scene(
+        &mut harness,
+        side_on,
+        None,
+        Transform::from_translation(eye).looking_to(Vec3::NEG_Z, Vec3::Y),
+        view,
+    );
+    let image = render_saved(&mut harness, "grass_vertical_slices");
+    let gpu = gpu_coverage(&image);
+    let bake = &scene.bake;
+    let layout = bake.textures.layout;
+    let grid = field_grid(Vec2::ZERO, Vec2::splat(2.0), 0.5);
+    let k = layout.per_axis;
+    // Layer `l` of slice `s` at uv, bilinear between texel centres, clamped at the edges.
+    let bilinear = |s: u32, l: u32, uv: Vec2| -> [f32; 4] {
+        let texels = bake.textures.layer(s, l);
+        let t = uv * res as f32 - 0.5;
+        let base = t.floor();
+        let f = t - base;
+        let at = |dx: i32, dy: i32| {
+            let c = (base.x as i32 + dx).clamp(0, res as i32 - 1) as u32;
+            let r = (base.y as i32 + dy).clamp(0, res as i32 - 1) as u32;
+            texels[(r * res + c) as usize]
         };
-        let got = image.pixel(i as u32 % SIZE, i as u32 / SIZE);
-        both += 1;
-        if (0..3).all(|k| (got[k] as f32 - encode(want[k])).abs() <= 3.0) {
-            close += 1;
+        let (a, b, c, d) = (at(0, 0), at(1, 0), at(0, 1), at(1, 1));
+        std::array::from_fn(|i| {
+            let top = a[i] + (b[i] - a[i]) * f.x;
+            let bottom = c[i] + (d[i] - c[i]) * f.x;
+            top + (bottom - top) * f.y
+        })
+    };
+    let mask = bake.textures.shadow_mask();
+    let mut cpu = vec![false; (SIZE * SIZE) as usize];
+    let mut colour = vec![None; (SIZE * SIZE) as usize];
+    for py in 0..SIZE {
+        for px in 0..SIZE {
+            let (x, y) = (
+                eye.x - view / 2.0 + (px as f32 + 0.5) * pixel,
+                eye.y + view / 2.0 - (py as f32 + 0.5) * pixel,
+            );
+            if !(0.0..=layout.height).contains(&y) {
+                continue;
+            }
+            // The quads across z, nearest (largest z) first.
+            'quads: for cz in (0..4).rev() {
+                for slab in (0..k).rev() {
+                    let z = grid.origin.y + (cz as f32 + (slab as f32 + 0.5) / k as f32) * 0.5;
+                    let p = Vec3::new(x, y, z);
+                    let sp = slice_point(
+                        &layout,
+                        &grid,
+                        0.0,
+                        species.patch.seed,
+                        p,
+                        SliceAxis::Z,
+                        eye,
+                    );
+                    let to_eye = (eye - p).normalize();
+                    let coverage = bilinear(sp.slice, LAYER_UNLIT, sp.uv)[3];
+                    let dth = bilinear(sp.slice, LAYER_THRESHOLD, sp.uv)[0];
+                    let o = fragment_opacity(
+                        &side_on,
+                        SliceAxis::Z,
+                        coverage,
+                        dth,
+                        p.distance(eye),
+                        1.0,
+                        to_eye.y,
+                    );
+                    if !(o >= DISCARD && o > shifted_dither(px, py, sp.dither_key)) {
+                        continue;
+                    }
+                    cpu[(py * SIZE + px) as usize] = true;
+                    let radiance = slice_radiance(
+                        &sp,
+                        |l| bilinear(sp.slice, l, sp.uv),
+                        species.transmission,
+                        blade_n_dot_v(SliceAxis::Z, to_eye),
+                        Vec3::splat(scene.ambient),
+                        Vec3::splat(scene.sun),
+                        mask.light_through(y, scene.to_light, 1.0),
+                        light_in_patch(scene.to_light, sp.mirror),
+                    ) * scene.exposure;
+                    colour[(py * SIZE + px) as usize] = Some(radiance);
+                    break 'quads;
+                }
+            }
         }
     }
-    eprintln!("slice colour: {close} of {both} pixels within 3 levels of the CPU radiance");
+    let (differ, g, c) = compare(&gpu, &cpu);
+    eprintln!("vertical slices: differ {differ}, GPU {g} px, CPU {c} px");
+    assert!(c > 1000, "{c}");
+    assert!(differ * 200 < c, "{differ} px differ of {c}");
+    let (close, both) = colour_agreement(&image, &gpu, &cpu, &colour);
+    eprintln!(
+        "vertical slice colour: {close} of {both} pixels within 3 levels of the CPU radiance"
+    );
     assert!(close * 100 >= both * 95, "{close} of {both}");
 }
 
