@@ -5,7 +5,10 @@
 //! - **Screen Space Soft Shadows** (Gumbau 2011, ch. 6): a min-filtered shadow map gives the
 //!   blocker distance, eq. 6.2 the penumbra width in screen space, and a separable anisotropic
 //!   Gaussian blurs the hard shadow — O(2n) per pixel where PCSS is O(n²).
-//! - statistically filtered shadow maps and foliage shadows (each in its own module as it lands).
+//! - statistically filtered shadow maps (Gumbau 2011, ch. 7): so far their visibility functions
+//!   as plain Rust ([`filterable::visibility`]: the Gaussian and power CDFs beside variance,
+//!   exponential and four-moment shadow maps); the moment shadow pass and its sampling are not
+//!   there yet. Foliage shadows will get their own module.
 //!
 //! Every technique is measured against Bevy's own PCSS (`DirectionalLight::soft_shadow_size`,
 //! `SpotLight::soft_shadows_enabled`) and shadow filters.
@@ -32,6 +35,7 @@
 //! ```
 //!
 //! Modules: [`ssss`] (the algorithm as plain Rust — the CPU references — and its render passes),
+//! [`filterable`] (filtered shadow maps' visibility functions),
 //! [`reference`](mod@reference) (the area-light ground truth the tests and the benchmark measure against).
 //!
 //! Other materials receive SSSS by calling `apply_soft_shadow` from the WGSL module
@@ -85,6 +89,7 @@
 
 use bevy::prelude::*;
 
+pub mod filterable;
 pub mod reference;
 pub mod settings;
 pub mod ssss;

@@ -1,0 +1,9 @@
+//! Statistically filtered shadow maps (Gumbau 2011, ch. 7): shadow maps that store statistics
+//! of the occluders' depths, so they filter like textures — blurred once, mip-mapped, sampled
+//! with a filter as wide as the pixel's footprint at no extra cost per tap.
+//!
+//! [`visibility`] holds the visibility functions — the thesis' Gaussian CDF (eq. 7.4) and power
+//! CDF (eq. 7.6–7.7), and as baselines variance (Chebyshev), exponential and four-moment shadow
+//! maps — as plain Rust, the references of the shaders.
+
+pub mod visibility;
