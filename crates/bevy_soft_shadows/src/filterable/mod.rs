@@ -4,6 +4,9 @@
 //!
 //! [`visibility`] holds the visibility functions — the thesis' Gaussian CDF (eq. 7.4) and power
 //! CDF (eq. 7.6–7.7), and as baselines variance (Chebyshev), exponential and four-moment shadow
-//! maps — as plain Rust, the references of the shaders.
+//! maps — as plain Rust, the references of the shaders; [`filter`] how the map is made and
+//! read (texels of statistics, the separable Gaussian pre-filter, the mip chain, the trilinear
+//! read at the receiver's footprint).
 
+pub mod filter;
 pub mod visibility;
