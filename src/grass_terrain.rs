@@ -113,7 +113,7 @@ pub fn grass_ground_from_terrain(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use bevy_terrain_clip::builder::{BuildSettings, build_pyramid};
+    use bevy_terrain_clip::builder::{BuildSettings, build_height_pyramid};
     use bevy_terrain_clip::dem::{DiskHeightSource, HeightScale};
 
     /// Over a tilted plane's pyramid, the field's map holds the plane less the field's height at
@@ -125,13 +125,6 @@ mod tests {
         let (origin, mpt) = ([1000.0f64, 5000.0f64], 1.0f64);
         let plane = |x: f64, z: f64| 100.0 + 0.3 * (x - origin[0]) - 0.2 * (z - origin[1]);
         let scale = HeightScale::covering(0.0, 200.0);
-        let heights = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(96, 80, |i, j| {
-            let (x, z) = (
-                origin[0] + (i as f64 + 0.5) * mpt,
-                origin[1] + (j as f64 + 0.5) * mpt,
-            );
-            image::Luma([scale.value(plane(x, z) as f32)])
-        });
         let settings = BuildSettings {
             tile_size: 32,
             origin_m: origin,
@@ -139,7 +132,7 @@ mod tests {
             heights: scale,
             ..Default::default()
         };
-        build_pyramid(&heights, &dir, &settings, &|_, _| {}, None).unwrap();
+        build_height_pyramid(&dir, [96, 80], &settings, plane).unwrap();
         let mut query = HeightQuery::new(DiskHeightSource::open(&dir).unwrap(), 8);
         let field = Vec3::new(1040.0, 95.0, 5030.0);
         let size = Vec2::new(40.0, 30.0);

@@ -321,6 +321,27 @@ pub fn build_pyramid<P: PyramidTexel>(
     Ok(builder.report)
 }
 
+/// Builds (or resumes) a heightmap pyramid in `dir` from `height(x, z)` (metres at world
+/// `x, z`), sampled at the texel centres of a `size[0] × size[1]` grid whose north-west corner and
+/// texel size are `settings.origin_m` and `settings.metres_per_texel`, stored in 16 bits under
+/// `settings.heights` — a procedural or analytic ground as a pyramid, as a DEM would give it.
+pub fn build_height_pyramid(
+    dir: &Path,
+    size: [u32; 2],
+    settings: &BuildSettings,
+    height: impl Fn(f64, f64) -> f64,
+) -> Result<BuildReport, BuildError> {
+    let (origin, step) = (settings.origin_m, settings.metres_per_texel);
+    let image = ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(size[0], size[1], |i, j| {
+        let (x, z) = (
+            origin[0] + (i as f64 + 0.5) * step,
+            origin[1] + (j as f64 + 0.5) * step,
+        );
+        image::Luma([settings.heights.value(height(x, z) as f32)])
+    });
+    build_pyramid(&image, dir, settings, &|_, _| {}, None)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -494,13 +515,6 @@ mod tests {
         let (origin, mpt) = ([1000.0f64, 5000.0f64], 2.0f64);
         let plane = |x: f64, z: f64| 100.0 + 0.3 * (x - origin[0]) - 0.2 * (z - origin[1]);
         let scale = HeightScale::covering(0.0, 200.0);
-        let heights = ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(130, 100, |i, j| {
-            let centre = (
-                origin[0] + (i as f64 + 0.5) * mpt,
-                origin[1] + (j as f64 + 0.5) * mpt,
-            );
-            image::Luma([scale.value(plane(centre.0, centre.1) as f32)])
-        });
         let settings = BuildSettings {
             tile_size: 32,
             origin_m: origin,
@@ -508,7 +522,7 @@ mod tests {
             heights: scale,
             ..Default::default()
         };
-        build_pyramid(&heights, &dir, &settings, &|_, _| {}, None).unwrap();
+        build_height_pyramid(&dir, [130, 100], &settings, plane).unwrap();
         let mut query = HeightQuery::new(DiskHeightSource::open(&dir).unwrap(), 8);
         // Anywhere inside the image (a texel in from its edges), across tile boundaries: the
         // plane, to within the 16-bit step (a plane is exact under bilinear interpolation).
