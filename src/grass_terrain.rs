@@ -154,14 +154,14 @@ mod tests {
             }
         }
         assert!(worst <= scale.scale_m + 1e-3, "worst {worst} m");
-        // Half of it hanging off the pyramid's east edge (its finest level spans 128 m: the
-        // image's 96, padded).
-        let Err(off) = grass_ground_from_terrain(&mut query, field + Vec3::X * 100.0, size, texels)
+        // Half of it hanging off the data's east edge (x > 1096 m; the pyramid's padding
+        // beyond is not data).
+        let Err(off) = grass_ground_from_terrain(&mut query, field + Vec3::X * 60.0, size, texels)
         else {
             panic!("a field off the terrain read heights");
         };
         assert!(
-            matches!(off, TerrainGroundError::OutsideData { x, .. } if x > 1128.0),
+            matches!(off, TerrainGroundError::OutsideData { x, .. } if x > 1096.0),
             "{off}"
         );
         assert!(

@@ -297,6 +297,7 @@ pub fn build_pyramid<P: PyramidTexel>(
         texel: P::FORMAT,
         height_offset_m: settings.heights.offset_m,
         height_scale_m: settings.heights.scale_m,
+        extent_texels: Some([image.width(), image.height()]),
     };
     let problems = manifest.problems();
     if !problems.is_empty() {
@@ -538,9 +539,20 @@ mod tests {
         let len = (0.3f32 * 0.3 + 1.0 + 0.2 * 0.2).sqrt();
         let want = [-0.3 / len, 1.0 / len, 0.2 / len];
         assert!((0..3).all(|c| (n[c] - want[c]).abs() < 0.01), "{n:?}");
-        // Outside the pyramid: nothing.
+        // Outside the pyramid: nothing; nor in the padding that rounds the image's 260 × 200 m
+        // up to the pyramid's 512 m square, whose last texel centre of data is a texel in.
         assert_eq!(query.height_at(999.0, 5100.0).unwrap(), None);
         assert_eq!(query.height_at(1100.0, 5000.0 + 512.0 + 1.0).unwrap(), None);
+        assert_eq!(query.height_at(1000.0 + 260.5, 5100.0).unwrap(), None);
+        assert_eq!(query.height_at(1100.0, 5000.0 + 200.5).unwrap(), None);
+        let edge = query
+            .height_at(1000.0 + 259.5, 5000.0 + 199.5)
+            .unwrap()
+            .unwrap() as f64;
+        assert!(
+            (edge - plane(1259.0, 5199.0)).abs() <= scale.scale_m,
+            "{edge}"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 

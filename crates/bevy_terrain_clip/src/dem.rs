@@ -307,22 +307,28 @@ impl HeightQuery {
 
     /// The ground's height (m) at world `(x, z)`: bilinear between the four nearest texel
     /// centres of the finest level (clamped to the data at its edges); `None` outside the data
-    /// and where a finest-level tile is absent (outside a partial level's inset) — coarser
+    /// (the source image's extent, where the manifest records it — not the padding that rounds
+    /// the pyramid up to a power of two) and where a finest-level tile is absent (outside a partial level's inset) — coarser
     /// levels are not consulted yet.
     pub fn height_at(&mut self, x: f64, z: f64) -> Result<Option<f32>, TileError> {
         let manifest = self.source.manifest.clone();
         let fx = (x - manifest.origin_m[0]) / manifest.metres_per_texel - 0.5;
         let fz = (z - manifest.origin_m[1]) / manifest.metres_per_texel - 0.5;
-        let side = ((manifest.tile_size as i64) << (manifest.levels - 1)) as f64;
-        if !(fx >= -0.5 && fz >= -0.5 && fx < side - 0.5 && fz < side - 0.5) {
+        // The data: the source image's extent where the manifest records it (beyond, the
+        // pyramid's square is padding), else the whole finest level.
+        let side = (manifest.tile_size as i64) << (manifest.levels - 1);
+        let [w, h] = manifest
+            .extent_texels
+            .map_or([side, side], |[w, h]| [w as i64, h as i64]);
+        let (wf, hf) = (w as f64, h as f64);
+        if !(fx >= -0.5 && fz >= -0.5 && fx < wf - 0.5 && fz < hf - 0.5) {
             return Ok(None);
         }
-        let clamp = |v: f64| v.clamp(0.0, side - 1.0);
-        let (fx, fz) = (clamp(fx), clamp(fz));
+        let (fx, fz) = (fx.clamp(0.0, wf - 1.0), fz.clamp(0.0, hf - 1.0));
         let (i, j) = (fx.floor() as i64, fz.floor() as i64);
         let (tx, tz) = ((fx - i as f64) as f32, (fz - j as f64) as f32);
         let mut corner = |di: i64, dj: i64| -> Result<Option<f32>, TileError> {
-            let (ci, cj) = ((i + di).min(side as i64 - 1), (j + dj).min(side as i64 - 1));
+            let (ci, cj) = ((i + di).min(w - 1), (j + dj).min(h - 1));
             self.texel(ci, cj)
         };
         let (Some(h00), Some(h10), Some(h01), Some(h11)) =

@@ -130,6 +130,11 @@ pub struct PyramidManifest {
     /// `height16`: metres per stored unit.
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub height_scale_m: f64,
+    /// The source image's size in finest-level texels `[width, height]`, from the north-west
+    /// corner: the rest of the pyramid's square is padding, not data. Absent (older pyramids):
+    /// all of it is data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extent_texels: Option<[u32; 2]>,
 }
 
 /// Why a manifest was rejected.
@@ -185,6 +190,15 @@ impl PyramidManifest {
                 "height_offset_m {} and height_scale_m {} must be finite, the scale positive",
                 self.height_offset_m, self.height_scale_m
             ));
+        }
+        if let Some([w, h]) = self.extent_texels {
+            let side = (self.tile_size as u64) << self.levels.clamp(1, 24).saturating_sub(1);
+            if w == 0 || h == 0 || w as u64 > side || h as u64 > side {
+                p.push(format!(
+                    "extent_texels [{w}, {h}] must be positive and within the finest level's \
+                     {side} texels"
+                ));
+            }
         }
         if !self.origin_m.iter().all(|v| v.is_finite()) {
             p.push(format!("origin_m {:?} is not finite", self.origin_m));
@@ -289,6 +303,7 @@ mod tests {
             texel: TexelFormat::Rgba8,
             height_offset_m: 0.0,
             height_scale_m: 1.0,
+            extent_texels: None,
         }
     }
 
@@ -334,6 +349,22 @@ mod tests {
             e.contains("tile_size 300") && e.contains("partial level 5"),
             "{e}"
         );
+        // An extent wider than the finest level (256 · 2⁵ = 8192 texels), or empty.
+        for extent in [[8193, 100], [0, 100]] {
+            let wide = PyramidManifest {
+                extent_texels: Some(extent),
+                ..manifest()
+            };
+            assert!(
+                wide.problems().iter().any(|p| p.contains("extent_texels")),
+                "{extent:?}"
+            );
+        }
+        let fits = PyramidManifest {
+            extent_texels: Some([8192, 3000]),
+            ..manifest()
+        };
+        assert!(fits.problems().is_empty(), "{:?}", fits.problems());
         std::fs::write(dir.join(MANIFEST), "{ \"version\": 1 }").unwrap();
         let e = PyramidManifest::load(&dir).unwrap_err().to_string();
         assert!(e.contains("not a pyramid manifest"), "{e}");

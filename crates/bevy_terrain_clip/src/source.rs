@@ -538,6 +538,7 @@ mod tests {
             texel: Default::default(),
             height_offset_m: 0.0,
             height_scale_m: 1.0,
+            extent_texels: None,
         };
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(
