@@ -106,6 +106,7 @@ impl Plugin for SoftShadowsPlugin {
         app.register_type::<ScreenSpaceSoftShadows>()
             .add_systems(PreUpdate, settings::sanitize_soft_shadow_settings);
         ssss::build(app);
+        filterable::build(app);
     }
 }
 

@@ -6,7 +6,23 @@
 //! CDF (eq. 7.6–7.7), and as baselines variance (Chebyshev), exponential and four-moment shadow
 //! maps — as plain Rust, the references of the shaders; [`filter`] how the map is made and
 //! read (texels of statistics, the separable Gaussian pre-filter, the mip chain, the trilinear
-//! read at the receiver's footprint).
+//! read at the receiver's footprint). The WGSL module `bevy_soft_shadows::filterable_visibility`
+//! holds the same visibility functions for shaders (tested against these on the GPU).
 
 pub mod filter;
 pub mod visibility;
+
+use bevy::asset::{embedded_asset, load_embedded_asset};
+use bevy::prelude::*;
+
+/// Keeps the WGSL module `bevy_soft_shadows::filterable_visibility` loaded, so shaders may import
+/// it by path.
+#[derive(Resource)]
+#[allow(dead_code)]
+struct FilterableShaders(Handle<Shader>);
+
+pub(crate) fn build(app: &mut App) {
+    embedded_asset!(app, "filterable_visibility.wgsl");
+    let visibility: Handle<Shader> = load_embedded_asset!(app, "filterable_visibility.wgsl");
+    app.insert_resource(FilterableShaders(visibility));
+}
