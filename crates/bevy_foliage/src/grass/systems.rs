@@ -35,9 +35,10 @@ use std::time::Instant;
 pub const GEOMETRY_BLADES: DiagnosticPath = DiagnosticPath::const_new("grass/geometry_blades");
 /// Cells drawn with blade geometry this frame.
 pub const GEOMETRY_CELLS: DiagnosticPath = DiagnosticPath::const_new("grass/geometry_cells");
-/// Blocks of cells drawn as volume slices this frame.
+/// Blocks of cells drawn with their vertical and horizontal slices this frame.
 pub const SLICE_BLOCKS: DiagnosticPath = DiagnosticPath::const_new("grass/slice_blocks");
-/// Macro-cells drawn as horizontal slice this frame.
+/// Nodes drawn as horizontal slice alone this frame: macro-cells, and blocks where the vertical
+/// slices' weight is zero throughout.
 pub const MACRO_CELLS: DiagnosticPath = DiagnosticPath::const_new("grass/macro_cells");
 /// Milliseconds the cell walk and the entity updates took this frame (CPU).
 pub const SELECT_MS: DiagnosticPath = DiagnosticPath::const_new("grass/select_ms");
@@ -85,7 +86,7 @@ pub struct GrassFieldState {
     slice_bake: Entity,
     /// The slices, once baked.
     slices: Option<FieldSlices>,
-    /// Slice blocks and macro-cells drawn in the last frame.
+    /// Slice blocks and horizontal-only nodes (macro-cells and blocks) drawn in the last frame.
     pub slice_nodes: (u32, u32),
     /// Why the slices could not be baked (the field then draws blade geometry only).
     pub slice_error: Option<String>,
