@@ -5,10 +5,12 @@
 //! - **Screen Space Soft Shadows** (Gumbau 2011, ch. 6): a min-filtered shadow map gives the
 //!   blocker distance, eq. 6.2 the penumbra width in screen space, and a separable anisotropic
 //!   Gaussian blurs the hard shadow — O(2n) per pixel where PCSS is O(n²).
-//! - statistically filtered shadow maps (Gumbau 2011, ch. 7): so far their visibility functions
-//!   as plain Rust ([`filterable::visibility`]: the Gaussian and power CDFs beside variance,
-//!   exponential and four-moment shadow maps); the moment shadow pass and its sampling are not
-//!   there yet. Foliage shadows will get their own module.
+//! - statistically filtered shadow maps (Gumbau 2011, ch. 7), in progress: their visibility
+//!   functions ([`filterable::visibility`], and as WGSL: the Gaussian and power CDFs beside
+//!   variance, exponential and four-moment shadow maps), and a [`filterable::FilteredShadowMap`]
+//!   on a directional light resolves its cascades into a blurred, mip-mapped map of statistics
+//!   after the shadow passes ([`filterable::render`]). Receivers do not read it yet. Foliage
+//!   shadows will get their own module.
 //!
 //! Every technique is measured against Bevy's own PCSS (`DirectionalLight::soft_shadow_size`,
 //! `SpotLight::soft_shadows_enabled`) and shadow filters.

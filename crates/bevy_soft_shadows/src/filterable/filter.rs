@@ -11,9 +11,10 @@
 //! every depth the mean was made from.
 
 use super::visibility::{chebyshev, exponential, gaussian_cdf, hamburger_msm, power_cdf};
+use bevy::reflect::Reflect;
 
 /// Which statistics a filterable shadow map stores, and so which visibility function reads it.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Reflect)]
 pub enum FilterableMethod {
     /// The thesis' Gaussian CDF (eq. 7.4) over `(E[z], E[z²])`.
     GaussianCdf,

@@ -8,9 +8,19 @@
 //! read (texels of statistics, the separable Gaussian pre-filter, the mip chain, the trilinear
 //! read at the receiver's footprint). The WGSL module `bevy_soft_shadows::filterable_visibility`
 //! holds the same visibility functions for shaders (tested against these on the GPU).
+//!
+//! On the GPU so far: a [`FilteredShadowMap`] on a shadow-casting directional light makes
+//! [`render`] resolve every layer of Bevy's directional shadow texture into the method's
+//! statistics, blur them and build the mips, each frame after the shadow passes, into
+//! [`render::FilteredShadowTextures`] on the view (tested texel for texel against [`filter`]).
+//! No receiver reads the map yet.
 
 pub mod filter;
+pub mod render;
+pub mod settings;
 pub mod visibility;
+
+pub use settings::FilteredShadowMap;
 
 use bevy::asset::{embedded_asset, load_embedded_asset};
 use bevy::prelude::*;
@@ -24,5 +34,8 @@ struct FilterableShaders(Handle<Shader>);
 pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "filterable_visibility.wgsl");
     let visibility: Handle<Shader> = load_embedded_asset!(app, "filterable_visibility.wgsl");
-    app.insert_resource(FilterableShaders(visibility));
+    app.insert_resource(FilterableShaders(visibility))
+        .register_type::<FilteredShadowMap>()
+        .add_systems(PreUpdate, settings::sanitize_filtered_shadow_settings);
+    render::build(app);
 }

@@ -1,0 +1,109 @@
+//! The component that gives a directional light a filterable shadow map.
+
+use super::filter::FilterableMethod;
+use bevy::prelude::*;
+
+/// Put on a shadow-casting `DirectionalLight`: its cascades are resolved into a filterable
+/// shadow map of `method`'s statistics, blurred by a Gaussian of `blur_sigma` shadow-map texels
+/// and mip-mapped, every frame after the shadow passes (`FilteredShadowTextures` on each view).
+/// The first such light is served.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Reflect)]
+#[reflect(Component, Debug, PartialEq, Default)]
+pub struct FilteredShadowMap {
+    /// Which statistics the map holds, and so which visibility reads them.
+    pub method: FilterableMethod,
+    /// The pre-filter's standard deviation in shadow-map texels (0.05..=12).
+    pub blur_sigma: f32,
+}
+
+impl Default for FilteredShadowMap {
+    fn default() -> Self {
+        Self {
+            method: FilterableMethod::GaussianCdf,
+            blur_sigma: 1.5,
+        }
+    }
+}
+
+impl FilteredShadowMap {
+    /// The largest `blur_sigma`: its Gaussian's radius (⌈2.5σ⌉) fills the passes' 31 texels.
+    pub const MAX_BLUR_SIGMA: f32 = 12.0;
+    /// The smallest `blur_sigma`.
+    pub const MIN_BLUR_SIGMA: f32 = 0.05;
+
+    /// Valid settings and what was corrected: a non-finite σ becomes the default, an
+    /// out-of-range one is clamped; an exponential scale that is not finite and positive
+    /// becomes 80.
+    pub fn sanitized(&self) -> (Self, Vec<String>) {
+        let mut out = *self;
+        let mut fixes = Vec::new();
+        if !out.blur_sigma.is_finite() {
+            fixes.push(format!(
+                "blur_sigma = {} is not finite: using 1.5",
+                out.blur_sigma
+            ));
+            out.blur_sigma = 1.5;
+        } else if !(Self::MIN_BLUR_SIGMA..=Self::MAX_BLUR_SIGMA).contains(&out.blur_sigma) {
+            let clamped = out
+                .blur_sigma
+                .clamp(Self::MIN_BLUR_SIGMA, Self::MAX_BLUR_SIGMA);
+            fixes.push(format!(
+                "blur_sigma = {} is outside {}..={}: clamped to {clamped}",
+                out.blur_sigma,
+                Self::MIN_BLUR_SIGMA,
+                Self::MAX_BLUR_SIGMA
+            ));
+            out.blur_sigma = clamped;
+        }
+        if let FilterableMethod::Exponential { c } = out.method
+            && !(c.is_finite() && c > 0.0)
+        {
+            fixes.push(format!(
+                "the exponential's scale c = {c} must be positive: using 80"
+            ));
+            out.method = FilterableMethod::Exponential { c: 80.0 };
+        }
+        (out, fixes)
+    }
+}
+
+/// Replaces unusable [`FilteredShadowMap`] settings in place, with a warning naming each fix.
+pub(crate) fn sanitize_filtered_shadow_settings(
+    mut lights: Query<(Entity, &mut FilteredShadowMap), Changed<FilteredShadowMap>>,
+) {
+    for (entity, mut settings) in &mut lights {
+        let (fixed, fixes) = settings.sanitized();
+        if !fixes.is_empty() {
+            warn!("FilteredShadowMap on {entity}: {}", fixes.join("; "));
+            *settings = fixed;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_settings_are_corrected() {
+        let (fixed, fixes) = FilteredShadowMap {
+            method: FilterableMethod::Exponential { c: f32::NAN },
+            blur_sigma: 100.0,
+        }
+        .sanitized();
+        assert_eq!(fixed.blur_sigma, FilteredShadowMap::MAX_BLUR_SIGMA);
+        assert_eq!(fixed.method, FilterableMethod::Exponential { c: 80.0 });
+        assert_eq!(fixes.len(), 2, "{fixes:?}");
+        let good = FilteredShadowMap::default();
+        assert_eq!(good.sanitized(), (good, vec![]));
+        assert_eq!(
+            FilteredShadowMap {
+                blur_sigma: f32::INFINITY,
+                ..good
+            }
+            .sanitized()
+            .0,
+            good
+        );
+    }
+}

@@ -1,0 +1,163 @@
+//! The filterable shadow map's passes on the GPU against their CPU reference
+//! (`filterable::filter`): the pole scene's sun (one cascade, a 256² map) resolved into texels
+//! of statistics, blurred by a Gaussian and mip-mapped; the GPU's blurred map and every mip equal
+//! what `blur` and `mip_chain` make of the GPU's own resolved texels, for each method.
+
+mod common;
+
+use bevy::light::DirectionalLightShadowMap;
+use bevy::prelude::*;
+use bevy::render::RenderApp;
+use bevy::render::render_resource::{
+    BufferDescriptor, BufferUsages, CommandEncoderDescriptor, Extent3d, Origin3d,
+    TexelCopyBufferInfo, TexelCopyBufferLayout, TexelCopyTextureInfo, Texture, TextureAspect,
+};
+use bevy::render::renderer::{RenderDevice, RenderQueue};
+use bevy_nature_harness::RenderHarness;
+use bevy_nature_harness::headless::read_buffer_now;
+use bevy_soft_shadows::SoftShadowsPlugin;
+use bevy_soft_shadows::filterable::FilteredShadowMap;
+use bevy_soft_shadows::filterable::filter::{FilterableMethod, MomentMap, blur, mip_chain};
+use bevy_soft_shadows::filterable::render::FilteredShadowTextures;
+use common::*;
+
+/// Layer 0 of mip `level` of `texture` (`Rgba32Float`), read back.
+fn read_level(
+    device: &RenderDevice,
+    queue: &RenderQueue,
+    texture: &Texture,
+    level: u32,
+) -> MomentMap {
+    let size = texture
+        .size()
+        .mip_level_size(level, bevy::render::render_resource::TextureDimension::D2);
+    let row = (size.width * 16).div_ceil(256) * 256;
+    let buffer = device.create_buffer(&BufferDescriptor {
+        label: Some("filtered_shadow_readback"),
+        size: (row * size.height) as u64,
+        usage: BufferUsages::COPY_DST | BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor { label: None });
+    encoder.copy_texture_to_buffer(
+        TexelCopyTextureInfo {
+            texture,
+            mip_level: level,
+            origin: Origin3d::ZERO,
+            aspect: TextureAspect::All,
+        },
+        TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(size.height),
+            },
+        },
+        Extent3d {
+            depth_or_array_layers: 1,
+            ..size
+        },
+    );
+    queue.submit([encoder.finish()]);
+    let bytes = read_buffer_now(device, queue, &buffer).expect("readback");
+    let mut texels = Vec::with_capacity((size.width * size.height) as usize);
+    for y in 0..size.height {
+        for x in 0..size.width {
+            let at = (y * row + x * 16) as usize;
+            texels.push(std::array::from_fn(|c| {
+                f32::from_le_bytes(bytes[at + 4 * c..at + 4 * c + 4].try_into().unwrap())
+            }));
+        }
+    }
+    MomentMap {
+        width: size.width,
+        height: size.height,
+        texels,
+    }
+}
+
+#[test]
+fn the_gpu_blurs_and_mips_the_statistics_as_the_cpu_does() {
+    for method in [
+        FilterableMethod::Moments4,
+        FilterableMethod::PowerCdf,
+        FilterableMethod::Exponential { c: 20.0 },
+    ] {
+        let Some(mut harness) = RenderHarness::for_test("filtered_shadow_map", 32, 32) else {
+            return;
+        };
+        harness.app_mut().add_plugins(SoftShadowsPlugin);
+        setup(&mut harness);
+        harness
+            .world_mut()
+            .insert_resource(DirectionalLightShadowMap { size: 256 });
+        let sigma = 1.5;
+        let sun = sun_entity(&mut harness);
+        harness
+            .world_mut()
+            .entity_mut(sun)
+            .insert(FilteredShadowMap {
+                method,
+                blur_sigma: sigma,
+            });
+        harness.wait_until_ready().expect("pipelines");
+        for _ in 0..3 {
+            harness.step();
+        }
+        let render_world = harness.app().get_sub_app(RenderApp).unwrap().world();
+        let device = render_world.resource::<RenderDevice>();
+        let queue = render_world.resource::<RenderQueue>();
+        let mut textures = render_world
+            .try_query::<&FilteredShadowTextures>()
+            .expect("the component is registered");
+        let textures = textures
+            .iter(render_world)
+            .next()
+            .expect("a view with the map");
+        let raw = read_level(device, queue, &textures.raw.texture, 0);
+        assert_eq!((raw.width, raw.height), (256, 256));
+        // The resolve: the pole nearer the sun than the ground, each texel its encoding.
+        let depths: Vec<f32> = raw
+            .texels
+            .iter()
+            .map(|t| match method {
+                FilterableMethod::Exponential { c } => t[0].ln() / c,
+                _ => t[0],
+            })
+            .collect();
+        for (t, &z) in raw.texels.iter().zip(&depths) {
+            let want = method.encode(z);
+            for c in 0..4 {
+                assert!(
+                    (t[c] - want[c]).abs() <= 1e-5 * want[c].abs().max(1.0),
+                    "{method:?}: {t:?}"
+                );
+            }
+        }
+        let (lo, hi) = depths
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &z| {
+                (a.min(z), b.max(z))
+            });
+        assert!(hi - lo > 0.05, "{method:?}: one depth only ({lo}..{hi})");
+        // The blur and every mip against the CPU's, from the GPU's own resolved texels.
+        let chain = mip_chain(&blur(&raw, method, sigma), method);
+        let levels = textures.mip_views.len() as u32;
+        assert_eq!(levels as usize, chain.len());
+        let mut worst = 0.0f32;
+        for level in 0..levels {
+            let gpu = read_level(device, queue, &textures.moments.texture, level);
+            let cpu = &chain[level as usize];
+            assert_eq!((gpu.width, gpu.height), (cpu.width, cpu.height));
+            for (g, c) in gpu.texels.iter().zip(&cpu.texels) {
+                for k in 0..4 {
+                    let d = (g[k] - c[k]).abs() / c[k].abs().max(1.0);
+                    worst = worst.max(d);
+                }
+            }
+        }
+        eprintln!("{method:?}: {levels} levels, worst relative difference {worst:e}");
+        assert!(worst < 1e-4, "{method:?}: {worst}");
+    }
+}
