@@ -32,10 +32,17 @@ use bevy::prelude::*;
 struct FilterableShaders(Handle<Shader>);
 
 pub(crate) fn build(app: &mut App) {
+    app.register_type::<FilteredShadowMap>()
+        .add_systems(PreUpdate, settings::sanitize_filtered_shadow_settings);
+    if !app
+        .world()
+        .contains_resource::<bevy::asset::io::embedded::EmbeddedAssetRegistry>()
+    {
+        // SSSS's build warns once for the plugin; nothing renders without the asset server.
+        return;
+    }
     embedded_asset!(app, "filterable_visibility.wgsl");
     let visibility: Handle<Shader> = load_embedded_asset!(app, "filterable_visibility.wgsl");
-    app.insert_resource(FilterableShaders(visibility))
-        .register_type::<FilteredShadowMap>()
-        .add_systems(PreUpdate, settings::sanitize_filtered_shadow_settings);
+    app.insert_resource(FilterableShaders(visibility));
     render::build(app);
 }

@@ -106,4 +106,20 @@ mod tests {
             good
         );
     }
+
+    #[test]
+    fn the_plugin_clamps_the_component_on_a_light() {
+        let mut app = App::new();
+        app.add_plugins(crate::SoftShadowsPlugin);
+        let light = app
+            .world_mut()
+            .spawn(FilteredShadowMap {
+                blur_sigma: -3.0,
+                ..default()
+            })
+            .id();
+        app.update();
+        let fixed = app.world().get::<FilteredShadowMap>(light).unwrap();
+        assert_eq!(fixed.blur_sigma, FilteredShadowMap::MIN_BLUR_SIGMA);
+    }
 }
