@@ -7,6 +7,12 @@ use bevy::prelude::*;
 /// shadow map of `method`'s statistics, blurred by a Gaussian of `blur_sigma` shadow-map texels
 /// and mip-mapped, every frame after the shadow passes (`FilteredShadowTextures` on each view).
 /// The first such light is served.
+///
+/// In progress: no receiver reads the map yet, and it costs memory — three `Rgba32Float`
+/// textures as large as Bevy's whole directional shadow texture (the resolved texels, the blur's
+/// scratch and the mip-mapped map): with the default 2048² maps and four cascades, about
+/// 0.9 GB. Per-method formats (two channels for VSM and the Gaussian CDF, one for ESM, 16 bits
+/// for the power CDF) are to come.
 #[derive(Component, Clone, Copy, Debug, PartialEq, Reflect)]
 #[reflect(Component, Debug, PartialEq, Default)]
 pub struct FilteredShadowMap {
