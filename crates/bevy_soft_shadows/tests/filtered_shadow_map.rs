@@ -1,7 +1,8 @@
 //! The filterable shadow map's passes on the GPU against their CPU reference
 //! (`filterable::filter`): the pole scene's sun (one cascade, a 256² map) resolved into texels
 //! of statistics, blurred by a Gaussian and mip-mapped; the GPU's blurred map and every mip equal
-//! what `blur` and `mip_chain` make of the GPU's own resolved texels, for each method.
+//! what `blur` and `mip_chain` make of the GPU's own resolved texels, for a method of each
+//! texel format (one, two and four channels).
 
 mod common;
 
@@ -11,6 +12,7 @@ use bevy::render::RenderApp;
 use bevy::render::render_resource::{
     BufferDescriptor, BufferUsages, CommandEncoderDescriptor, Extent3d, Origin3d,
     TexelCopyBufferInfo, TexelCopyBufferLayout, TexelCopyTextureInfo, Texture, TextureAspect,
+    TextureFormat,
 };
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy_nature_harness::RenderHarness;
@@ -18,10 +20,11 @@ use bevy_nature_harness::headless::read_buffer_now;
 use bevy_soft_shadows::SoftShadowsPlugin;
 use bevy_soft_shadows::filterable::FilteredShadowMap;
 use bevy_soft_shadows::filterable::filter::{FilterableMethod, MomentMap, blur, mip_chain};
-use bevy_soft_shadows::filterable::render::FilteredShadowTextures;
+use bevy_soft_shadows::filterable::render::{FilteredShadowTextures, texel_format};
 use common::*;
 
-/// Layer 0 of mip `level` of `texture` (`Rgba32Float`), read back.
+/// Layer 0 of mip `level` of `texture` (one, two or four 32-bit float channels), read back as
+/// four channels (the missing ones 0).
 fn read_level(
     device: &RenderDevice,
     queue: &RenderQueue,
@@ -31,7 +34,14 @@ fn read_level(
     let size = texture
         .size()
         .mip_level_size(level, bevy::render::render_resource::TextureDimension::D2);
-    let row = (size.width * 16).div_ceil(256) * 256;
+    let channels = match texture.format() {
+        TextureFormat::R32Float => 1,
+        TextureFormat::Rg32Float => 2,
+        TextureFormat::Rgba32Float => 4,
+        other => panic!("unexpected format {other:?}"),
+    };
+    let texel_bytes = 4 * channels;
+    let row = (size.width * texel_bytes).div_ceil(256) * 256;
     let buffer = device.create_buffer(&BufferDescriptor {
         label: Some("filtered_shadow_readback"),
         size: (row * size.height) as u64,
@@ -64,9 +74,13 @@ fn read_level(
     let mut texels = Vec::with_capacity((size.width * size.height) as usize);
     for y in 0..size.height {
         for x in 0..size.width {
-            let at = (y * row + x * 16) as usize;
+            let at = (y * row + x * texel_bytes) as usize;
             texels.push(std::array::from_fn(|c| {
-                f32::from_le_bytes(bytes[at + 4 * c..at + 4 * c + 4].try_into().unwrap())
+                if c < channels as usize {
+                    f32::from_le_bytes(bytes[at + 4 * c..at + 4 * c + 4].try_into().unwrap())
+                } else {
+                    0.0
+                }
             }));
         }
     }
@@ -82,6 +96,7 @@ fn the_gpu_blurs_and_mips_the_statistics_as_the_cpu_does() {
     for method in [
         FilterableMethod::Moments4,
         FilterableMethod::PowerCdf,
+        FilterableMethod::GaussianCdf,
         FilterableMethod::Exponential { c: 20.0 },
     ] {
         let Some(mut harness) = RenderHarness::for_test("filtered_shadow_map", 32, 32) else {
@@ -115,6 +130,7 @@ fn the_gpu_blurs_and_mips_the_statistics_as_the_cpu_does() {
             .iter(render_world)
             .next()
             .expect("a view with the map");
+        assert_eq!(textures.format, texel_format(method));
         let raw = read_level(device, queue, &textures.raw.texture, 0);
         assert_eq!((raw.width, raw.height), (256, 256));
         // The resolve: the pole nearer the sun than the ground, each texel its encoding.

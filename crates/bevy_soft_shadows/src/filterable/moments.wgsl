@@ -15,7 +15,16 @@ struct MomentParams {
 
 @group(0) @binding(0) var shadow_depth: texture_depth_2d_array;
 @group(0) @binding(1) var source: texture_2d_array<f32>;
+// Each method's statistics in as few channels as they need.
+#ifdef FORMAT_R32
+@group(0) @binding(2) var destination: texture_storage_2d_array<r32float, write>;
+#else
+#ifdef FORMAT_RG32
+@group(0) @binding(2) var destination: texture_storage_2d_array<rg32float, write>;
+#else
 @group(0) @binding(2) var destination: texture_storage_2d_array<rgba32float, write>;
+#endif
+#endif
 @group(0) @binding(3) var<uniform> params: MomentParams;
 
 const POWER_CDF: u32 = 1u;

@@ -1,7 +1,8 @@
 //! The render-world side of filterable shadow maps: after the shadow passes, each layer of
 //! Bevy's directional shadow texture is resolved into a texel of statistics per depth, blurred
 //! by a separable Gaussian and mip-mapped (`moments.wgsl`; `filter` is the CPU reference), into
-//! [`FilteredShadowTextures`] on the view. Receivers do not read it yet.
+//! [`FilteredShadowTextures`] on the view, in the method's [`texel_format`]. Receivers do not
+//! read it yet.
 
 use super::filter::{FilterableMethod, gaussian_weights};
 use super::settings::FilteredShadowMap;
@@ -58,15 +59,45 @@ impl MomentParams {
     }
 }
 
+/// The texel format holding `method`'s statistics: as few channels as they need — one for ESM,
+/// two for VSM and the Gaussian CDF, four for the power CDF's mean and range and for four
+/// moments.
+pub fn texel_format(method: FilterableMethod) -> TextureFormat {
+    match method {
+        FilterableMethod::Exponential { .. } => TextureFormat::R32Float,
+        FilterableMethod::GaussianCdf | FilterableMethod::Variance => TextureFormat::Rg32Float,
+        FilterableMethod::PowerCdf | FilterableMethod::Moments4 => TextureFormat::Rgba32Float,
+    }
+}
+
+/// The shader def that declares `format` as the passes' destination in `moments.wgsl`.
+fn format_def(format: TextureFormat) -> &'static str {
+    match format {
+        TextureFormat::R32Float => "FORMAT_R32",
+        TextureFormat::Rg32Float => "FORMAT_RG32",
+        _ => "FORMAT_RGBA32",
+    }
+}
+
+/// The formats [`texel_format`] uses, in the order of [`MomentPipelines::by_format`].
+const FORMATS: [TextureFormat; 3] = [
+    TextureFormat::R32Float,
+    TextureFormat::Rg32Float,
+    TextureFormat::Rgba32Float,
+];
+
 /// The filtered shadow map of the first directional light with [`FilteredShadowMap`], as
 /// extracted.
 #[derive(Resource, Default, Clone, Copy)]
 struct ExtractedFilteredShadow(Option<(FilterableMethod, f32)>);
 
 /// A view's filterable shadow map: `raw` the resolved statistics (one layer per layer of Bevy's
-/// directional shadow texture), `moments` the blurred map with its mips (`Rgba32Float`).
+/// directional shadow texture), `moments` the blurred map with its mips, in the method's
+/// [`texel_format`].
 #[derive(Component)]
 pub struct FilteredShadowTextures {
+    /// The texel format of all three.
+    pub format: TextureFormat,
     /// The statistics of each depth, before the blur.
     pub raw: CachedTexture,
     /// The horizontal pass's output.
@@ -77,13 +108,28 @@ pub struct FilteredShadowTextures {
     pub mip_views: Vec<TextureView>,
 }
 
-#[derive(Resource)]
-struct MomentPipelines {
+/// The passes for one texel format.
+struct FormatPipelines {
     layout: BindGroupLayoutDescriptor,
     resolve: CachedComputePipelineId,
     blur_horizontal: CachedComputePipelineId,
     blur_vertical: CachedComputePipelineId,
     downsample: CachedComputePipelineId,
+}
+
+#[derive(Resource)]
+struct MomentPipelines {
+    /// One set per format of [`FORMATS`].
+    by_format: Vec<FormatPipelines>,
+}
+
+impl MomentPipelines {
+    fn of(&self, format: TextureFormat) -> Option<&FormatPipelines> {
+        FORMATS
+            .iter()
+            .position(|f| *f == format)
+            .map(|i| &self.by_format[i])
+    }
 }
 
 #[derive(Resource, Default)]
@@ -94,38 +140,43 @@ fn init_pipelines(
     pipeline_cache: Res<PipelineCache>,
     asset_server: Res<AssetServer>,
 ) {
-    let layout = BindGroupLayoutDescriptor::new(
-        "filtered_shadow_layout",
-        &BindGroupLayoutEntries::sequential(
-            ShaderStages::COMPUTE,
-            (
-                texture_2d_array(TextureSampleType::Depth),
-                texture_2d_array(TextureSampleType::Float { filterable: false }),
-                texture_storage_2d_array(
-                    TextureFormat::Rgba32Float,
-                    StorageTextureAccess::WriteOnly,
-                ),
-                uniform_buffer::<MomentParams>(false),
-            ),
-        ),
-    );
     let shader = load_embedded_asset!(asset_server.as_ref(), "moments.wgsl");
-    let queue = |entry: &'static str| {
-        pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
-            label: Some(format!("filtered_shadow_{entry}").into()),
-            layout: vec![layout.clone()],
-            shader: shader.clone(),
-            entry_point: Some(entry.into()),
-            ..default()
+    let by_format = FORMATS
+        .iter()
+        .map(|&format| {
+            let def = format_def(format);
+            let layout = BindGroupLayoutDescriptor::new(
+                "filtered_shadow_layout",
+                &BindGroupLayoutEntries::sequential(
+                    ShaderStages::COMPUTE,
+                    (
+                        texture_2d_array(TextureSampleType::Depth),
+                        texture_2d_array(TextureSampleType::Float { filterable: false }),
+                        texture_storage_2d_array(format, StorageTextureAccess::WriteOnly),
+                        uniform_buffer::<MomentParams>(false),
+                    ),
+                ),
+            );
+            let queue = |entry: &'static str| {
+                pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
+                    label: Some(format!("filtered_shadow_{entry}_{def}").into()),
+                    layout: vec![layout.clone()],
+                    shader: shader.clone(),
+                    shader_defs: vec![def.into()],
+                    entry_point: Some(entry.into()),
+                    ..default()
+                })
+            };
+            FormatPipelines {
+                resolve: queue("resolve"),
+                blur_horizontal: queue("blur_horizontal"),
+                blur_vertical: queue("blur_vertical"),
+                downsample: queue("downsample"),
+                layout,
+            }
         })
-    };
-    commands.insert_resource(MomentPipelines {
-        resolve: queue("resolve"),
-        blur_horizontal: queue("blur_horizontal"),
-        blur_vertical: queue("blur_vertical"),
-        downsample: queue("downsample"),
-        layout,
-    });
+        .collect();
+    commands.insert_resource(MomentPipelines { by_format });
 }
 
 fn extract_filtered_shadow(
@@ -156,6 +207,7 @@ fn prepare_textures(
         }
         return;
     };
+    let format = texel_format(method);
     params.0.set(MomentParams::new(method, sigma));
     params.0.write_buffer(&device, &queue);
     for (entity, shadows) in &views {
@@ -175,7 +227,7 @@ fn prepare_textures(
                     mip_level_count,
                     sample_count: 1,
                     dimension: TextureDimension::D2,
-                    format: TextureFormat::Rgba32Float,
+                    format,
                     usage: TextureUsages::STORAGE_BINDING
                         | TextureUsages::TEXTURE_BINDING
                         | TextureUsages::COPY_SRC,
@@ -198,6 +250,7 @@ fn prepare_textures(
             })
             .collect();
         commands.entity(entity).insert(FilteredShadowTextures {
+            format,
             raw,
             scratch,
             moments,
@@ -221,6 +274,9 @@ fn filtered_shadow(
     mut ctx: RenderContext,
 ) {
     let (shadows, textures) = view.into_inner();
+    let Some(pipelines) = pipelines.of(textures.format) else {
+        return;
+    };
     let (Some(resolve), Some(blur_h), Some(blur_v), Some(downsample), Some(binding)) = (
         pipeline_cache.get_compute_pipeline(pipelines.resolve),
         pipeline_cache.get_compute_pipeline(pipelines.blur_horizontal),

@@ -8,11 +8,11 @@ use bevy::prelude::*;
 /// and mip-mapped, every frame after the shadow passes (`FilteredShadowTextures` on each view).
 /// The first such light is served.
 ///
-/// In progress: no receiver reads the map yet, and it costs memory — three `Rgba32Float`
-/// textures as large as Bevy's whole directional shadow texture (the resolved texels, the blur's
-/// scratch and the mip-mapped map): with the default 2048² maps and four cascades, about
-/// 0.9 GB. Per-method formats (two channels for VSM and the Gaussian CDF, one for ESM, 16 bits
-/// for the power CDF) are to come.
+/// In progress: no receiver reads the map yet, and it costs memory — three textures as large as
+/// Bevy's whole directional shadow texture (the resolved texels, the blur's scratch and the
+/// mip-mapped map), 32-bit floats in as many channels as the method needs: with the default
+/// 2048² maps and four cascades, about 0.22 GB for ESM, 0.45 GB for VSM and the Gaussian CDF,
+/// 0.9 GB for the power CDF and four moments (16-bit storage is to come).
 #[derive(Component, Clone, Copy, Debug, PartialEq, Reflect)]
 #[reflect(Component, Debug, PartialEq, Default)]
 pub struct FilteredShadowMap {
