@@ -83,7 +83,8 @@
 //! `ssss/segment_filter` (which form of the filter runs,
 //! [`SsssDilationFilter`](ssss::render::SsssDilationFilter)); with Bevy's
 //! `RenderDiagnosticsPlugin`, the GPU time of the `ssss` span and of its passes (`ssss_reduce`,
-//! `ssss_dilate`, `ssss_distance`, `ssss_blur_h`, `ssss_blur_v`).
+//! `ssss_dilate`, `ssss_distance`, `ssss_blur_h`, `ssss_blur_v`), and of the filtered shadow
+//! map's passes (`filtered_shadow`).
 //!
 //! Limits: one SSSS light (a directional light if one has the component — the first
 //! shadow-casting directional light in Bevy's order — else the first spot light with it, else

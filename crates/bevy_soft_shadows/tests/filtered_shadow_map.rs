@@ -117,8 +117,16 @@ fn the_gpu_blurs_and_mips_the_statistics_as_the_cpu_does() {
                 blur_sigma: sigma,
             });
         harness.wait_until_ready().expect("pipelines");
+        harness.reset_timing();
         for _ in 0..3 {
             harness.step();
+        }
+        // The passes' GPU time is recorded, where the adapter has timestamps.
+        if harness.has_gpu_timestamps() {
+            let ms = harness
+                .gpu_pass_time_ms("filtered_shadow")
+                .expect("a timed span");
+            assert!(ms >= 0.0, "{ms}");
         }
         let render_world = harness.app().get_sub_app(RenderApp).unwrap().world();
         let device = render_world.resource::<RenderDevice>();

@@ -10,6 +10,7 @@ use bevy::asset::{embedded_asset, load_embedded_asset};
 use bevy::core_pipeline::{Core3d, Core3dSystems};
 use bevy::pbr::{LATE_SHADOW_PASS, ViewShadowBindings, per_view_shadow_pass};
 use bevy::prelude::*;
+use bevy::render::diagnostic::RecordDiagnostics;
 use bevy::render::render_resource::binding_types::{
     texture_2d_array, texture_storage_2d_array, uniform_buffer,
 };
@@ -317,12 +318,16 @@ fn filtered_shadow(
             size,
         ));
     }
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
     let mut pass = ctx
         .command_encoder()
         .begin_compute_pass(&ComputePassDescriptor {
             label: Some("filtered_shadow"),
             timestamp_writes: None,
         });
+    // GPU time as `render/filtered_shadow/elapsed_gpu` with Bevy's `RenderDiagnosticsPlugin`.
+    let span = diagnostics.pass_span(&mut pass, "filtered_shadow");
     for (pipeline, group, size) in &steps {
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, group, &[]);
@@ -332,6 +337,7 @@ fn filtered_shadow(
             size.depth_or_array_layers,
         );
     }
+    span.end(&mut pass);
 }
 
 /// Registers the render-world side.
