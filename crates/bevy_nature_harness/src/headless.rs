@@ -26,7 +26,8 @@ use bevy::render::gpu_readback::{Readback, ReadbackComplete};
 use bevy::render::pipelined_rendering::PipelinedRenderingPlugin;
 use bevy::render::render_resource::{
     Buffer, BufferDescriptor, BufferUsages, CachedPipelineState, CommandEncoderDescriptor,
-    PipelineCache, TextureFormat, TextureUsages,
+    Extent3d, Origin3d, PipelineCache, TexelCopyBufferInfo, TexelCopyBufferLayout,
+    TexelCopyTextureInfo, Texture, TextureAspect, TextureDimension, TextureFormat, TextureUsages,
 };
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy::render::storage::ShaderBuffer;
@@ -640,6 +641,61 @@ impl RenderHarness {
         }
         Err(HarnessError::ReadbackTimeout(30))
     }
+}
+
+/// Reads back layers `0..layers` of mip `mip` of a 2D (array) `texture` whose texels are
+/// `texel_bytes` long: copies them into a buffer, submits, blocks until it is mapped, and returns
+/// the texels tightly packed — row after row, layer after layer, without the copy's 256-byte row
+/// padding.
+pub fn read_texture_now(
+    device: &RenderDevice,
+    queue: &RenderQueue,
+    texture: &Texture,
+    mip: u32,
+    layers: u32,
+    texel_bytes: u32,
+) -> Result<Vec<u8>, HarnessError> {
+    let size = texture.size().mip_level_size(mip, TextureDimension::D2);
+    let tight = size.width * texel_bytes;
+    let align = wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let padded = tight.div_ceil(align) * align;
+    let buffer = device.create_buffer(&BufferDescriptor {
+        label: Some("harness_texture_readback"),
+        size: (padded * size.height * layers) as u64,
+        usage: BufferUsages::COPY_DST | BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor {
+        label: Some("harness_texture_readback"),
+    });
+    encoder.copy_texture_to_buffer(
+        TexelCopyTextureInfo {
+            texture,
+            mip_level: mip,
+            origin: Origin3d::ZERO,
+            aspect: TextureAspect::All,
+        },
+        TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded),
+                rows_per_image: Some(size.height),
+            },
+        },
+        Extent3d {
+            width: size.width,
+            height: size.height,
+            depth_or_array_layers: layers,
+        },
+    );
+    queue.submit([encoder.finish()]);
+    let bytes = read_buffer_now(device, queue, &buffer)?;
+    Ok(bytes
+        .chunks_exact(padded as usize)
+        .flat_map(|row| &row[..tight as usize])
+        .copied()
+        .collect())
 }
 
 /// Copies `buffer` into a staging buffer, submits, and blocks until it is mapped.

@@ -9,14 +9,10 @@ mod common;
 use bevy::light::DirectionalLightShadowMap;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
-use bevy::render::render_resource::{
-    BufferDescriptor, BufferUsages, CommandEncoderDescriptor, Extent3d, Origin3d,
-    TexelCopyBufferInfo, TexelCopyBufferLayout, TexelCopyTextureInfo, Texture, TextureAspect,
-    TextureFormat,
-};
+use bevy::render::render_resource::{Texture, TextureDimension, TextureFormat};
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy_nature_harness::RenderHarness;
-use bevy_nature_harness::headless::read_buffer_now;
+use bevy_nature_harness::headless::read_texture_now;
 use bevy_soft_shadows::SoftShadowsPlugin;
 use bevy_soft_shadows::filterable::FilteredShadowMap;
 use bevy_soft_shadows::filterable::filter::{FilterableMethod, MomentMap, blur, mip_chain};
@@ -31,59 +27,26 @@ fn read_level(
     texture: &Texture,
     level: u32,
 ) -> MomentMap {
-    let size = texture
-        .size()
-        .mip_level_size(level, bevy::render::render_resource::TextureDimension::D2);
+    let size = texture.size().mip_level_size(level, TextureDimension::D2);
     let channels = match texture.format() {
         TextureFormat::R32Float => 1,
         TextureFormat::Rg32Float => 2,
         TextureFormat::Rgba32Float => 4,
         other => panic!("unexpected format {other:?}"),
     };
-    let texel_bytes = 4 * channels;
-    let row = (size.width * texel_bytes).div_ceil(256) * 256;
-    let buffer = device.create_buffer(&BufferDescriptor {
-        label: Some("filtered_shadow_readback"),
-        size: (row * size.height) as u64,
-        usage: BufferUsages::COPY_DST | BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor { label: None });
-    encoder.copy_texture_to_buffer(
-        TexelCopyTextureInfo {
-            texture,
-            mip_level: level,
-            origin: Origin3d::ZERO,
-            aspect: TextureAspect::All,
-        },
-        TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(row),
-                rows_per_image: Some(size.height),
-            },
-        },
-        Extent3d {
-            depth_or_array_layers: 1,
-            ..size
-        },
-    );
-    queue.submit([encoder.finish()]);
-    let bytes = read_buffer_now(device, queue, &buffer).expect("readback");
-    let mut texels = Vec::with_capacity((size.width * size.height) as usize);
-    for y in 0..size.height {
-        for x in 0..size.width {
-            let at = (y * row + x * texel_bytes) as usize;
-            texels.push(std::array::from_fn(|c| {
+    let bytes = read_texture_now(device, queue, texture, level, 1, 4 * channels).expect("readback");
+    let texels = bytes
+        .chunks_exact(4 * channels as usize)
+        .map(|texel| {
+            std::array::from_fn(|c| {
                 if c < channels as usize {
-                    f32::from_le_bytes(bytes[at + 4 * c..at + 4 * c + 4].try_into().unwrap())
+                    f32::from_le_bytes(texel[4 * c..4 * c + 4].try_into().unwrap())
                 } else {
                     0.0
                 }
-            }));
-        }
-    }
+            })
+        })
+        .collect();
     MomentMap {
         width: size.width,
         height: size.height,

@@ -8,14 +8,10 @@
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy::render::render_asset::RenderAssets;
-use bevy::render::render_resource::{
-    BufferDescriptor, BufferUsages, CommandEncoderDescriptor, Extent3d, Origin3d,
-    TexelCopyBufferInfo, TexelCopyBufferLayout, TexelCopyTextureInfo, TextureAspect,
-};
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy::render::texture::GpuImage;
 use bevy_nature_harness::RenderHarness;
-use bevy_nature_harness::headless::read_buffer_now;
+use bevy_nature_harness::headless::read_texture_now;
 use bevy_terrain_clip::source::{ProceduralTileSource, TexelKind, address_texel};
 use bevy_terrain_clip::stack_gpu::{ClipStackTexture, TextureMapping};
 use bevy_terrain_clip::stack_gpu::{QUALITY, SUBTILES_UPLOADED};
@@ -31,7 +27,6 @@ fn read_layers(
     layers: u32,
     mip: u32,
 ) -> Vec<u8> {
-    let side = CLIP >> mip;
     let render_world = harness.app().get_sub_app(RenderApp).unwrap().world();
     let device = render_world.resource::<RenderDevice>();
     let queue = render_world.resource::<RenderQueue>();
@@ -39,37 +34,7 @@ fn read_layers(
         .resource::<RenderAssets<GpuImage>>()
         .get(image)
         .expect("texture array prepared");
-    let size = (side * side * 4 * layers) as u64;
-    let buffer = device.create_buffer(&BufferDescriptor {
-        label: Some("clip_stack_readback"),
-        size,
-        usage: BufferUsages::COPY_DST | BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor { label: None });
-    encoder.copy_texture_to_buffer(
-        TexelCopyTextureInfo {
-            texture: &gpu.texture,
-            mip_level: mip,
-            origin: Origin3d::ZERO,
-            aspect: TextureAspect::All,
-        },
-        TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(side * 4),
-                rows_per_image: Some(side),
-            },
-        },
-        Extent3d {
-            width: side,
-            height: side,
-            depth_or_array_layers: layers,
-        },
-    );
-    queue.submit([encoder.finish()]);
-    read_buffer_now(device, queue, &buffer).unwrap()
+    read_texture_now(device, queue, &gpu.texture, mip, layers, 4).unwrap()
 }
 
 /// Steps until every layer is valid, then compares the whole array with the source. Returns
