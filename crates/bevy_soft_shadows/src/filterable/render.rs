@@ -193,6 +193,7 @@ fn extract_filtered_shadow(
         });
 }
 
+#[allow(clippy::too_many_arguments)]
 fn prepare_textures(
     mut commands: Commands,
     device: Res<RenderDevice>,
@@ -201,9 +202,11 @@ fn prepare_textures(
     extracted: Res<ExtractedFilteredShadow>,
     mut params: ResMut<MomentParamsBuffer>,
     views: Query<(Entity, &ViewShadowBindings), With<ExtractedView>>,
+    holding: Query<Entity, With<FilteredShadowTextures>>,
 ) {
     let Some((method, sigma)) = extracted.0 else {
-        for (entity, _) in &views {
+        // Only views that still hold a map: nothing is queued while no light asks for one.
+        for entity in &holding {
             commands.entity(entity).remove::<FilteredShadowTextures>();
         }
         return;
