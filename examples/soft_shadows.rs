@@ -8,8 +8,11 @@
 //! cargo run --example soft_shadows -- --headless --frames 30 --stats ssss.json
 //! cargo run --example soft_shadows -- --bench [--frames N] [--stats FILE] [--scenes poles,palm]
 //! cargo run --example soft_shadows -- --bench --spot          # the same under a lamp
+//! cargo run --example soft_shadows -- --bench --filtered      # the filterable shadow maps
 //! ```
 //!
+//! Key 6 (technique 3) shadows the sun with a filterable shadow map, key 7 (or `filtered` in the
+//! panel) cycles its method: the thesis' Gaussian and power CDFs, VSM, ESM, four moments.
 //! Key 4 (or `spot` in the panel) switches from the sun to a lamp (a spot light) above the scene,
 //! key 5 (`scene`) cycles from the posts to a canopy of three trees and to a palm on a beach (a
 //! thin trunk and fronds high over the sand: large penumbrae over thin blockers).
@@ -28,18 +31,25 @@
 //! has converged); SSSS on the classified tiles (with the active-tile fraction and the blur's cost
 //! per active tile) and on every tile. Every scene's baseline rows run before SSSS first runs.
 //! `--stats FILE` writes the rows as JSON (`"timing": "timestamps"`).
+//!
+//! `--bench --filtered` measures the filterable shadow maps instead, each scene in a harness of its
+//! own (their receivers replace the standard materials): per light size, hard shadows and each
+//! method with its pre-filter's σ swept (best RMSE against the same area-light reference timed);
+//! then the cost of each method over hard shadows at σ = 2 texels with 1024² and 2048² maps.
 
 use bevy::anti_alias::taa::TemporalAntiAliasing;
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
-use bevy::light::ShadowFilteringMethod;
+use bevy::light::{DirectionalLightShadowMap, ShadowFilteringMethod};
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy_nature::shadow_scene::{
-    DemoLamp, DemoSun, LAMP_AIM, LAMP_POSITION, PCSS_SIZE_PER_RADIAN, SCENE_NAMES, ShadowDemo,
-    ShadowTechnique, add_shadow_demo, lamp_diameter, lamp_transform, spawn_shadow_scene,
-    sun_direction,
+    DemoLamp, DemoSun, FILTERED_METHODS, LAMP_AIM, LAMP_POSITION, PCSS_SIZE_PER_RADIAN,
+    SCENE_NAMES, ShadowDemo, ShadowTechnique, add_shadow_demo, lamp_diameter, lamp_transform,
+    spawn_shadow_scene, sun_direction,
 };
 use bevy_nature::soft_shadows::ScreenSpaceSoftShadows;
+use bevy_nature::soft_shadows::filterable::FilteredShadowMap;
+use bevy_nature::soft_shadows::filterable::filter::FilterableMethod;
 use bevy_nature::soft_shadows::reference::{
     LinearAverage, jittered_directions, jittered_positions, srgb_to_linear,
 };
@@ -51,7 +61,8 @@ fn main() -> AppExit {
     let mut rest: Vec<String> = std::env::args().skip(1).collect();
     let bench = rest.iter().any(|a| a == "--bench");
     let spot = rest.iter().any(|a| a == "--spot");
-    rest.retain(|a| a != "--bench" && a != "--spot");
+    let filtered = rest.iter().any(|a| a == "--filtered");
+    rest.retain(|a| a != "--bench" && a != "--spot" && a != "--filtered");
     // `--scenes poles,palm`: the bench's scenes (all by default).
     let mut scenes: Vec<String> = SCENE_NAMES.iter().map(|s| s.to_string()).collect();
     if let Some(i) = rest.iter().position(|a| a == "--scenes") {
@@ -70,15 +81,16 @@ fn main() -> AppExit {
         rest.drain(i..=i + 1);
     }
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
-        eprintln!("{e} [--bench] [--spot] [--scenes poles,canopy,palm]");
+        eprintln!("{e} [--bench] [--spot] [--filtered] [--scenes poles,canopy,palm]");
         std::process::exit(2)
     });
     if bench {
-        return run_bench(&args, spot, &scenes);
+        return run_bench(&args, spot, filtered, &scenes);
     }
     ExampleRunner::with_args("soft_shadows", args)
         .inspect_resource::<ShadowDemo>()
         .inspect_component::<ScreenSpaceSoftShadows>()
+        .inspect_component::<FilteredShadowMap>()
         .run(|app| {
             app.add_plugins(bevy_nature::soft_shadows::SoftShadowsPlugin)
                 .add_systems(Startup, spawn_shadow_scene);
@@ -158,6 +170,17 @@ fn set_technique(harness: &mut RenderHarness, technique: ShadowTechnique, light_
         .position(|t| *t == technique)
         .unwrap() as u32;
     demo.light_size = light_size;
+    settle(harness);
+}
+
+/// Lets a change take effect and every pipeline it needs compile before anything is rendered:
+/// a technique switch (or a camera losing its prepasses) specialises new pipelines, which a
+/// real GPU's driver compiles over many of its fast frames — meanwhile Bevy skips the draws
+/// that need them, and a render would miss meshes.
+fn settle(harness: &mut RenderHarness) {
+    if harness.run_frames(2).is_ok() {
+        harness.wait_until_ready().ok();
+    }
 }
 
 /// The area-light reference: hard shadows from suns jittered over the light's disk (or lamps
@@ -235,8 +258,14 @@ fn scene_harness(scene: u32, size: UVec2, spot: bool) -> Result<RenderHarness, S
         .entity_mut(camera)
         .insert((Tonemapping::None, DebandDither::Disabled));
     harness.wait_until_ready().map_err(|e| e.to_string())?;
-    // A real GPU raises its clocks under load: warm it up before anything is timed.
-    harness.run_frames(60).map_err(|e| e.to_string())?;
+    // A real GPU raises its clocks under load: warm it up (60 frames and at least 2 s — a fast
+    // GPU's 60 frames take a tenth of that) before anything is timed.
+    let start = std::time::Instant::now();
+    let mut frames = 0;
+    while frames < 60 || start.elapsed().as_secs_f32() < 2.0 {
+        harness.run_frames(10).map_err(|e| e.to_string())?;
+        frames += 10;
+    }
     Ok(harness)
 }
 
@@ -340,6 +369,7 @@ fn bench_scene(
             TemporalAntiAliasing::default(),
             ShadowFilteringMethod::Temporal,
         ));
+        settle(&mut taa);
         for ((light, reference), factor) in LIGHTS.iter().zip(&references).zip(&best_pcss) {
             set_technique(&mut taa, ShadowTechnique::Pcss, light.1);
             taa.world_mut()
@@ -371,7 +401,7 @@ fn bench_scene(
             bevy::core_pipeline::prepass::DepthPrepass,
             bevy::core_pipeline::prepass::NormalPrepass,
         ));
-        harness.wait_until_ready().map_err(|e| e.to_string())?;
+        settle(&mut harness);
         for (light, reference) in LIGHTS.iter().zip(&references) {
             set_technique(&mut harness, ShadowTechnique::Hard, light.1);
             let m = measure(&mut harness, frames, 8, reference)?;
@@ -400,6 +430,7 @@ fn bench_scene(
                 .world_mut()
                 .resource_mut::<ShadowDemo>()
                 .ssss_all_tiles = all_tiles;
+            settle(&mut harness);
             let m = measure(&mut harness, frames, 8, reference)?;
             let blur = harness.gpu_pass_time_ms("ssss/ssss_blur_h")?
                 + harness.gpu_pass_time_ms("ssss/ssss_blur_v")?;
@@ -421,7 +452,133 @@ fn bench_scene(
     Ok(())
 }
 
-fn run_bench(args: &ExampleArgs, spot: bool, scenes: &[String]) -> AppExit {
+/// The pre-filter's σ (shadow-map texels) swept per light for the filterable methods.
+const FILTER_SIGMAS: [f32; 5] = [0.5, 1.0, 2.0, 4.0, 8.0];
+
+/// A short name for a filterable method.
+fn method_name(method: FilterableMethod) -> &'static str {
+    match method {
+        FilterableMethod::GaussianCdf => "gaussian_cdf",
+        FilterableMethod::PowerCdf => "power_cdf",
+        FilterableMethod::Variance => "vsm",
+        FilterableMethod::Exponential { .. } => "esm",
+        FilterableMethod::Moments4 => "msm4",
+    }
+}
+
+/// One scene's filterable shadow maps (sun only): references, hard shadows, each method swept
+/// over its σ per light (the best timed), then each method's cost at 1024² and 2048² maps.
+fn bench_filtered(scene: u32, size: UVec2, frames: u32, rows: &mut Vec<Row>) -> Result<(), String> {
+    let scene_name = SCENE_NAMES[scene.min(2) as usize];
+    let mut harness = scene_harness(scene, size, false)?;
+    let mut references = Vec::new();
+    for (label, light_size) in LIGHTS {
+        eprintln!(
+            "soft_shadows --bench --filtered: {scene_name}, {label} light: area-light reference (48 renders)"
+        );
+        references.push(reference(&mut harness, light_size, false)?);
+    }
+    let mut push = |row: Row| {
+        eprintln!(
+            "  {:<7} {:<8} {:<20} {:<26} GPU frame {:>8.2} ms  RMSE {:.5}",
+            row.scene, row.light, row.technique, row.params, row.frame_gpu_ms, row.rmse
+        );
+        rows.push(row);
+    };
+    let row = |technique, light: (&str, f32), params: String, (frame, rmse): (f64, f64)| Row {
+        scene: scene_name,
+        light: light.0.to_string(),
+        light_size: light.1,
+        technique,
+        params,
+        frame_gpu_ms: frame,
+        rmse,
+        tiles: None,
+    };
+    let set_map = |harness: &mut RenderHarness, side: usize| {
+        harness
+            .world_mut()
+            .insert_resource(DirectionalLightShadowMap { size: side });
+        settle(harness);
+    };
+    set_map(&mut harness, 2048);
+    for (light, reference) in LIGHTS.iter().zip(&references) {
+        set_technique(&mut harness, ShadowTechnique::Hard, light.1);
+        let m = measure(&mut harness, frames, 8, reference)?;
+        push(row("hard", *light, "map 2048²".into(), m));
+    }
+    for method in FILTERED_METHODS {
+        for (light, reference) in LIGHTS.iter().zip(&references) {
+            set_technique(&mut harness, ShadowTechnique::Filtered, light.1);
+            let mut best = (f64::INFINITY, FILTER_SIGMAS[0]);
+            let mut sweep = Vec::new();
+            for sigma in FILTER_SIGMAS {
+                harness.world_mut().resource_mut::<ShadowDemo>().filtered = FilteredShadowMap {
+                    method,
+                    blur_sigma: sigma,
+                };
+                settle(&mut harness);
+                let image = linear(&harness.render().map_err(|e| e.to_string())?.data);
+                let e = rmse(&image, reference);
+                sweep.push(format!("{sigma}:{e:.5}"));
+                if e < best.0 {
+                    best = (e, sigma);
+                }
+            }
+            harness.world_mut().resource_mut::<ShadowDemo>().filtered = FilteredShadowMap {
+                method,
+                blur_sigma: best.1,
+            };
+            settle(&mut harness);
+            let m = measure(&mut harness, frames, 8, reference)?;
+            eprintln!(
+                "    {} sweep (σ:RMSE) {}",
+                method_name(method),
+                sweep.join(" ")
+            );
+            push(row(
+                method_name(method),
+                *light,
+                format!("map 2048², σ {}", best.1),
+                m,
+            ));
+        }
+    }
+    // Cost: every method at one σ, over hard shadows of the same map size (medium light).
+    let (light, reference) = (LIGHTS[1], &references[1]);
+    for side in [1024usize, 2048] {
+        set_map(&mut harness, side);
+        set_technique(&mut harness, ShadowTechnique::Hard, light.1);
+        let m = measure(&mut harness, frames, 8, reference)?;
+        // The cost rows compare with the hard row of their own map size.
+        let mut r = row("hard", light, format!("map {side}²"), m);
+        r.light = format!("{} {side}", light.0);
+        push(r);
+        for method in FILTERED_METHODS {
+            set_technique(&mut harness, ShadowTechnique::Filtered, light.1);
+            harness.world_mut().resource_mut::<ShadowDemo>().filtered = FilteredShadowMap {
+                method,
+                blur_sigma: 2.0,
+            };
+            settle(&mut harness);
+            let m = measure(&mut harness, frames, 8, reference)?;
+            let technique = match method {
+                FilterableMethod::GaussianCdf => "cost_gaussian_cdf",
+                FilterableMethod::PowerCdf => "cost_power_cdf",
+                FilterableMethod::Variance => "cost_vsm",
+                FilterableMethod::Exponential { .. } => "cost_esm",
+                FilterableMethod::Moments4 => "cost_msm4",
+            };
+            let mut r = row(technique, light, format!("map {side}², σ 2"), m);
+            r.light = format!("{} {side}", light.0);
+            push(r);
+        }
+    }
+    set_map(&mut harness, 2048);
+    Ok(())
+}
+
+fn run_bench(args: &ExampleArgs, spot: bool, filtered: bool, scenes: &[String]) -> AppExit {
     let Some(adapter) = require_adapter("soft_shadows") else {
         return AppExit::error();
     };
@@ -440,7 +597,12 @@ fn run_bench(args: &ExampleArgs, spot: bool, scenes: &[String]) -> AppExit {
         if !scenes.iter().any(|s| s == SCENE_NAMES[scene as usize]) {
             continue;
         }
-        if let Err(e) = bench_scene(scene, size, frames, spot, &mut rows) {
+        let result = if filtered {
+            bench_filtered(scene, size, frames, &mut rows)
+        } else {
+            bench_scene(scene, size, frames, spot, &mut rows)
+        };
+        if let Err(e) = result {
             eprintln!("soft_shadows --bench: {e}");
             return AppExit::error();
         }
@@ -481,9 +643,14 @@ fn run_bench(args: &ExampleArgs, spot: bool, scenes: &[String]) -> AppExit {
             row
         })
         .collect();
+    let headline_technique = if filtered {
+        "cost_gaussian_cdf"
+    } else {
+        "ssss"
+    };
     let headline: serde_json::Map<String, serde_json::Value> = json_rows
         .iter()
-        .filter(|r| r["scene"] == "poles" && r["technique"] == "ssss")
+        .filter(|r| r["scene"] == "poles" && r["technique"] == headline_technique)
         .map(|r| {
             (
                 r["light"].as_str().unwrap_or_default().to_string(),
@@ -495,15 +662,15 @@ fn run_bench(args: &ExampleArgs, spot: bool, scenes: &[String]) -> AppExit {
         "timing": "timestamps",
         "adapter": adapter.name,
         "frames": frames,
-        "headline": {"ssss_cost_over_hard_ms_on_poles": headline},
+        "headline": {format!("{headline_technique}_cost_over_hard_ms_on_poles"): headline},
         "rows": json_rows,
     });
     let text = serde_json::to_string_pretty(&out).unwrap();
     eprintln!(
-        "HEADLINE ssss_cost_over_hard_ms_on_poles ({}x{}, GPU timestamps): {}",
+        "HEADLINE {headline_technique}_cost_over_hard_ms_on_poles ({}x{}, GPU timestamps): {}",
         size.x,
         size.y,
-        serde_json::to_string(&out["headline"]["ssss_cost_over_hard_ms_on_poles"]).unwrap()
+        serde_json::to_string(&headline).unwrap()
     );
     if let Some(path) = &args.stats
         && let Err(e) = bevy_nature_harness::stats::write_atomically(path, &text)

@@ -1,12 +1,14 @@
 //! The soft-shadow scene of the `soft_shadows` example and benchmark: a ground with posts of
 //! several heights, a table-like panel on legs and a sphere under a low sun or a lamp (spot
 //! light) above them, so penumbrae start hard at every contact and widen with the distance to
-//! the blocker — and a switch between Bevy's hard shadows, Bevy's PCSS and Screen Space Soft
-//! Shadows for the same light.
+//! the blocker — and a switch between Bevy's hard shadows, Bevy's PCSS, Screen Space Soft
+//! Shadows and the filterable shadow maps for the same light.
 
 use bevy::light::{CascadeShadowConfigBuilder, DirectionalLightShadowMap, ShadowFilteringMethod};
 use bevy::prelude::*;
 use bevy_soft_shadows::ScreenSpaceSoftShadows;
+use bevy_soft_shadows::filterable::FilteredShadowMap;
+use bevy_soft_shadows::filterable::filter::FilterableMethod;
 
 /// The shadowing technique of the scene's sun.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Reflect)]
@@ -19,11 +21,14 @@ pub enum ShadowTechnique {
     /// Screen Space Soft Shadows ([`ScreenSpaceSoftShadows`]).
     #[default]
     Ssss,
+    /// A filterable shadow map ([`FilteredShadowMap`]; the sun only: a lamp keeps Bevy's hard
+    /// shadow).
+    Filtered,
 }
 
 impl ShadowTechnique {
-    /// All three, in switching order.
-    pub const ALL: [Self; 3] = [Self::Hard, Self::Pcss, Self::Ssss];
+    /// All four, in switching order.
+    pub const ALL: [Self; 4] = [Self::Hard, Self::Pcss, Self::Ssss, Self::Filtered];
 
     /// Short name.
     pub fn name(self) -> &'static str {
@@ -31,6 +36,7 @@ impl ShadowTechnique {
             Self::Hard => "hard",
             Self::Pcss => "pcss",
             Self::Ssss => "ssss",
+            Self::Filtered => "filtered",
         }
     }
 }
@@ -39,7 +45,7 @@ impl ShadowTechnique {
 #[derive(Resource, Clone, Debug, PartialEq, Reflect)]
 #[reflect(Resource)]
 pub struct ShadowDemo {
-    /// 0: hard, 1: Bevy's PCSS, 2: SSSS (keys 1, 2, 3).
+    /// 0: hard, 1: Bevy's PCSS, 2: SSSS, 3: a filterable shadow map (keys 1, 2, 3, 6).
     pub technique: u32,
     /// Angular diameter of the light seen from the scene (rad): the sun's, or the lamp's from
     /// [`LAMP_DISTANCE`] away (its diameter is [`lamp_diameter`]).
@@ -59,7 +65,19 @@ pub struct ShadowDemo {
     /// shared with an angular size; this factor gave PCSS its lowest error against the
     /// area-light reference on the pole scene (`ssss_vs_pcss` test sweep).
     pub pcss_size_per_radian: f32,
+    /// The filterable shadow map of technique 3: its method (key 7 cycles through them) and
+    /// pre-filter.
+    pub filtered: FilteredShadowMap,
 }
+
+/// The filterable methods, in the order key 7 cycles through them.
+pub const FILTERED_METHODS: [FilterableMethod; 5] = [
+    FilterableMethod::GaussianCdf,
+    FilterableMethod::PowerCdf,
+    FilterableMethod::Variance,
+    FilterableMethod::Exponential { c: 80.0 },
+    FilterableMethod::Moments4,
+];
 
 impl Default for ShadowDemo {
     fn default() -> Self {
@@ -70,6 +88,10 @@ impl Default for ShadowDemo {
             scene: 0,
             ssss_all_tiles: false,
             pcss_size_per_radian: PCSS_SIZE_PER_RADIAN,
+            filtered: FilteredShadowMap {
+                blur_sigma: 3.0,
+                ..default()
+            },
         }
     }
 }
@@ -80,7 +102,7 @@ pub const PCSS_SIZE_PER_RADIAN: f32 = 4.0 / 0.15;
 impl ShadowDemo {
     /// The technique selected.
     pub fn technique(&self) -> ShadowTechnique {
-        ShadowTechnique::ALL[(self.technique as usize).min(2)]
+        ShadowTechnique::ALL[(self.technique as usize).min(ShadowTechnique::ALL.len() - 1)]
     }
 
     /// The sun's SSSS `max_occluder_distance` for the scene shown: 5 m covers the posts, the
@@ -518,6 +540,11 @@ pub fn apply_shadow_demo(
         } else {
             commands.entity(entity).remove::<ScreenSpaceSoftShadows>();
         }
+        if technique == ShadowTechnique::Filtered && !demo.spot {
+            commands.entity(entity).insert(demo.filtered);
+        } else {
+            commands.entity(entity).remove::<FilteredShadowMap>();
+        }
     }
     for (entity, mut light, mut visibility) in &mut lamp {
         *visibility = if demo.spot {
@@ -544,8 +571,9 @@ pub fn apply_shadow_demo(
     }
 }
 
-/// Keys 1, 2, 3 pick hard shadows, PCSS or SSSS; key 4 switches between the sun and the lamp,
-/// key 5 cycles through the pole, canopy and palm scenes.
+/// Keys 1, 2, 3, 6 pick hard shadows, PCSS, SSSS or a filterable shadow map; key 7 cycles the
+/// filterable map's method; key 4 switches between the sun and the lamp, key 5 cycles through the
+/// pole, canopy and palm scenes.
 pub fn switch_with_keys(keys: Option<Res<ButtonInput<KeyCode>>>, mut demo: ResMut<ShadowDemo>) {
     let Some(keys) = keys else { return };
     if keys.just_pressed(KeyCode::Digit4) {
@@ -554,10 +582,18 @@ pub fn switch_with_keys(keys: Option<Res<ButtonInput<KeyCode>>>, mut demo: ResMu
     if keys.just_pressed(KeyCode::Digit5) {
         demo.scene = (demo.scene.min(2) + 1) % 3;
     }
+    if keys.just_pressed(KeyCode::Digit7) {
+        let next = FILTERED_METHODS
+            .iter()
+            .position(|m| *m == demo.filtered.method)
+            .map_or(0, |i| (i + 1) % FILTERED_METHODS.len());
+        demo.filtered.method = FILTERED_METHODS[next];
+    }
     for (key, technique) in [
         (KeyCode::Digit1, 0),
         (KeyCode::Digit2, 1),
         (KeyCode::Digit3, 2),
+        (KeyCode::Digit6, 3),
     ] {
         if keys.just_pressed(key) && demo.technique != technique {
             demo.technique = technique;

@@ -7,10 +7,11 @@
 //!   Gaussian blurs the hard shadow — O(2n) per pixel where PCSS is O(n²).
 //! - statistically filtered shadow maps (Gumbau 2011, ch. 7), in progress: their visibility
 //!   functions ([`filterable::visibility`], and as WGSL: the Gaussian and power CDFs beside
-//!   variance, exponential and four-moment shadow maps), and a [`filterable::FilteredShadowMap`]
-//!   on a directional light resolves its cascades into a blurred, mip-mapped map of statistics
-//!   after the shadow passes ([`filterable::render`]). Receivers do not read it yet. Foliage
-//!   shadows will get their own module.
+//!   variance, exponential and four-moment shadow maps); a [`filterable::FilteredShadowMap`] on
+//!   a directional light resolves its cascades into a blurred, mip-mapped map of statistics
+//!   after the shadow passes ([`filterable::render`]), which [`SoftShadowMaterial`]s read at
+//!   the pixel's footprint as that light's shadow term where SSSS is off. Spot lights and
+//!   foliage shadows are still to come.
 //!
 //! Every technique is measured against Bevy's own PCSS (`DirectionalLight::soft_shadow_size`,
 //! `SpotLight::soft_shadows_enabled`) and shadow filters.

@@ -9,13 +9,17 @@
 //! read at the receiver's footprint). The WGSL module `bevy_soft_shadows::filterable_visibility`
 //! holds the same visibility functions for shaders (tested against these on the GPU).
 //!
-//! On the GPU so far: a [`FilteredShadowMap`] on a shadow-casting directional light makes
-//! [`render`] resolve every layer of Bevy's directional shadow texture into the method's
-//! statistics, blur them and build the mips, each frame after the shadow passes, into
-//! [`render::FilteredShadowTextures`] on the view (tested texel for texel against [`filter`]).
-//! No receiver reads the map yet.
+//! On the GPU: a [`FilteredShadowMap`] on a shadow-casting directional light makes [`render`]
+//! resolve the light's cascades in Bevy's directional shadow texture into the method's
+//! statistics, blur them and build the mips, each frame after the shadow passes, into the map of
+//! [`receiver::FilteredShadowImages`] (tested texel for texel against [`filter`]); meshes'
+//! `StandardMaterial`s become [`receiver::FilteredShadowMaterial`]s, whose fragment stage
+//! (`filtered_receiver.wgsl`, importable as `bevy_soft_shadows::filtered_receiver`) reads the map
+//! at the pixel's footprint and re-weights the light's direct contribution by the filtered
+//! visibility in place of Bevy's shadow lookup.
 
 pub mod filter;
+pub mod receiver;
 pub mod render;
 pub mod settings;
 pub mod visibility;
@@ -25,11 +29,11 @@ pub use settings::FilteredShadowMap;
 use bevy::asset::{embedded_asset, load_embedded_asset};
 use bevy::prelude::*;
 
-/// Keeps the WGSL module `bevy_soft_shadows::filterable_visibility` loaded, so shaders may import
-/// it by path.
+/// Keeps the WGSL modules `bevy_soft_shadows::filterable_visibility` and
+/// `bevy_soft_shadows::filtered_receiver` loaded, so shaders may import them by path.
 #[derive(Resource)]
 #[allow(dead_code)]
-struct FilterableShaders(Handle<Shader>);
+struct FilterableShaders(Handle<Shader>, Handle<Shader>);
 
 pub(crate) fn build(app: &mut App) {
     app.register_type::<FilteredShadowMap>()
@@ -42,7 +46,10 @@ pub(crate) fn build(app: &mut App) {
         return;
     }
     embedded_asset!(app, "filterable_visibility.wgsl");
+    embedded_asset!(app, "filtered_receiver.wgsl");
     let visibility: Handle<Shader> = load_embedded_asset!(app, "filterable_visibility.wgsl");
-    app.insert_resource(FilterableShaders(visibility));
+    let receiver: Handle<Shader> = load_embedded_asset!(app, "filtered_receiver.wgsl");
+    app.insert_resource(FilterableShaders(visibility, receiver));
+    receiver::build(app);
     render::build(app);
 }

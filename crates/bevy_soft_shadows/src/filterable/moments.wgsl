@@ -1,11 +1,12 @@
-// The filterable shadow map's passes (Gumbau 2011, §7.2–7.3), per layer of Bevy's directional
-// shadow texture: `resolve` turns each depth into a texel of statistics, `blur_horizontal` and
+// The filterable shadow map's passes (Gumbau 2011, §7.2–7.3), per cascade of the light in Bevy's
+// directional shadow texture: `resolve` turns each depth into a texel of statistics, `blur_horizontal` and
 // `blur_vertical` pre-filter it by a separable Gaussian, `downsample` builds each mip from the
 // one below. `bevy_soft_shadows::filterable::filter` is the CPU reference of each.
 
 struct MomentParams {
     // x: the method (0 Gaussian CDF, 1 power CDF, 2 variance, 3 exponential, 4 four moments);
-    // y: the Gaussian's radius r in texels.
+    // y: the Gaussian's radius r in texels; z: the light's first layer in Bevy's directional
+    // shadow texture (the map's layer i is the light's cascade i).
     mode: vec4<u32>,
     // x: the exponential's scale c.
     scale: vec4<f32>,
@@ -61,7 +62,7 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(id.xy >= size) {
         return;
     }
-    let depth = textureLoad(shadow_depth, vec2<i32>(id.xy), i32(id.z), 0);
+    let depth = textureLoad(shadow_depth, vec2<i32>(id.xy), i32(id.z + params.mode.z), 0);
     textureStore(destination, vec2<i32>(id.xy), i32(id.z), encode(1.0 - depth));
 }
 

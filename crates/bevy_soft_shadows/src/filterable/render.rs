@@ -1,22 +1,32 @@
 //! The render-world side of filterable shadow maps: after the shadow passes, each layer of
 //! Bevy's directional shadow texture is resolved into a texel of statistics per depth, blurred
 //! by a separable Gaussian and mip-mapped (`moments.wgsl`; `filter` is the CPU reference), into
-//! [`FilteredShadowTextures`] on the view, in the method's [`texel_format`]. Receivers do not
-//! read it yet.
+//! the map of [`FilteredShadowImages`](super::receiver::FilteredShadowImages) (its cascades'
+//! layers only), in the method's [`texel_format`]; the receivers' buffer is told which of the
+//! view's directional lights the map is for.
 
-use super::filter::{FilterableMethod, gaussian_weights};
+use super::filter::{FilterableMethod, MIN_VARIANCE, MOMENT_BIAS, gaussian_weights};
+pub use super::receiver::texel_format;
+use super::receiver::{FilteredShadowCamera, FilteredShadowImages, inactive_receiver_bytes};
 use super::settings::FilteredShadowMap;
 use bevy::asset::{embedded_asset, load_embedded_asset};
+use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::{Core3d, Core3dSystems};
-use bevy::pbr::{LATE_SHADOW_PASS, ViewShadowBindings, per_view_shadow_pass};
+use bevy::pbr::{
+    ExtractedDirectionalLight, LATE_SHADOW_PASS, MAX_CASCADES_PER_LIGHT, MAX_DIRECTIONAL_LIGHTS,
+    ViewShadowBindings, per_view_shadow_pass,
+};
 use bevy::prelude::*;
 use bevy::render::diagnostic::RecordDiagnostics;
+use bevy::render::render_asset::RenderAssets;
 use bevy::render::render_resource::binding_types::{
     texture_2d_array, texture_storage_2d_array, uniform_buffer,
 };
 use bevy::render::render_resource::*;
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery};
-use bevy::render::texture::{CachedTexture, TextureCache};
+use bevy::render::storage::{GpuShaderBuffer, ShaderBuffer};
+use bevy::render::sync_world::RenderEntity;
+use bevy::render::texture::{CachedTexture, GpuImage, TextureCache};
 use bevy::render::view::ExtractedView;
 use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems};
 
@@ -28,7 +38,7 @@ pub const MAX_BLUR_RADIUS: u32 = 31;
 #[derive(Clone, Copy, Debug, Default, ShaderType)]
 pub struct MomentParams {
     /// x: the method (0 Gaussian CDF, 1 power CDF, 2 variance, 3 exponential, 4 four moments);
-    /// y: the Gaussian's radius.
+    /// y: the Gaussian's radius; z: the light's first layer in Bevy's directional shadow texture.
     pub mode: UVec4,
     /// x: the exponential's scale.
     pub scale: Vec4,
@@ -37,15 +47,10 @@ pub struct MomentParams {
 }
 
 impl MomentParams {
-    /// The parameters of `method` blurred by a Gaussian of `sigma` texels.
-    pub fn new(method: FilterableMethod, sigma: f32) -> Self {
-        let (mode, c) = match method {
-            FilterableMethod::GaussianCdf => (0, 0.0),
-            FilterableMethod::PowerCdf => (1, 0.0),
-            FilterableMethod::Variance => (2, 0.0),
-            FilterableMethod::Exponential { c } => (3, c),
-            FilterableMethod::Moments4 => (4, 0.0),
-        };
+    /// The parameters of `method` blurred by a Gaussian of `sigma` texels, for the light whose
+    /// cascades start at layer `base_layer` of Bevy's directional shadow texture.
+    pub fn new(method: FilterableMethod, sigma: f32, base_layer: u32) -> Self {
+        let (mode, c) = method_code(method);
         let w = gaussian_weights(sigma);
         let r = (w.len() / 2).min(MAX_BLUR_RADIUS as usize);
         let mut weights = [Vec4::ZERO; 8];
@@ -53,22 +58,79 @@ impl MomentParams {
             weights[k / 4][k % 4] = w[w.len() / 2 + k];
         }
         Self {
-            mode: UVec4::new(mode, r as u32, 0, 0),
+            mode: UVec4::new(mode, r as u32, base_layer, 0),
             scale: Vec4::new(c, 0.0, 0.0, 0.0),
             weights,
         }
     }
 }
 
-/// The texel format holding `method`'s statistics: as few channels as they need — one for ESM,
-/// two for VSM and the Gaussian CDF, four for the power CDF's mean and range and for four
-/// moments.
-pub fn texel_format(method: FilterableMethod) -> TextureFormat {
+/// The method's number in the shaders, and the exponential's scale (0 for the others).
+fn method_code(method: FilterableMethod) -> (u32, f32) {
     match method {
-        FilterableMethod::Exponential { .. } => TextureFormat::R32Float,
-        FilterableMethod::GaussianCdf | FilterableMethod::Variance => TextureFormat::Rg32Float,
-        FilterableMethod::PowerCdf | FilterableMethod::Moments4 => TextureFormat::Rgba32Float,
+        FilterableMethod::GaussianCdf => (0, 0.0),
+        FilterableMethod::PowerCdf => (1, 0.0),
+        FilterableMethod::Variance => (2, 0.0),
+        FilterableMethod::Exponential { c } => (3, c),
+        FilterableMethod::Moments4 => (4, 0.0),
     }
+}
+
+/// A directional light as Bevy's `prepare_lights` sees it for a view.
+#[derive(Clone, Copy, Debug)]
+pub struct DirectionalSlotLight {
+    /// The light's render-world entity (Bevy's tie-break).
+    pub entity: Entity,
+    /// `DirectionalLight::volumetric`.
+    pub volumetric: bool,
+    /// `DirectionalLight::shadow_maps_enabled`.
+    pub shadow_maps_enabled: bool,
+    /// Whether the light's render layers intersect the view's.
+    pub in_view: bool,
+    /// Its cascades (`CascadeShadowConfig::bounds.len()`).
+    pub cascades: usize,
+}
+
+/// Where Bevy 0.19's `prepare_lights` (`bevy_pbr/src/render/light.rs`) puts light `ours` for a
+/// view: its index among the view's directional lights (what shaders index
+/// `lights.directional_lights` with) and its first layer in the directional shadow texture
+/// (`depth_texture_base_index`). Bevy sorts the lights by (volumetric, shadows on, entity), keeps
+/// those in the view's layers, at most `MAX_DIRECTIONAL_LIGHTS`, and stacks the cascades of the
+/// shadow-casting ones in that order. `None` when the view does not draw the light's shadows.
+pub fn directional_slot(lights: &[DirectionalSlotLight], ours: Entity) -> Option<(u32, u32)> {
+    let mut sorted: Vec<&DirectionalSlotLight> = lights.iter().collect();
+    sorted.sort_by_key(|l| (l.volumetric, l.shadow_maps_enabled, l.entity));
+    let mut base = 0u32;
+    for (index, light) in sorted
+        .into_iter()
+        .filter(|l| l.in_view)
+        .take(MAX_DIRECTIONAL_LIGHTS)
+        .enumerate()
+    {
+        if light.entity == ours {
+            return light.shadow_maps_enabled.then_some((index as u32, base));
+        }
+        if light.shadow_maps_enabled {
+            base += light.cascades.min(MAX_CASCADES_PER_LIGHT) as u32;
+        }
+    }
+    None
+}
+
+/// The receivers' buffer (`FilteredReceiver` of `filtered_receiver.wgsl`) for the light at
+/// `light_index` among the view's directional lights.
+fn receiver_bytes(light_index: u32, method: FilterableMethod, mips: u32) -> Vec<u8> {
+    let (code, c) = method_code(method);
+    [light_index, code, mips, 0]
+        .iter()
+        .map(|v| v.to_le_bytes())
+        .chain(
+            [c, MIN_VARIANCE, MOMENT_BIAS, 0.0]
+                .iter()
+                .map(|v| v.to_le_bytes()),
+        )
+        .flatten()
+        .collect()
 }
 
 /// The shader def that declares `format` as the passes' destination in `moments.wgsl`.
@@ -87,24 +149,30 @@ const FORMATS: [TextureFormat; 3] = [
     TextureFormat::Rgba32Float,
 ];
 
-/// The filtered shadow map of the first directional light with [`FilteredShadowMap`], as
-/// extracted.
-#[derive(Resource, Default, Clone, Copy)]
-struct ExtractedFilteredShadow(Option<(FilterableMethod, f32)>);
+/// The filtered shadow map of the first shadow-casting directional light with
+/// [`FilteredShadowMap`], as extracted: its settings and render entity, the map's image and the
+/// receivers' buffer.
+#[derive(Resource, Default, Clone)]
+struct ExtractedFilteredShadow {
+    light: Option<(Entity, FilterableMethod, f32)>,
+    moments: AssetId<Image>,
+    receiver: AssetId<ShaderBuffer>,
+}
 
-/// A view's filterable shadow map: `raw` the resolved statistics (one layer per layer of Bevy's
-/// directional shadow texture), `moments` the blurred map with its mips, in the method's
-/// [`texel_format`].
+/// The scene view's filterable shadow map: `raw` the resolved statistics (one layer per cascade
+/// of the light), `moments` the blurred map with its mips, in the method's [`texel_format`].
 #[derive(Component)]
 pub struct FilteredShadowTextures {
     /// The texel format of all three.
     pub format: TextureFormat,
+    /// The light's first layer in Bevy's directional shadow texture.
+    pub base_layer: u32,
     /// The statistics of each depth, before the blur.
     pub raw: CachedTexture,
     /// The horizontal pass's output.
     pub scratch: CachedTexture,
-    /// The blurred map and its mips.
-    pub moments: CachedTexture,
+    /// The blurred map and its mips (the texture of `FilteredShadowImages::moments`).
+    pub moments: Texture,
     /// One view per mip of `moments`.
     pub mip_views: Vec<TextureView>,
 }
@@ -182,18 +250,23 @@ fn init_pipelines(
 
 fn extract_filtered_shadow(
     mut extracted: ResMut<ExtractedFilteredShadow>,
-    lights: Extract<Query<(&FilteredShadowMap, &DirectionalLight)>>,
+    lights: Extract<Query<(RenderEntity, &FilteredShadowMap, &DirectionalLight)>>,
+    maps: Extract<Option<Res<FilteredShadowImages>>>,
 ) {
-    extracted.0 = lights
+    extracted.light = lights
         .iter()
-        .find(|(_, light)| light.shadow_maps_enabled)
-        .map(|(settings, _)| {
+        .find(|(_, _, light)| light.shadow_maps_enabled)
+        .map(|(entity, settings, _)| {
             let s = settings.sanitized().0;
-            (s.method, s.blur_sigma)
+            (entity, s.method, s.blur_sigma)
         });
+    if let Some(maps) = maps.as_ref() {
+        extracted.moments = maps.moments.id();
+        extracted.receiver = maps.receiver.id();
+    }
 }
 
-#[allow(clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn prepare_textures(
     mut commands: Commands,
     device: Res<RenderDevice>,
@@ -201,34 +274,95 @@ fn prepare_textures(
     mut cache: ResMut<TextureCache>,
     extracted: Res<ExtractedFilteredShadow>,
     mut params: ResMut<MomentParamsBuffer>,
-    views: Query<(Entity, &ViewShadowBindings), With<ExtractedView>>,
+    images: Res<RenderAssets<GpuImage>>,
+    buffers: Res<RenderAssets<GpuShaderBuffer>>,
+    views: Query<
+        (Entity, &ViewShadowBindings, Option<&RenderLayers>),
+        (With<ExtractedView>, With<FilteredShadowCamera>),
+    >,
+    lights: Query<(Entity, &ExtractedDirectionalLight, &RenderLayers)>,
     holding: Query<Entity, With<FilteredShadowTextures>>,
+    mut warned: Local<bool>,
 ) {
-    let Some((method, sigma)) = extracted.0 else {
-        // Only views that still hold a map: nothing is queued while no light asks for one.
-        for entity in &holding {
+    let mut receiver = inactive_receiver_bytes();
+    let served = extracted.light.and_then(|(light, method, sigma)| {
+        let (entity, shadows, layers) = views.iter().next()?;
+        let view_layers = layers.cloned().unwrap_or_default();
+        let slots: Vec<DirectionalSlotLight> = lights
+            .iter()
+            .map(|(entity, l, layers)| DirectionalSlotLight {
+                entity,
+                volumetric: l.volumetric,
+                shadow_maps_enabled: l.shadow_maps_enabled,
+                in_view: layers.intersects(&view_layers),
+                cascades: l.cascade_shadow_config.bounds.len(),
+            })
+            .collect();
+        let (index, base_layer) = directional_slot(&slots, light)?;
+        let cascades = lights
+            .get(light)
+            .ok()?
+            .1
+            .cascade_shadow_config
+            .bounds
+            .len()
+            .clamp(1, MAX_CASCADES_PER_LIGHT) as u32;
+        let source = &shadows.directional_light_depth_texture;
+        let format = texel_format(method);
+        let image = images.get(extracted.moments)?;
+        let want = (source.width(), source.height(), cascades, format);
+        let have = (
+            image.texture.width(),
+            image.texture.height(),
+            image.texture.depth_or_array_layers(),
+            image.texture.format(),
+        );
+        if want != have || base_layer + cascades > source.depth_or_array_layers() {
+            // The main world sizes the map from the same settings a frame earlier; a lasting
+            // mismatch (Bevy clamping the shadow map to the adapter's limit) is reported once.
+            if !*warned && want.3 == have.3 && image.texture.width() > source.width() {
+                warn!(
+                    "filtered shadow map: Bevy's directional shadow texture is {}² texels, less \
+                     than DirectionalLightShadowMap asks for; no filtered map is made",
+                    source.width()
+                );
+                *warned = true;
+            }
+            return None;
+        }
+        Some((
+            entity,
+            index,
+            base_layer,
+            method,
+            sigma,
+            image.texture.clone(),
+        ))
+    });
+    // Views that no longer get a map lose theirs (only those: nothing is queued per frame
+    // while no light asks for one).
+    let served_view = served.as_ref().map(|s| s.0);
+    for entity in &holding {
+        if Some(entity) != served_view {
             commands.entity(entity).remove::<FilteredShadowTextures>();
         }
-        return;
-    };
-    let format = texel_format(method);
-    params.0.set(MomentParams::new(method, sigma));
-    params.0.write_buffer(&device, &queue);
-    for (entity, shadows) in &views {
-        let source = &shadows.directional_light_depth_texture;
+    }
+    if let Some((entity, index, base_layer, method, sigma, moments)) = served {
+        let format = moments.format();
+        params.0.set(MomentParams::new(method, sigma, base_layer));
+        params.0.write_buffer(&device, &queue);
         let size = Extent3d {
-            width: source.width(),
-            height: source.height(),
-            depth_or_array_layers: source.depth_or_array_layers(),
+            width: moments.width(),
+            height: moments.height(),
+            depth_or_array_layers: moments.depth_or_array_layers(),
         };
-        let mips = size.width.max(size.height).max(1).ilog2() + 1;
-        let mut get = |label: &'static str, mip_level_count: u32| {
+        let mut get = |label: &'static str| {
             cache.get(
                 &device,
                 TextureDescriptor {
                     label: Some(label),
                     size,
-                    mip_level_count,
+                    mip_level_count: 1,
                     sample_count: 1,
                     dimension: TextureDimension::D2,
                     format,
@@ -239,12 +373,12 @@ fn prepare_textures(
                 },
             )
         };
-        let raw = get("filtered_shadow_raw", 1);
-        let scratch = get("filtered_shadow_scratch", 1);
-        let moments = get("filtered_shadow_moments", mips);
+        let raw = get("filtered_shadow_raw");
+        let scratch = get("filtered_shadow_scratch");
+        let mips = moments.mip_level_count();
         let mip_views = (0..mips)
             .map(|level| {
-                moments.texture.create_view(&TextureViewDescriptor {
+                moments.create_view(&TextureViewDescriptor {
                     label: Some("filtered_shadow_mip"),
                     dimension: Some(TextureViewDimension::D2Array),
                     base_mip_level: level,
@@ -255,11 +389,16 @@ fn prepare_textures(
             .collect();
         commands.entity(entity).insert(FilteredShadowTextures {
             format,
+            base_layer,
             raw,
             scratch,
             moments,
             mip_views,
         });
+        receiver = receiver_bytes(index, method, mips);
+    }
+    if let Some(buffer) = buffers.get(extracted.receiver) {
+        queue.write_buffer(&buffer.buffer, 0, &receiver);
     }
 }
 
@@ -312,7 +451,7 @@ fn filtered_shadow(
             textures.raw.texture.size(),
         ),
     ];
-    let base = textures.moments.texture.size();
+    let base = textures.moments.size();
     for level in 1..textures.mip_views.len() {
         let size = base.mip_level_size(level as u32, TextureDimension::D2);
         steps.push((
@@ -365,4 +504,63 @@ pub(crate) fn build(app: &mut App) {
                 .after(per_view_shadow_pass::<LATE_SHADOW_PASS>)
                 .before(Core3dSystems::MainPass),
         );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn light(
+        index: u32,
+        volumetric: bool,
+        shadows: bool,
+        in_view: bool,
+        cascades: usize,
+    ) -> DirectionalSlotLight {
+        DirectionalSlotLight {
+            entity: Entity::from_raw_u32(index).unwrap(),
+            volumetric,
+            shadow_maps_enabled: shadows,
+            in_view,
+            cascades,
+        }
+    }
+
+    /// Bevy's order: lights without shadows first, then by entity; only the view's lights
+    /// count, and only shadow-casting ones take layers (at most four cascades each).
+    #[test]
+    fn the_slot_follows_bevys_order_of_directional_lights() {
+        let lights = [
+            light(7, false, true, true, 4),
+            light(3, false, true, true, 6),
+            light(5, false, false, true, 4),
+            light(2, false, true, false, 4),
+            light(9, true, true, true, 2),
+        ];
+        let e = |i| Entity::from_raw_u32(i).unwrap();
+        // Sorted in view: 5 (no shadows), then 3 and 7 in `Entity`'s order, then 9
+        // (volumetric).
+        let (first, second) = if e(3) < e(7) { (3, 7) } else { (7, 3) };
+        assert_eq!(directional_slot(&lights, e(5)), None);
+        assert_eq!(directional_slot(&lights, e(first)), Some((1, 0)));
+        assert_eq!(directional_slot(&lights, e(second)), Some((2, 4)));
+        assert_eq!(directional_slot(&lights, e(9)), Some((3, 8)));
+        // Out of the view's layers: no slot.
+        assert_eq!(directional_slot(&lights, e(2)), None);
+        assert_eq!(
+            directional_slot(&[light(1, false, true, true, 4)], e(1)),
+            Some((0, 0))
+        );
+    }
+
+    #[test]
+    fn the_receivers_buffer_names_light_method_and_mips() {
+        let bytes = receiver_bytes(2, FilterableMethod::Exponential { c: 80.0 }, 12);
+        assert_eq!(bytes.len(), 32);
+        let word = |i: usize| u32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().unwrap());
+        assert_eq!((word(0), word(1), word(2)), (2, 3, 12));
+        assert_eq!(f32::from_bits(word(4)), 80.0);
+        assert_eq!(f32::from_bits(word(5)), MIN_VARIANCE);
+        assert_eq!(f32::from_bits(word(6)), MOMENT_BIAS);
+    }
 }

@@ -5,14 +5,16 @@ use bevy::prelude::*;
 
 /// Put on a shadow-casting `DirectionalLight`: its cascades are resolved into a filterable
 /// shadow map of `method`'s statistics, blurred by a Gaussian of `blur_sigma` shadow-map texels
-/// and mip-mapped, every frame after the shadow passes (`FilteredShadowTextures` on each view).
-/// The first such light is served.
+/// and mip-mapped, every frame after the shadow passes, for the scene's camera; meshes'
+/// `StandardMaterial`s become [`SoftShadowMaterial`](crate::SoftShadowMaterial)s that read it
+/// as this light's shadow term (where Screen Space Soft Shadows are off). The first such light
+/// is served; spot lights are not yet.
 ///
-/// In progress: no receiver reads the map yet, and it costs memory — three textures as large as
-/// Bevy's whole directional shadow texture (the resolved texels, the blur's scratch and the
-/// mip-mapped map), 32-bit floats in as many channels as the method needs: with the default
-/// 2048² maps and four cascades, about 0.22 GB for ESM, 0.45 GB for VSM and the Gaussian CDF,
-/// 0.9 GB for the power CDF and four moments (16-bit storage is to come).
+/// It costs memory: three textures of the light's cascades at Bevy's directional shadow-map size
+/// (the resolved texels, the blur's scratch and the mip-mapped map), 32-bit floats in as many
+/// channels as the method needs: with the default 2048² maps and four cascades, about 0.22 GB
+/// for ESM, 0.45 GB for VSM and the Gaussian CDF, 0.9 GB for the power CDF and four moments
+/// (16-bit storage is to come).
 #[derive(Component, Clone, Copy, Debug, PartialEq, Reflect)]
 #[reflect(Component, Debug, PartialEq, Default)]
 pub struct FilteredShadowMap {

@@ -1,7 +1,11 @@
 //! The main-world side of SSSS: the screen-sized textures the passes write, the material that
-//! feeds the soft visibility into Bevy's lighting, and the plugin glue that turns it on for a
-//! scene (prepasses on the cameras, receivers on the meshes).
+//! feeds the soft visibility — or, where SSSS is off, the filterable shadow map's visibility —
+//! into Bevy's lighting, and the plugin glue that turns it on for a scene (prepasses on the
+//! cameras, receivers on the meshes).
 
+use crate::filterable::receiver::{
+    FilteredShadowActive, FilteredShadowImages, FilteredShadowSystems,
+};
 use crate::settings::ScreenSpaceSoftShadows;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::core_pipeline::prepass::{DepthPrepass, NormalPrepass};
@@ -12,19 +16,42 @@ use bevy::render::extract_component::ExtractComponent;
 use bevy::render::render_resource::{
     AsBindGroup, Extent3d, TextureDimension, TextureFormat, TextureUsages,
 };
+use bevy::render::storage::ShaderBuffer;
 use bevy::shader::ShaderRef;
 
-/// The soft visibility of the SSSS light, per pixel, for the receiving materials.
-#[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
+/// What the receiving materials read: the soft visibility of the SSSS light, per pixel, and the
+/// filterable shadow map with the buffer that says which light it is for. Made by the plugin
+/// from [`SsssTextures`] and [`FilteredShadowImages`] (see [`SoftShadowReceiver::new`]).
+#[derive(Asset, AsBindGroup, Reflect, Debug, Clone)]
 pub struct SoftShadowReceiver {
     /// The SSSS output (Rg32Float, the camera's size): the soft visibility (−1 where SSSS is
     /// inactive) and the light (a spot light's clustered index `i`, a point light's as `−2 − i`,
     /// −1 for a directional light).
     #[texture(100, sample_type = "float", filterable = false)]
     pub visibility: Handle<Image>,
+    /// The filterable shadow map ([`FilteredShadowImages::moments`]; `None` reads a fallback
+    /// and must come with a buffer saying no map).
+    #[texture(101, dimension = "2d_array", sample_type = "float", filterable = false)]
+    pub moments: Option<Handle<Image>>,
+    /// Which light the filterable shadow map is for ([`FilteredShadowImages::receiver`]).
+    #[storage(102, read_only)]
+    pub filtered: Handle<ShaderBuffer>,
 }
 
-/// A `StandardMaterial` receiving Screen Space Soft Shadows from the SSSS light.
+impl SoftShadowReceiver {
+    /// The receiver of the plugin's SSSS textures and filterable shadow map.
+    pub fn new(textures: &SsssTextures, maps: &FilteredShadowImages) -> Self {
+        Self {
+            visibility: textures.visibility.clone(),
+            moments: Some(maps.moments.clone()),
+            filtered: maps.receiver.clone(),
+        }
+    }
+}
+
+/// A `StandardMaterial` receiving Screen Space Soft Shadows from the SSSS light, or where SSSS is
+/// off, the filterable shadow map of the light with a
+/// [`FilteredShadowMap`](crate::filterable::FilteredShadowMap).
 pub type SoftShadowMaterial = ExtendedMaterial<StandardMaterial, SoftShadowReceiver>;
 
 const SHADER: &str = "embedded://bevy_soft_shadows/ssss/receiver.wgsl";
@@ -81,6 +108,13 @@ fn screen_image(size: UVec2, format: TextureFormat) -> Image {
     image
 }
 
+/// A 1 × 1 visibility texture reading "inactive" (−1).
+fn inactive_visibility() -> Image {
+    let mut image = screen_image(UVec2::ONE, TextureFormat::Rg32Float);
+    image.data = Some([(-1.0f32).to_le_bytes(), (-1.0f32).to_le_bytes()].concat());
+    image
+}
+
 /// Whether any light has SSSS on.
 #[derive(Resource, Clone, Copy, Default, Debug, PartialEq, Eq)]
 pub struct SsssActive(pub bool);
@@ -124,6 +158,11 @@ fn prepare_cameras_and_textures(
     let any = !lights.is_empty();
     if active.0 != any {
         active.0 = any;
+    }
+    if !images.contains(textures.visibility.id()) || textures.visibility == Handle::default() {
+        // Until SSSS first runs (or while only a filterable shadow map is on), receivers read a
+        // 1 × 1 "inactive" texture.
+        textures.visibility = images.add(inactive_visibility());
     }
     if !any {
         // SSSS is off: its camera goes back to what it was.
@@ -245,21 +284,27 @@ impl Default for ConvertStandardMaterials {
 }
 
 /// Swaps `StandardMaterial`s for [`SoftShadowMaterial`]s sharing their parameters (one receiver
-/// material per standard material). They stay swapped when SSSS goes off: they then read
-/// "inactive" and shade as Bevy would. (Swapping back in the frame the camera loses its
-/// prepasses leaves Bevy 0.19's prepass phase drawing with the other material's bind group.)
+/// material per standard material) while SSSS or a filterable shadow map is on. They stay
+/// swapped when both go off: they then read "inactive" and shade as Bevy would. (Swapping back in
+/// the frame the camera loses its prepasses leaves Bevy 0.19's prepass phase drawing with the
+/// other material's bind group.)
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn convert_receivers(
     mut commands: Commands,
     convert: Res<ConvertStandardMaterials>,
     active: Res<SsssActive>,
+    filtered: Res<FilteredShadowActive>,
     textures: Res<SsssTextures>,
+    maps: Res<FilteredShadowImages>,
     meshes: Query<(Entity, &MeshMaterial3d<StandardMaterial>), Without<NoSoftShadowReceiver>>,
     standard: Res<Assets<StandardMaterial>>,
     mut receivers: ResMut<Assets<SoftShadowMaterial>>,
     mut converted: Local<HashMap<AssetId<StandardMaterial>, Handle<SoftShadowMaterial>>>,
+    mut bound: Local<BoundTextures>,
 ) {
-    if !convert.0 || !active.0 || textures.size == UVec2::ZERO {
+    refresh_bind_groups(&mut bound, &textures, &maps, &mut receivers);
+    let ssss_ready = active.0 && textures.size != UVec2::ZERO;
+    if !convert.0 || !(ssss_ready || filtered.0) {
         return;
     }
     for (entity, material) in &meshes {
@@ -271,9 +316,7 @@ fn convert_receivers(
             .or_insert_with(|| {
                 receivers.add(SoftShadowMaterial {
                     base: base.clone(),
-                    extension: SoftShadowReceiver {
-                        visibility: textures.visibility.clone(),
-                    },
+                    extension: SoftShadowReceiver::new(&textures, &maps),
                 })
             })
             .clone();
@@ -281,6 +324,41 @@ fn convert_receivers(
             .entity(entity)
             .remove::<MeshMaterial3d<StandardMaterial>>()
             .insert(MeshMaterial3d(handle));
+    }
+}
+
+/// The textures' layouts the receivers' bind groups were last made with.
+#[derive(Default)]
+struct BoundTextures {
+    layouts: Option<(UVec2, Option<(UVec3, TextureFormat)>)>,
+    /// A frame after a change the bind groups are made again.
+    pending: bool,
+}
+
+/// Bevy makes a material's bind group when the material changes, not when an image it binds is
+/// replaced: after the SSSS textures are resized or the filterable map changes its layout, every
+/// receiver is touched — a frame later, once the render world holds the new textures (Bevy 0.19
+/// orders the two preparations in no particular way).
+fn refresh_bind_groups(
+    bound: &mut BoundTextures,
+    textures: &SsssTextures,
+    maps: &FilteredShadowImages,
+    receivers: &mut Assets<SoftShadowMaterial>,
+) {
+    if bound.pending {
+        let ids: Vec<_> = receivers.ids().collect();
+        for id in ids {
+            // A mutable borrow is what marks the material modified.
+            if let Some(mut material) = receivers.get_mut(id) {
+                let _ = &mut *material;
+            }
+        }
+        bound.pending = false;
+    }
+    let layouts = Some((textures.size, maps.layout));
+    if bound.layouts != layouts {
+        bound.pending = bound.layouts.is_some();
+        bound.layouts = layouts;
     }
 }
 
@@ -299,6 +377,7 @@ pub(crate) fn build(app: &mut App) {
                 prepare_cameras_and_textures,
                 convert_receivers,
             )
-                .chain(),
+                .chain()
+                .after(FilteredShadowSystems),
         );
 }

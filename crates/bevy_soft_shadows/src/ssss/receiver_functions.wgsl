@@ -36,13 +36,8 @@ fn soft_shadow_light() -> u32 {
     return 0xffffffffu;
 }
 
-// `soft` is what `soft_visibility_at` read: (visibility, light), the light being a spot light's
-// clustered index i, a point light's as −2 − i, or −1 for the directional light.
-fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, soft: vec2<f32>) -> vec4<f32> {
-    if soft.x < 0.0 || (pbr_input.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u {
-        return color;
-    }
-    // The base layer's lighting input, as `apply_pbr_lighting` builds it.
+// The base layer's lighting input, as `apply_pbr_lighting` builds it.
+fn lighting_input(pbr_input: PbrInput) -> lighting::LightingInput {
     let m = pbr_input.material;
     let NdotV = max(dot(pbr_input.N, pbr_input.V), 0.0001);
     var input: lighting::LightingInput;
@@ -59,6 +54,47 @@ fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, 
     input.F0_dielectric = calculate_F0_dielectric(m.reflectance);
     input.F0_metallic = m.base_color.rgb;
     input.F_ab = lighting::F_AB(m.perceptual_roughness, NdotV);
+    return input;
+}
+
+// `color` (Bevy's lighting of `pbr_input`) with directional light `light`'s shadow term
+// replaced by `visibility`: its direct contribution D re-weighted from Bevy's visibility v_b,
+// color += exposure · D · (visibility − v_b). For any shadow term computed outside Bevy's
+// lookup (SSSS, filterable shadow maps).
+fn apply_directional_visibility(
+    pbr_input: PbrInput,
+    color: vec4<f32>,
+    light: u32,
+    frag_xy: vec2<f32>,
+    visibility: f32,
+) -> vec4<f32> {
+    if (pbr_input.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u
+        || (view_bindings::lights.directional_lights[light].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
+        return color;
+    }
+    var input = lighting_input(pbr_input);
+    let view = view_bindings::view.view_from_world;
+    let view_z = dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), pbr_input.world_position);
+    let bevy_visibility = fetch_directional_shadow(
+        light, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
+    let direct = lighting::directional_light(light, &input, true);
+    return color + vec4(view_bindings::view.exposure * direct * (visibility - bevy_visibility), 0.0);
+}
+
+// `soft` is what `soft_visibility_at` read: (visibility, light), the light being a spot light's
+// clustered index i, a point light's as −2 − i, or −1 for the directional light.
+fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, soft: vec2<f32>) -> vec4<f32> {
+    if soft.x < 0.0 || (pbr_input.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u {
+        return color;
+    }
+    if soft.y > -1.5 && soft.y < 0.0 {
+        let light = soft_shadow_light();
+        if light == 0xffffffffu {
+            return color;
+        }
+        return apply_directional_visibility(pbr_input, color, light, frag_xy, soft.x);
+    }
+    var input = lighting_input(pbr_input);
     var bevy_visibility = 1.0;
     var direct = vec3(0.0);
     if soft.y <= -1.5 {
@@ -72,9 +108,9 @@ fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, 
         bevy_visibility = fetch_point_shadow(
             id, pbr_input.world_position, pbr_input.world_normal, frag_xy);
         direct = lighting::point_light(id, &input, true, true);
-    } else if soft.y >= 0.0 {
-        // A spot light: Bevy's `fetch_spot_shadow` and `lighting::spot_light`, as its clustered
-        // light loop calls them.
+    } else {
+        // A spot light: Bevy's `fetch_spot_shadow` and `lighting::spot_light`, as its
+        // clustered light loop calls them.
         let id = u32(soft.y);
         let light = &view_bindings::clustered_lights.data[id];
         if ((*light).flags & POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
@@ -83,16 +119,6 @@ fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, 
         bevy_visibility = fetch_spot_shadow(
             id, pbr_input.world_position, pbr_input.world_normal, (*light).shadow_map_near_z, frag_xy);
         direct = lighting::spot_light(id, &input, true);
-    } else {
-        let light = soft_shadow_light();
-        if light == 0xffffffffu {
-            return color;
-        }
-        let view = view_bindings::view.view_from_world;
-        let view_z = dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), pbr_input.world_position);
-        bevy_visibility = fetch_directional_shadow(
-            light, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
-        direct = lighting::directional_light(light, &input, true);
     }
     return color + vec4(view_bindings::view.exposure * direct * (soft.x - bevy_visibility), 0.0);
 }

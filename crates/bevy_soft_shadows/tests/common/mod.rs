@@ -11,8 +11,12 @@ use bevy::light::{
     ShadowFilteringMethod,
 };
 use bevy::prelude::*;
+use bevy::render::render_resource::{Texture, TextureDimension, TextureFormat};
+use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy_nature_harness::RenderHarness;
 use bevy_nature_harness::compare::RgbaImage;
+use bevy_nature_harness::headless::read_texture_now;
+use bevy_soft_shadows::filterable::filter::MomentMap;
 use bevy_soft_shadows::reference::{LinearAverage, jittered_directions, srgb_to_linear};
 
 pub const SIZE: u32 = 160;
@@ -544,4 +548,39 @@ pub fn save_comparison(test: &str, hard: &[f32], pcss: &[f32], ssss: &[f32], ref
     strip(&[hard, pcss, ssss, reference])
         .save_png(dir.join("comparison.png"))
         .ok();
+}
+
+/// Layer 0 of mip `level` of `texture` (one, two or four 32-bit float channels), read back as
+/// four channels (the missing ones 0).
+pub fn read_level(
+    device: &RenderDevice,
+    queue: &RenderQueue,
+    texture: &Texture,
+    level: u32,
+) -> MomentMap {
+    let size = texture.size().mip_level_size(level, TextureDimension::D2);
+    let channels = match texture.format() {
+        TextureFormat::R32Float => 1,
+        TextureFormat::Rg32Float => 2,
+        TextureFormat::Rgba32Float => 4,
+        other => panic!("unexpected format {other:?}"),
+    };
+    let bytes = read_texture_now(device, queue, texture, level, 1, 4 * channels).expect("readback");
+    let texels = bytes
+        .chunks_exact(4 * channels as usize)
+        .map(|texel| {
+            std::array::from_fn(|c| {
+                if c < channels as usize {
+                    f32::from_le_bytes(texel[4 * c..4 * c + 4].try_into().unwrap())
+                } else {
+                    0.0
+                }
+            })
+        })
+        .collect();
+    MomentMap {
+        width: size.width,
+        height: size.height,
+        texels,
+    }
 }
