@@ -18,7 +18,6 @@ mod common;
 
 use bevy::prelude::*;
 use bevy_nature_harness::RenderHarness;
-use bevy_soft_shadows::filterable::FilteredShadowMap;
 use bevy_soft_shadows::filterable::filter::FilterableMethod;
 use common::*;
 
@@ -112,20 +111,8 @@ fn the_thesis_cdfs_bleed_less_light_than_vsm_on_stacked_occluders() {
     assert!(strip.len() > 300, "only {} stacked pixels", strip.len());
     let sun = sun_entity(&mut harness);
     let mut bleeding = Vec::new();
-    for method in [
-        FilterableMethod::GaussianCdf,
-        FilterableMethod::PowerCdf,
-        FilterableMethod::Variance,
-        FilterableMethod::Exponential { c: 80.0 },
-        FilterableMethod::Moments4,
-    ] {
-        harness
-            .world_mut()
-            .entity_mut(sun)
-            .insert(FilteredShadowMap {
-                method,
-                blur_sigma: 3.0,
-            });
+    for method in FILTERED_METHODS {
+        use_filtered_map(&mut harness, sun, method);
         // Until the receivers read this method's map (the lit ground as before, the shadow
         // edges no longer hard), then two more frames.
         let mut image = Vec::new();

@@ -21,7 +21,6 @@ use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy_nature_harness::RenderHarness;
-use bevy_soft_shadows::filterable::FilteredShadowMap;
 use bevy_soft_shadows::filterable::filter::{FilterableMethod, MomentMap, sample};
 use bevy_soft_shadows::filterable::render::FilteredShadowTextures;
 use common::*;
@@ -100,20 +99,8 @@ fn receivers_apply_the_filtered_visibility_the_cpu_reads_from_the_map() {
     let hard = to_linear(&harness.render().expect("hard"));
     let lit_green = lit(&hard);
     let sun = sun_entity(&mut harness);
-    for method in [
-        FilterableMethod::GaussianCdf,
-        FilterableMethod::PowerCdf,
-        FilterableMethod::Variance,
-        FilterableMethod::Exponential { c: 80.0 },
-        FilterableMethod::Moments4,
-    ] {
-        harness
-            .world_mut()
-            .entity_mut(sun)
-            .insert(FilteredShadowMap {
-                method,
-                blur_sigma: 3.0,
-            });
+    for method in FILTERED_METHODS {
+        use_filtered_map(&mut harness, sun, method);
         // Until the receivers read this method's map: the CPU's visibility from the map read
         // back after the frame matches the frame.
         let mut last = (0usize, 0usize, 0.0f32, 0usize, 0usize);

@@ -584,3 +584,30 @@ pub fn read_level(
         texels,
     }
 }
+
+/// The five filterable methods, in the order the tests switch through them.
+pub const FILTERED_METHODS: [bevy_soft_shadows::filterable::filter::FilterableMethod; 5] = {
+    use bevy_soft_shadows::filterable::filter::FilterableMethod::*;
+    [
+        GaussianCdf,
+        PowerCdf,
+        Variance,
+        Exponential { c: 80.0 },
+        Moments4,
+    ]
+};
+
+/// Gives `sun` a filterable shadow map of `method`, pre-filtered by a Gaussian of 3 texels.
+pub fn use_filtered_map(
+    harness: &mut RenderHarness,
+    sun: Entity,
+    method: bevy_soft_shadows::filterable::filter::FilterableMethod,
+) {
+    harness
+        .world_mut()
+        .entity_mut(sun)
+        .insert(bevy_soft_shadows::filterable::FilteredShadowMap {
+            method,
+            blur_sigma: 3.0,
+        });
+}
