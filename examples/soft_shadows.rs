@@ -9,10 +9,12 @@
 //! cargo run --example soft_shadows -- --bench [--frames N] [--stats FILE] [--scenes poles,palm]
 //! cargo run --example soft_shadows -- --bench --spot          # the same under a lamp
 //! cargo run --example soft_shadows -- --bench --filtered      # the filterable shadow maps
+//! cargo run --example soft_shadows -- --bench --filtered --spot  # ... on the lamp
 //! ```
 //!
-//! Key 6 (technique 3) shadows the sun with a filterable shadow map, key 7 (or `filtered` in the
-//! panel) cycles its method: the thesis' Gaussian and power CDFs, VSM, ESM, four moments.
+//! Key 6 (technique 3) shadows the sun (or the lamp) with a filterable shadow map, key 7 (or
+//! `filtered` in the panel) cycles its method: the thesis' Gaussian and power CDFs, VSM, ESM,
+//! four moments.
 //! Key 4 (or `spot` in the panel) switches from the sun to a lamp (a spot light) above the scene,
 //! key 5 (`scene`) cycles from the posts to a canopy of three trees and to a palm on a beach (a
 //! thin trunk and fronds high over the sand: large penumbrae over thin blockers).
@@ -32,8 +34,9 @@
 //! per active tile) and on every tile. Every scene's baseline rows run before SSSS first runs.
 //! `--stats FILE` writes the rows as JSON (`"timing": "timestamps"`).
 //!
-//! `--bench --filtered` measures the filterable shadow maps instead, each scene in a harness of its
-//! own (their receivers replace the standard materials): per light size, hard shadows and each
+//! `--bench --filtered [--spot]` measures the filterable shadow maps instead, each scene in a
+//! harness of its own (their receivers replace the standard materials): per light size, hard
+//! shadows and each
 //! method with its pre-filter's σ swept (best RMSE against the same area-light reference timed);
 //! then the cost of each method over hard shadows at σ = 2 texels with 1024² and 2048² maps.
 
@@ -269,6 +272,26 @@ fn scene_harness(scene: u32, size: UVec2, spot: bool) -> Result<RenderHarness, S
     Ok(harness)
 }
 
+/// A harness for `scene` (under the lamp with `spot`) and its area-light reference for each of
+/// [`LIGHTS`], with progress on stderr (`mode`: the bench's flags).
+fn scene_and_references(
+    scene: u32,
+    size: UVec2,
+    spot: bool,
+    mode: &str,
+) -> Result<(RenderHarness, Vec<Vec<f32>>), String> {
+    let scene_name = SCENE_NAMES[scene.min(2) as usize];
+    let mut harness = scene_harness(scene, size, spot)?;
+    let mut references = Vec::new();
+    for (label, light_size) in LIGHTS {
+        eprintln!(
+            "soft_shadows {mode}: {scene_name}, {label} light: area-light reference (48 renders)"
+        );
+        references.push(reference(&mut harness, light_size, spot)?);
+    }
+    Ok((harness, references))
+}
+
 /// One scene: references first, then every baseline row (before SSSS ever runs: receivers and
 /// camera untouched), then the SSSS rows.
 fn bench_scene(
@@ -279,15 +302,8 @@ fn bench_scene(
     rows: &mut Vec<Row>,
 ) -> Result<(), String> {
     let scene_name = SCENE_NAMES[scene.min(2) as usize];
-    let mut harness = scene_harness(scene, size, spot)?;
+    let (mut harness, references) = scene_and_references(scene, size, spot, "--bench")?;
     let light_name = |label: &str| format!("{}{label}", if spot { "spot " } else { "" });
-    let mut references = Vec::new();
-    for (label, light_size) in LIGHTS {
-        eprintln!(
-            "soft_shadows --bench: {scene_name}, {label} light: area-light reference (48 renders)"
-        );
-        references.push(reference(&mut harness, light_size, spot)?);
-    }
     let push = |rows: &mut Vec<Row>, row: Row| {
         eprintln!(
             "  {:<7} {:<8} {:<20} {:<26} GPU frame {:>8.2} ms  RMSE {:.5}{}",
@@ -466,18 +482,18 @@ fn method_name(method: FilterableMethod) -> &'static str {
     }
 }
 
-/// One scene's filterable shadow maps (sun only): references, hard shadows, each method swept
-/// over its σ per light (the best timed), then each method's cost at 1024² and 2048² maps.
-fn bench_filtered(scene: u32, size: UVec2, frames: u32, rows: &mut Vec<Row>) -> Result<(), String> {
+/// One scene's filterable shadow maps (on the sun, or with `spot` the lamp): references, hard
+/// shadows, each method swept over its σ per light (the best timed), then each method's cost at
+/// 1024² and 2048² maps.
+fn bench_filtered(
+    scene: u32,
+    size: UVec2,
+    frames: u32,
+    spot: bool,
+    rows: &mut Vec<Row>,
+) -> Result<(), String> {
     let scene_name = SCENE_NAMES[scene.min(2) as usize];
-    let mut harness = scene_harness(scene, size, false)?;
-    let mut references = Vec::new();
-    for (label, light_size) in LIGHTS {
-        eprintln!(
-            "soft_shadows --bench --filtered: {scene_name}, {label} light: area-light reference (48 renders)"
-        );
-        references.push(reference(&mut harness, light_size, false)?);
-    }
+    let (mut harness, references) = scene_and_references(scene, size, spot, "--bench --filtered")?;
     let mut push = |row: Row| {
         eprintln!(
             "  {:<7} {:<8} {:<20} {:<26} GPU frame {:>8.2} ms  RMSE {:.5}",
@@ -487,7 +503,7 @@ fn bench_filtered(scene: u32, size: UVec2, frames: u32, rows: &mut Vec<Row>) -> 
     };
     let row = |technique, light: (&str, f32), params: String, (frame, rmse): (f64, f64)| Row {
         scene: scene_name,
-        light: light.0.to_string(),
+        light: format!("{}{}", if spot { "spot " } else { "" }, light.0),
         light_size: light.1,
         technique,
         params,
@@ -552,7 +568,7 @@ fn bench_filtered(scene: u32, size: UVec2, frames: u32, rows: &mut Vec<Row>) -> 
         let m = measure(&mut harness, frames, 8, reference)?;
         // The cost rows compare with the hard row of their own map size.
         let mut r = row("hard", light, format!("map {side}²"), m);
-        r.light = format!("{} {side}", light.0);
+        r.light = format!("{} {side}", r.light);
         push(r);
         for method in FILTERED_METHODS {
             set_technique(&mut harness, ShadowTechnique::Filtered, light.1);
@@ -570,7 +586,7 @@ fn bench_filtered(scene: u32, size: UVec2, frames: u32, rows: &mut Vec<Row>) -> 
                 FilterableMethod::Moments4 => "cost_msm4",
             };
             let mut r = row(technique, light, format!("map {side}², σ 2"), m);
-            r.light = format!("{} {side}", light.0);
+            r.light = format!("{} {side}", r.light);
             push(r);
         }
     }
@@ -598,7 +614,7 @@ fn run_bench(args: &ExampleArgs, spot: bool, filtered: bool, scenes: &[String]) 
             continue;
         }
         let result = if filtered {
-            bench_filtered(scene, size, frames, &mut rows)
+            bench_filtered(scene, size, frames, spot, &mut rows)
         } else {
             bench_scene(scene, size, frames, spot, &mut rows)
         };

@@ -21,8 +21,7 @@ pub enum ShadowTechnique {
     /// Screen Space Soft Shadows ([`ScreenSpaceSoftShadows`]).
     #[default]
     Ssss,
-    /// A filterable shadow map ([`FilteredShadowMap`]; the sun only: a lamp keeps Bevy's hard
-    /// shadow).
+    /// A filterable shadow map ([`FilteredShadowMap`]) on the sun or the lamp.
     Filtered,
 }
 
@@ -567,6 +566,11 @@ pub fn apply_shadow_demo(
                 .insert(ssss_settings(diameter, 3.5, demo.ssss_all_tiles));
         } else {
             commands.entity(entity).remove::<ScreenSpaceSoftShadows>();
+        }
+        if technique == ShadowTechnique::Filtered && demo.spot {
+            commands.entity(entity).insert(demo.filtered);
+        } else {
+            commands.entity(entity).remove::<FilteredShadowMap>();
         }
     }
 }

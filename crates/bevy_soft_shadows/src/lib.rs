@@ -8,10 +8,11 @@
 //! - statistically filtered shadow maps (Gumbau 2011, ch. 7), in progress: their visibility
 //!   functions ([`filterable::visibility`], and as WGSL: the Gaussian and power CDFs beside
 //!   variance, exponential and four-moment shadow maps); a [`filterable::FilteredShadowMap`] on
-//!   a directional light resolves its cascades into a blurred, mip-mapped map of statistics
-//!   after the shadow passes ([`filterable::render`]), which [`SoftShadowMaterial`]s read at
-//!   the pixel's footprint as that light's shadow term where SSSS is off. Spot lights and
-//!   foliage shadows are still to come.
+//!   a directional light (its cascades) or a spot light (its map) resolves them into a
+//!   blurred, mip-mapped map of statistics after the shadow passes ([`filterable::render`]),
+//!   which [`SoftShadowMaterial`]s read at the pixel's footprint as that light's shadow term.
+//! - foliage shadows (Boulanger 2008, §5.5.2), in progress: the world-space opacity shadow map
+//!   of trees as plain Rust ([`foliage::opacity_map`]); its render pass is still to come.
 //!
 //! Every technique is measured against Bevy's own PCSS (`DirectionalLight::soft_shadow_size`,
 //! `SpotLight::soft_shadows_enabled`) and shadow filters.
@@ -38,7 +39,7 @@
 //! ```
 //!
 //! Modules: [`ssss`] (the algorithm as plain Rust — the CPU references — and its render passes),
-//! [`filterable`] (filtered shadow maps' visibility functions),
+//! [`filterable`] (filtered shadow maps), [`foliage`] (trees' shadows),
 //! [`reference`](mod@reference) (the area-light ground truth the tests and the benchmark measure against).
 //!
 //! Other materials receive SSSS by calling `apply_soft_shadow` from the WGSL module
@@ -94,6 +95,7 @@
 use bevy::prelude::*;
 
 pub mod filterable;
+pub mod foliage;
 pub mod reference;
 pub mod settings;
 pub mod ssss;

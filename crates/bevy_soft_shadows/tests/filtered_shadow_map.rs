@@ -14,7 +14,7 @@ use bevy_nature_harness::RenderHarness;
 use bevy_soft_shadows::SoftShadowsPlugin;
 use bevy_soft_shadows::filterable::FilteredShadowMap;
 use bevy_soft_shadows::filterable::filter::{FilterableMethod, blur, mip_chain};
-use bevy_soft_shadows::filterable::render::{FilteredShadowTextures, texel_format};
+use bevy_soft_shadows::filterable::render::{FilteredShadowViewMaps, texel_format};
 use common::*;
 
 #[test]
@@ -57,12 +57,13 @@ fn the_gpu_blurs_and_mips_the_statistics_as_the_cpu_does() {
         let render_world = harness.app().get_sub_app(RenderApp).unwrap().world();
         let device = render_world.resource::<RenderDevice>();
         let queue = render_world.resource::<RenderQueue>();
-        let mut textures = render_world
-            .try_query::<&FilteredShadowTextures>()
+        let mut maps = render_world
+            .try_query::<&FilteredShadowViewMaps>()
             .expect("the component is registered");
-        let textures = textures
+        let textures = maps
             .iter(render_world)
             .next()
+            .and_then(|maps| maps.directional.as_ref())
             .expect("a view with the map");
         assert_eq!(textures.format, texel_format(method));
         let raw = read_level(device, queue, &textures.raw.texture, 0);

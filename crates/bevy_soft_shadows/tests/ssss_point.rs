@@ -90,27 +90,10 @@ fn point_scene(test: &str, neighbours: bool) -> Option<(RenderHarness, Entity, V
     );
     // With neighbours, shadow-casting point lights spawned before and after the bulb: Bevy sorts
     // point lights by entity, so the bulb is the middle one of three whichever way entities count.
-    let dark_point = |harness: &mut RenderHarness, at: Vec3| {
-        harness.world_mut().spawn((
-            PointLight {
-                intensity: 0.0,
-                shadow_maps_enabled: true,
-                ..default()
-            },
-            Transform::from_translation(at),
-        ));
-    };
     if neighbours {
-        dark_point(&mut harness, Vec3::new(-2.0, 3.0, 2.0));
         let world = harness.world_mut();
-        world.spawn((
-            DirectionalLight {
-                illuminance: 0.0,
-                shadow_maps_enabled: true,
-                ..default()
-            },
-            Transform::default().looking_to(Vec3::new(0.3, -1.0, 0.2), Vec3::Y),
-        ));
+        spawn_dark_bulb(world, Vec3::new(-2.0, 3.0, 2.0));
+        spawn_dark_sun(world);
         world.spawn((
             SpotLight {
                 intensity: 0.0,
@@ -134,7 +117,7 @@ fn point_scene(test: &str, neighbours: bool) -> Option<(RenderHarness, Entity, V
         ))
         .id();
     if neighbours {
-        dark_point(&mut harness, Vec3::new(-4.0, 3.0, -2.0));
+        spawn_dark_bulb(harness.world_mut(), Vec3::new(-4.0, 3.0, -2.0));
     }
     harness
         .app_mut()

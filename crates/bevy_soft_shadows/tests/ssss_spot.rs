@@ -95,23 +95,9 @@ fn spot_scene(test: &str, neighbours: bool) -> Option<(RenderHarness, Entity, Ve
         .id();
     if neighbours {
         let world = harness.world_mut();
-        world.spawn((
-            DirectionalLight {
-                illuminance: 0.0,
-                shadow_maps_enabled: true,
-                ..default()
-            },
-            Transform::default().looking_to(Vec3::new(0.3, -1.0, 0.2), Vec3::Y),
-        ));
+        spawn_dark_sun(world);
         for x in [-2.0, 2.0] {
-            world.spawn((
-                PointLight {
-                    intensity: 0.0,
-                    shadow_maps_enabled: true,
-                    ..default()
-                },
-                Transform::from_xyz(x, 3.0, 2.0),
-            ));
+            spawn_dark_bulb(world, Vec3::new(x, 3.0, 2.0));
         }
     }
     harness

@@ -84,6 +84,43 @@ impl FilterableMethod {
     }
 }
 
+/// What a shadow map's stored depths are, and so how the resolve turns them into the light-space
+/// depth `z ∈ [0, 1]` the statistics are made of — larger farther from the light, linear in
+/// distance so that the moments of a texel's depths describe distances (a perspective map's
+/// `near / d` would crowd every depth beyond a few near planes into the last percent of the
+/// range, where the two-moment methods' variance drowns in rounding).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DepthSource {
+    /// A directional light's cascade: Bevy stores reversed, linear depth (1 at the near plane),
+    /// so `z = 1 − depth`.
+    Cascade,
+    /// A spot light's map: Bevy's infinite reverse-Z perspective stores `near / d`, `d` the
+    /// distance along the spot's axis; `z = d / range`, clamped to 1 (the cleared depth 0 — no
+    /// occluder — is `z = 1`).
+    Spot {
+        /// `SpotLight::shadow_map_near_z`.
+        near: f32,
+        /// `SpotLight::range`: the distance that maps to `z = 1`.
+        range: f32,
+    },
+}
+
+impl DepthSource {
+    /// The light-space depth `z` of a stored depth.
+    pub fn linear(&self, stored: f32) -> f32 {
+        match *self {
+            Self::Cascade => 1.0 - stored,
+            Self::Spot { near, range } => {
+                if stored <= 0.0 {
+                    1.0
+                } else {
+                    (near / (stored * range)).min(1.0)
+                }
+            }
+        }
+    }
+}
+
 /// A filterable shadow map: `width × height` texels of statistics, row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MomentMap {
@@ -186,7 +223,11 @@ pub fn blur(map: &MomentMap, method: FilterableMethod, sigma: f32) -> MomentMap 
 /// The mip chain of `map` down to 1 × 1: each coarser texel the mean of the (up to) four below
 /// it for mean channels, their minimum or maximum for range channels.
 pub fn mip_chain(map: &MomentMap, method: FilterableMethod) -> Vec<MomentMap> {
-    let channels = method.channels();
+    mip_chain_of_channels(map, method.channels())
+}
+
+/// [`mip_chain`] for texels whose channels filter as `channels` say.
+pub fn mip_chain_of_channels(map: &MomentMap, channels: [ChannelFilter; 4]) -> Vec<MomentMap> {
     let mut chain = vec![map.clone()];
     while let Some(level) = chain.last().filter(|l| l.width > 1 || l.height > 1) {
         let (w, h) = (level.width.div_ceil(2), level.height.div_ceil(2));
@@ -275,6 +316,26 @@ mod tests {
             .map(|i| if i % w < 16 { 0.3 } else { 1.0 })
             .collect();
         (w, h, depths)
+    }
+
+    /// A spot map's stored `near / d` becomes `d / range`: linear in distance, 1 where nothing
+    /// was drawn and beyond the range; a cascade's reversed depth is flipped.
+    #[test]
+    fn depth_sources_give_linear_depth() {
+        let spot = DepthSource::Spot {
+            near: 0.1,
+            range: 20.0,
+        };
+        for d in [0.1f32, 0.5, 3.0, 7.5, 19.9] {
+            let z = spot.linear(0.1 / d);
+            assert!((z - d / 20.0).abs() < 1e-6, "{d}: {z}");
+        }
+        // Equal steps in distance are equal steps in z (not so for the stored depth).
+        let step = |a: f32, b: f32| spot.linear(0.1 / b) - spot.linear(0.1 / a);
+        assert!((step(4.0, 5.0) - step(14.0, 15.0)).abs() < 1e-6);
+        assert_eq!(spot.linear(0.0), 1.0);
+        assert_eq!(spot.linear(0.1 / 40.0), 1.0);
+        assert_eq!(DepthSource::Cascade.linear(0.25), 0.75);
     }
 
     /// An unfiltered texel is the hard shadow test, whatever the method.

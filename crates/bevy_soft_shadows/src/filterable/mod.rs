@@ -9,14 +9,15 @@
 //! read at the receiver's footprint). The WGSL module `bevy_soft_shadows::filterable_visibility`
 //! holds the same visibility functions for shaders (tested against these on the GPU).
 //!
-//! On the GPU: a [`FilteredShadowMap`] on a shadow-casting directional light makes [`render`]
-//! resolve the light's cascades in Bevy's directional shadow texture into the method's
-//! statistics, blur them and build the mips, each frame after the shadow passes, into the map of
+//! On the GPU: a [`FilteredShadowMap`] on a shadow-casting directional or spot light makes
+//! [`render`] resolve the light's layers of Bevy's directional and spot shadow texture (a
+//! directional light's cascades, a spot light's map) into the method's statistics, blur them
+//! and build the mips, each frame after the shadow passes, into the maps of
 //! [`receiver::FilteredShadowImages`] (tested texel for texel against [`filter`]); meshes'
-//! `StandardMaterial`s become [`receiver::FilteredShadowMaterial`]s, whose fragment stage
-//! (`filtered_receiver.wgsl`, importable as `bevy_soft_shadows::filtered_receiver`) reads the map
-//! at the pixel's footprint and re-weights the light's direct contribution by the filtered
-//! visibility in place of Bevy's shadow lookup.
+//! `StandardMaterial`s become [`SoftShadowMaterial`](crate::SoftShadowMaterial)s, whose fragment
+//! stage (`filtered_receiver.wgsl`, importable as `bevy_soft_shadows::filtered_receiver`) reads
+//! each map at the pixel's footprint and re-weights its light's direct contribution by the
+//! filtered visibility in place of Bevy's shadow lookup.
 
 pub mod filter;
 pub mod receiver;

@@ -1,14 +1,16 @@
-// The filterable shadow map's passes (Gumbau 2011, §7.2–7.3), per cascade of the light in Bevy's
-// directional shadow texture: `resolve` turns each depth into a texel of statistics, `blur_horizontal` and
+// The filterable shadow map's passes (Gumbau 2011, §7.2–7.3), per layer of the light in Bevy's
+// directional and spot shadow texture (a directional light's cascades, or a spot light's one
+// map): `resolve` turns each depth into a texel of statistics, `blur_horizontal` and
 // `blur_vertical` pre-filter it by a separable Gaussian, `downsample` builds each mip from the
 // one below. `bevy_soft_shadows::filterable::filter` is the CPU reference of each.
 
 struct MomentParams {
     // x: the method (0 Gaussian CDF, 1 power CDF, 2 variance, 3 exponential, 4 four moments);
     // y: the Gaussian's radius r in texels; z: the light's first layer in Bevy's directional
-    // shadow texture (the map's layer i is the light's cascade i).
+    // shadow texture (the map's layer i is the light's cascade i); w: what the depths are
+    // (`filter::DepthSource`: 0 a cascade, 1 a spot light's map).
     mode: vec4<u32>,
-    // x: the exponential's scale c.
+    // x: the exponential's scale c; y, z: a spot light's near plane and range.
     scale: vec4<f32>,
     // The Gaussian's weights w[k], k = |offset| = 0..=r, four a vector.
     weights: array<vec4<f32>, 8>,
@@ -54,8 +56,19 @@ fn weight(k: i32) -> f32 {
     return params.weights[i / 4u][i % 4u];
 }
 
-// Bevy's cascades store reversed, linear depth (1 at the cascade's near plane): the maps hold
-// z = 1 − depth, larger farther from the light.
+// `DepthSource::linear`: Bevy's cascades store reversed, linear depth (1 at the cascade's near
+// plane), so z = 1 − depth; a spot light's map stores near / d, so z = d / range (1 where
+// nothing was drawn). Larger farther from the light.
+fn linear_depth(depth: f32) -> f32 {
+    if params.mode.w == 0u {
+        return 1.0 - depth;
+    }
+    if depth <= 0.0 {
+        return 1.0;
+    }
+    return min(params.scale.y / (depth * params.scale.z), 1.0);
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn resolve(@builtin(global_invocation_id) id: vec3<u32>) {
     let size = textureDimensions(destination);
@@ -63,7 +76,7 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let depth = textureLoad(shadow_depth, vec2<i32>(id.xy), i32(id.z + params.mode.z), 0);
-    textureStore(destination, vec2<i32>(id.xy), i32(id.z), encode(1.0 - depth));
+    textureStore(destination, vec2<i32>(id.xy), i32(id.z), encode(linear_depth(depth)));
 }
 
 // One pass of the separable Gaussian along `step`: moments by the weights, the power CDF's

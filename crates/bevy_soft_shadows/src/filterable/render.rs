@@ -1,20 +1,21 @@
-//! The render-world side of filterable shadow maps: after the shadow passes, each layer of
-//! Bevy's directional shadow texture is resolved into a texel of statistics per depth, blurred
-//! by a separable Gaussian and mip-mapped (`moments.wgsl`; `filter` is the CPU reference), into
-//! the map of [`FilteredShadowImages`](super::receiver::FilteredShadowImages) (its cascades'
-//! layers only), in the method's [`texel_format`]; the receivers' buffer is told which of the
-//! view's directional lights the map is for.
+//! The render-world side of filterable shadow maps: after the shadow passes, the layers of
+//! Bevy's directional and spot shadow texture that hold the served lights' maps (a directional
+//! light's cascades, a spot light's one map) are resolved into a texel of statistics per depth,
+//! blurred by a separable Gaussian and mip-mapped (`moments.wgsl`; `filter` is the CPU
+//! reference), into the maps of [`FilteredShadowImages`](super::receiver::FilteredShadowImages),
+//! in each method's [`texel_format`]; the receivers' buffer is told which of the view's
+//! directional lights and which of Bevy's clustered lights the maps are for.
 
-use super::filter::{FilterableMethod, MIN_VARIANCE, MOMENT_BIAS, gaussian_weights};
+use super::filter::{DepthSource, FilterableMethod, MIN_VARIANCE, MOMENT_BIAS, gaussian_weights};
 pub use super::receiver::texel_format;
-use super::receiver::{FilteredShadowCamera, FilteredShadowImages, inactive_receiver_bytes};
+use super::receiver::{FilteredShadowCamera, FilteredShadowImages};
 use super::settings::FilteredShadowMap;
 use bevy::asset::{embedded_asset, load_embedded_asset};
 use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::{Core3d, Core3dSystems};
 use bevy::pbr::{
-    ExtractedDirectionalLight, LATE_SHADOW_PASS, MAX_CASCADES_PER_LIGHT, MAX_DIRECTIONAL_LIGHTS,
-    ViewShadowBindings, per_view_shadow_pass,
+    ExtractedDirectionalLight, ExtractedPointLight, GlobalClusterableObjectMeta, LATE_SHADOW_PASS,
+    MAX_CASCADES_PER_LIGHT, MAX_DIRECTIONAL_LIGHTS, ViewShadowBindings, per_view_shadow_pass,
 };
 use bevy::prelude::*;
 use bevy::render::diagnostic::RecordDiagnostics;
@@ -38,9 +39,10 @@ pub const MAX_BLUR_RADIUS: u32 = 31;
 #[derive(Clone, Copy, Debug, Default, ShaderType)]
 pub struct MomentParams {
     /// x: the method (0 Gaussian CDF, 1 power CDF, 2 variance, 3 exponential, 4 four moments);
-    /// y: the Gaussian's radius; z: the light's first layer in Bevy's directional shadow texture.
+    /// y: the Gaussian's radius; z: the light's first layer in Bevy's directional shadow texture;
+    /// w: the [`DepthSource`] (0 a cascade, 1 a spot light's map).
     pub mode: UVec4,
-    /// x: the exponential's scale.
+    /// x: the exponential's scale; y, z: a spot light's near plane and range.
     pub scale: Vec4,
     /// The Gaussian's weights by distance from the centre, 0..=radius.
     pub weights: [Vec4; 8],
@@ -48,8 +50,9 @@ pub struct MomentParams {
 
 impl MomentParams {
     /// The parameters of `method` blurred by a Gaussian of `sigma` texels, for the light whose
-    /// cascades start at layer `base_layer` of Bevy's directional shadow texture.
-    pub fn new(method: FilterableMethod, sigma: f32, base_layer: u32) -> Self {
+    /// maps start at layer `base_layer` of Bevy's directional shadow texture and store depths
+    /// as `source` says.
+    pub fn new(method: FilterableMethod, sigma: f32, base_layer: u32, source: DepthSource) -> Self {
         let (mode, c) = method_code(method);
         let w = gaussian_weights(sigma);
         let r = (w.len() / 2).min(MAX_BLUR_RADIUS as usize);
@@ -57,9 +60,13 @@ impl MomentParams {
         for k in 0..=r {
             weights[k / 4][k % 4] = w[w.len() / 2 + k];
         }
+        let (kind, near, range) = match source {
+            DepthSource::Cascade => (0, 0.0, 0.0),
+            DepthSource::Spot { near, range } => (1, near, range),
+        };
         Self {
-            mode: UVec4::new(mode, r as u32, base_layer, 0),
-            scale: Vec4::new(c, 0.0, 0.0, 0.0),
+            mode: UVec4::new(mode, r as u32, base_layer, kind),
+            scale: Vec4::new(c, near, range, 0.0),
             weights,
         }
     }
@@ -117,20 +124,69 @@ pub fn directional_slot(lights: &[DirectionalSlotLight], ours: Entity) -> Option
     None
 }
 
-/// The receivers' buffer (`FilteredReceiver` of `filtered_receiver.wgsl`) for the light at
-/// `light_index` among the view's directional lights.
-fn receiver_bytes(light_index: u32, method: FilterableMethod, mips: u32) -> Vec<u8> {
-    let (code, c) = method_code(method);
-    [light_index, code, mips, 0]
+/// A point or spot light as Bevy's `prepare_lights` sorts the clustered lights.
+#[derive(Clone, Copy, Debug)]
+pub struct ClusteredLight {
+    /// Whether it is a spot light.
+    pub spot: bool,
+    /// `shadow_maps_enabled`.
+    pub shadow_maps_enabled: bool,
+}
+
+/// Where Bevy 0.19's `prepare_lights` put the shadow map of the spot light at `index` in the
+/// clustered lights (`GlobalClusterableObjectMeta::entity_to_index`), given every clustered
+/// light and the directional shadow texture's layer count: Bevy sorts point lights before spot
+/// lights and shadow-casting ones first, and stacks the spot lights' maps after the directional
+/// cascades, so the layer is `layers − shadowed spots + (index − point lights)`. `None` when
+/// that light has no map.
+pub fn spot_layer(lights: &[ClusteredLight], index: u32, layers: u32) -> Option<u32> {
+    let light = lights.get(index as usize)?;
+    if !light.spot || !light.shadow_maps_enabled {
+        return None;
+    }
+    let points = lights.iter().filter(|l| !l.spot).count() as u32;
+    let shadowed_spots = lights
         .iter()
-        .map(|v| v.to_le_bytes())
-        .chain(
-            [c, MIN_VARIANCE, MOMENT_BIAS, 0.0]
-                .iter()
-                .map(|v| v.to_le_bytes()),
-        )
-        .flatten()
-        .collect()
+        .filter(|l| l.spot && l.shadow_maps_enabled)
+        .count() as u32;
+    let among_spots = index.checked_sub(points)?;
+    (among_spots < shadowed_spots && shadowed_spots <= layers)
+        .then(|| layers - shadowed_spots + among_spots)
+}
+
+/// One served map as the receivers' buffer describes it: the light's index (among the view's
+/// directional lights, or Bevy's clustered lights), the method, the mip count, and a spot
+/// light's range.
+#[derive(Clone, Copy, Debug)]
+struct ServedMap {
+    light_index: u32,
+    method: FilterableMethod,
+    mips: u32,
+    range: f32,
+}
+
+/// The receivers' buffer (`FilteredReceiver` of `filtered_receiver.wgsl`): the directional
+/// map's half, then the spot map's; `0xffffffff` for a map not made.
+fn receiver_bytes(directional: Option<ServedMap>, spot: Option<ServedMap>) -> Vec<u8> {
+    let half = |map: Option<ServedMap>| -> Vec<u8> {
+        let Some(map) = map else {
+            let mut bytes = vec![0u8; 32];
+            bytes[..4].copy_from_slice(&u32::MAX.to_le_bytes());
+            return bytes;
+        };
+        let (code, c) = method_code(map.method);
+        [map.light_index, code, map.mips, 0]
+            .iter()
+            .map(|v| v.to_le_bytes())
+            .chain(
+                [c, MIN_VARIANCE, MOMENT_BIAS, map.range]
+                    .iter()
+                    .map(|v| v.to_le_bytes()),
+            )
+            .flatten()
+            .collect()
+    };
+    [half(directional), half(spot)].concat()
 }
 
 /// The shader def that declares `format` as the passes' destination in `moments.wgsl`.
@@ -149,19 +205,30 @@ const FORMATS: [TextureFormat; 3] = [
     TextureFormat::Rgba32Float,
 ];
 
-/// The filtered shadow map of the first shadow-casting directional light with
-/// [`FilteredShadowMap`], as extracted: its settings and render entity, the map's image and the
-/// receivers' buffer.
+/// The filtered shadow maps of the first shadow-casting directional light and the first
+/// shadow-casting spot light with [`FilteredShadowMap`], as extracted: their render entities
+/// and settings, the maps' images and the receivers' buffer.
 #[derive(Resource, Default, Clone)]
 struct ExtractedFilteredShadow {
     light: Option<(Entity, FilterableMethod, f32)>,
+    spot: Option<(Entity, FilterableMethod, f32)>,
     moments: AssetId<Image>,
+    spot_moments: AssetId<Image>,
     receiver: AssetId<ShaderBuffer>,
 }
 
-/// The scene view's filterable shadow map: `raw` the resolved statistics (one layer per cascade
-/// of the light), `moments` the blurred map with its mips, in the method's [`texel_format`].
+/// The scene view's filterable shadow maps: the directional light's and the spot light's, each
+/// where one is made this frame.
 #[derive(Component)]
+pub struct FilteredShadowViewMaps {
+    /// The directional light's map (one layer per cascade).
+    pub directional: Option<FilteredShadowTextures>,
+    /// The spot light's map (one layer).
+    pub spot: Option<FilteredShadowTextures>,
+}
+
+/// One filterable shadow map: `raw` the resolved statistics, `moments` the blurred map with its
+/// mips, in the method's [`texel_format`].
 pub struct FilteredShadowTextures {
     /// The texel format of all three.
     pub format: TextureFormat,
@@ -171,7 +238,8 @@ pub struct FilteredShadowTextures {
     pub raw: CachedTexture,
     /// The horizontal pass's output.
     pub scratch: CachedTexture,
-    /// The blurred map and its mips (the texture of `FilteredShadowImages::moments`).
+    /// The blurred map and its mips (the texture of `FilteredShadowImages::moments` or
+    /// `spot_moments`).
     pub moments: Texture,
     /// One view per mip of `moments`.
     pub mip_views: Vec<TextureView>,
@@ -201,8 +269,12 @@ impl MomentPipelines {
     }
 }
 
+/// The passes' parameters of the directional map and of the spot map.
 #[derive(Resource, Default)]
-struct MomentParamsBuffer(UniformBuffer<MomentParams>);
+struct MomentParamsBuffers {
+    directional: UniformBuffer<MomentParams>,
+    spot: UniformBuffer<MomentParams>,
+}
 
 fn init_pipelines(
     mut commands: Commands,
@@ -251,19 +323,74 @@ fn init_pipelines(
 fn extract_filtered_shadow(
     mut extracted: ResMut<ExtractedFilteredShadow>,
     lights: Extract<Query<(RenderEntity, &FilteredShadowMap, &DirectionalLight)>>,
+    spots: Extract<Query<(RenderEntity, &FilteredShadowMap, &SpotLight)>>,
     maps: Extract<Option<Res<FilteredShadowImages>>>,
 ) {
+    let settings = |entity: Entity, settings: &FilteredShadowMap| {
+        let s = settings.sanitized().0;
+        (entity, s.method, s.blur_sigma)
+    };
     extracted.light = lights
         .iter()
         .find(|(_, _, light)| light.shadow_maps_enabled)
-        .map(|(entity, settings, _)| {
-            let s = settings.sanitized().0;
-            (entity, s.method, s.blur_sigma)
-        });
+        .map(|(entity, s, _)| settings(entity, s));
+    extracted.spot = spots
+        .iter()
+        .find(|(_, _, spot)| spot.shadow_maps_enabled)
+        .map(|(entity, s, _)| settings(entity, s));
     if let Some(maps) = maps.as_ref() {
         extracted.moments = maps.moments.id();
+        extracted.spot_moments = maps.spot_moments.id();
         extracted.receiver = maps.receiver.id();
     }
+}
+
+/// A map to make this frame: its texture, where its light's depths lie in Bevy's shadow texture
+/// and what they are, and the receivers' description of it.
+struct MapJob {
+    moments: Texture,
+    base_layer: u32,
+    params: MomentParams,
+    served: ServedMap,
+}
+
+/// Whether `image` is sized for `layers` layers of Bevy's shadow texture `source` in `method`'s
+/// format, the layers lying inside it. A mismatch lasts a frame after a change (the main world
+/// sizes the map from the same settings); one that lasts (Bevy clamping the shadow map to the
+/// adapter's limit) is reported once.
+fn fits(
+    image: &GpuImage,
+    source: &Texture,
+    base_layer: u32,
+    layers: u32,
+    method: FilterableMethod,
+    warned: &mut bool,
+) -> bool {
+    let texture = &image.texture;
+    let want = (
+        source.width(),
+        source.height(),
+        layers,
+        texel_format(method),
+    );
+    let have = (
+        texture.width(),
+        texture.height(),
+        texture.depth_or_array_layers(),
+        texture.format(),
+    );
+    if want == have && base_layer + layers <= source.depth_or_array_layers() {
+        return true;
+    }
+    if !*warned && want.3 == have.3 && texture.width() > source.width() {
+        warn!(
+            "filtered shadow map: Bevy's directional shadow texture is {}² texels, less than \
+             DirectionalLightShadowMap asks for; no filtered map is made",
+            source.width()
+        );
+        *warned = true;
+    }
+    false
 }
 
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
@@ -273,7 +400,7 @@ fn prepare_textures(
     queue: Res<RenderQueue>,
     mut cache: ResMut<TextureCache>,
     extracted: Res<ExtractedFilteredShadow>,
-    mut params: ResMut<MomentParamsBuffer>,
+    mut params: ResMut<MomentParamsBuffers>,
     images: Res<RenderAssets<GpuImage>>,
     buffers: Res<RenderAssets<GpuShaderBuffer>>,
     views: Query<
@@ -281,12 +408,14 @@ fn prepare_textures(
         (With<ExtractedView>, With<FilteredShadowCamera>),
     >,
     lights: Query<(Entity, &ExtractedDirectionalLight, &RenderLayers)>,
-    holding: Query<Entity, With<FilteredShadowTextures>>,
+    clustered: Res<GlobalClusterableObjectMeta>,
+    point_lights: Query<&ExtractedPointLight>,
+    holding: Query<Entity, With<FilteredShadowViewMaps>>,
     mut warned: Local<bool>,
 ) {
-    let mut receiver = inactive_receiver_bytes();
-    let served = extracted.light.and_then(|(light, method, sigma)| {
-        let (entity, shadows, layers) = views.iter().next()?;
+    let view = views.iter().next();
+    let directional = extracted.light.and_then(|(light, method, sigma)| {
+        let (_, shadows, layers) = view?;
         let view_layers = layers.cloned().unwrap_or_default();
         let slots: Vec<DirectionalSlotLight> = lights
             .iter()
@@ -308,53 +437,85 @@ fn prepare_textures(
             .len()
             .clamp(1, MAX_CASCADES_PER_LIGHT) as u32;
         let source = &shadows.directional_light_depth_texture;
-        let format = texel_format(method);
         let image = images.get(extracted.moments)?;
-        let want = (source.width(), source.height(), cascades, format);
-        let have = (
-            image.texture.width(),
-            image.texture.height(),
-            image.texture.depth_or_array_layers(),
-            image.texture.format(),
-        );
-        if want != have || base_layer + cascades > source.depth_or_array_layers() {
-            // The main world sizes the map from the same settings a frame earlier; a lasting
-            // mismatch (Bevy clamping the shadow map to the adapter's limit) is reported once.
-            if !*warned && want.3 == have.3 && image.texture.width() > source.width() {
-                warn!(
-                    "filtered shadow map: Bevy's directional shadow texture is {}² texels, less \
-                     than DirectionalLightShadowMap asks for; no filtered map is made",
-                    source.width()
-                );
-                *warned = true;
-            }
-            return None;
-        }
-        Some((
-            entity,
-            index,
+        fits(image, source, base_layer, cascades, method, &mut warned).then(|| MapJob {
+            moments: image.texture.clone(),
             base_layer,
-            method,
-            sigma,
-            image.texture.clone(),
-        ))
+            params: MomentParams::new(method, sigma, base_layer, DepthSource::Cascade),
+            served: ServedMap {
+                light_index: index,
+                method,
+                mips: image.texture.mip_level_count(),
+                range: 0.0,
+            },
+        })
+    });
+    let spot = extracted.spot.and_then(|(light, method, sigma)| {
+        let (_, shadows, _) = view?;
+        // Bevy's clustered lights in its order, to find the spot's layer.
+        let mut order = vec![
+            ClusteredLight {
+                spot: false,
+                shadow_maps_enabled: false,
+            };
+            clustered.entity_to_index.len()
+        ];
+        for (&entity, &index) in &clustered.entity_to_index {
+            let l = point_lights.get(entity).ok()?;
+            *order.get_mut(index)? = ClusteredLight {
+                spot: l.spot_light_angles.is_some(),
+                shadow_maps_enabled: l.shadow_maps_enabled,
+            };
+        }
+        let index = *clustered.entity_to_index.get(&light)? as u32;
+        let source = &shadows.directional_light_depth_texture;
+        let base_layer = spot_layer(&order, index, source.depth_or_array_layers())?;
+        let lamp = point_lights.get(light).ok()?;
+        let depths = DepthSource::Spot {
+            near: lamp.shadow_map_near_z,
+            range: lamp.range,
+        };
+        let image = images.get(extracted.spot_moments)?;
+        fits(image, source, base_layer, 1, method, &mut warned).then(|| MapJob {
+            moments: image.texture.clone(),
+            base_layer,
+            params: MomentParams::new(method, sigma, base_layer, depths),
+            served: ServedMap {
+                light_index: index,
+                method,
+                mips: image.texture.mip_level_count(),
+                range: lamp.range,
+            },
+        })
     });
     // Views that no longer get a map lose theirs (only those: nothing is queued per frame
     // while no light asks for one).
-    let served_view = served.as_ref().map(|s| s.0);
+    let served_view = view
+        .filter(|_| directional.is_some() || spot.is_some())
+        .map(|v| v.0);
     for entity in &holding {
         if Some(entity) != served_view {
-            commands.entity(entity).remove::<FilteredShadowTextures>();
+            commands.entity(entity).remove::<FilteredShadowViewMaps>();
         }
     }
-    if let Some((entity, index, base_layer, method, sigma, moments)) = served {
-        let format = moments.format();
-        params.0.set(MomentParams::new(method, sigma, base_layer));
-        params.0.write_buffer(&device, &queue);
+    let receiver = receiver_bytes(
+        directional.as_ref().map(|job| job.served),
+        spot.as_ref().map(|job| job.served),
+    );
+    if let Some(buffer) = buffers.get(extracted.receiver) {
+        queue.write_buffer(&buffer.buffer, 0, &receiver);
+    }
+    let Some(view) = served_view else {
+        return;
+    };
+    let mut make = |job: MapJob, buffer: &mut UniformBuffer<MomentParams>| {
+        buffer.set(job.params);
+        buffer.write_buffer(&device, &queue);
+        let format = job.moments.format();
         let size = Extent3d {
-            width: moments.width(),
-            height: moments.height(),
-            depth_or_array_layers: moments.depth_or_array_layers(),
+            width: job.moments.width(),
+            height: job.moments.height(),
+            depth_or_array_layers: job.moments.depth_or_array_layers(),
         };
         let mut get = |label: &'static str| {
             cache.get(
@@ -375,10 +536,9 @@ fn prepare_textures(
         };
         let raw = get("filtered_shadow_raw");
         let scratch = get("filtered_shadow_scratch");
-        let mips = moments.mip_level_count();
-        let mip_views = (0..mips)
+        let mip_views = (0..job.moments.mip_level_count())
             .map(|level| {
-                moments.create_view(&TextureViewDescriptor {
+                job.moments.create_view(&TextureViewDescriptor {
                     label: Some("filtered_shadow_mip"),
                     dimension: Some(TextureViewDimension::D2Array),
                     base_mip_level: level,
@@ -387,19 +547,21 @@ fn prepare_textures(
                 })
             })
             .collect();
-        commands.entity(entity).insert(FilteredShadowTextures {
+        FilteredShadowTextures {
             format,
-            base_layer,
+            base_layer: job.base_layer,
             raw,
             scratch,
-            moments,
+            moments: job.moments,
             mip_views,
-        });
-        receiver = receiver_bytes(index, method, mips);
-    }
-    if let Some(buffer) = buffers.get(extracted.receiver) {
-        queue.write_buffer(&buffer.buffer, 0, &receiver);
-    }
+        }
+    };
+    let params = &mut *params;
+    let maps = FilteredShadowViewMaps {
+        directional: directional.map(|job| make(job, &mut params.directional)),
+        spot: spot.map(|job| make(job, &mut params.spot)),
+    };
+    commands.entity(view).insert(maps);
 }
 
 fn array_view(texture: &Texture) -> TextureView {
@@ -410,55 +572,62 @@ fn array_view(texture: &Texture) -> TextureView {
 }
 
 fn filtered_shadow(
-    view: ViewQuery<(&ViewShadowBindings, &FilteredShadowTextures)>,
+    view: ViewQuery<(&ViewShadowBindings, &FilteredShadowViewMaps)>,
     pipelines: Res<MomentPipelines>,
     pipeline_cache: Res<PipelineCache>,
-    params: Res<MomentParamsBuffer>,
+    params: Res<MomentParamsBuffers>,
     mut ctx: RenderContext,
 ) {
-    let (shadows, textures) = view.into_inner();
-    let Some(pipelines) = pipelines.of(textures.format) else {
-        return;
-    };
-    let (Some(resolve), Some(blur_h), Some(blur_v), Some(downsample), Some(binding)) = (
-        pipeline_cache.get_compute_pipeline(pipelines.resolve),
-        pipeline_cache.get_compute_pipeline(pipelines.blur_horizontal),
-        pipeline_cache.get_compute_pipeline(pipelines.blur_vertical),
-        pipeline_cache.get_compute_pipeline(pipelines.downsample),
-        params.0.binding(),
-    ) else {
-        return;
-    };
+    let (shadows, maps) = view.into_inner();
     let device = ctx.render_device().clone();
-    let layout = pipeline_cache.get_bind_group_layout(&pipelines.layout);
     let depth = array_view(&shadows.directional_light_depth_texture);
-    let group = |source: &TextureView, target: &TextureView| {
-        device.create_bind_group(
-            "filtered_shadow_group",
-            &layout,
-            &BindGroupEntries::sequential((&depth, source, target, binding.clone())),
-        )
-    };
-    let raw = array_view(&textures.raw.texture);
-    let scratch = array_view(&textures.scratch.texture);
-    let mut steps = vec![
+    // Each map's dispatches: its pipelines, bind groups and sizes.
+    let mut steps = Vec::new();
+    for (textures, params) in [
+        (&maps.directional, &params.directional),
+        (&maps.spot, &params.spot),
+    ] {
+        let Some(textures) = textures else {
+            continue;
+        };
+        let Some(pipelines) = pipelines.of(textures.format) else {
+            continue;
+        };
+        let (Some(resolve), Some(blur_h), Some(blur_v), Some(downsample), Some(binding)) = (
+            pipeline_cache.get_compute_pipeline(pipelines.resolve),
+            pipeline_cache.get_compute_pipeline(pipelines.blur_horizontal),
+            pipeline_cache.get_compute_pipeline(pipelines.blur_vertical),
+            pipeline_cache.get_compute_pipeline(pipelines.downsample),
+            params.binding(),
+        ) else {
+            continue;
+        };
+        let layout = pipeline_cache.get_bind_group_layout(&pipelines.layout);
+        let group = |source: &TextureView, target: &TextureView| {
+            device.create_bind_group(
+                "filtered_shadow_group",
+                &layout,
+                &BindGroupEntries::sequential((&depth, source, target, binding.clone())),
+            )
+        };
+        let raw = array_view(&textures.raw.texture);
+        let scratch = array_view(&textures.scratch.texture);
+        let size = textures.raw.texture.size();
         // The resolve reads only the depth (its source slot holds a texture it does not write).
-        (resolve, group(&scratch, &raw), textures.raw.texture.size()),
-        (blur_h, group(&raw, &scratch), textures.raw.texture.size()),
-        (
-            blur_v,
-            group(&scratch, &textures.mip_views[0]),
-            textures.raw.texture.size(),
-        ),
-    ];
-    let base = textures.moments.size();
-    for level in 1..textures.mip_views.len() {
-        let size = base.mip_level_size(level as u32, TextureDimension::D2);
-        steps.push((
-            downsample,
-            group(&textures.mip_views[level - 1], &textures.mip_views[level]),
-            size,
-        ));
+        steps.push((resolve, group(&scratch, &raw), size));
+        steps.push((blur_h, group(&raw, &scratch), size));
+        steps.push((blur_v, group(&scratch, &textures.mip_views[0]), size));
+        let base = textures.moments.size();
+        for level in 1..textures.mip_views.len() {
+            steps.push((
+                downsample,
+                group(&textures.mip_views[level - 1], &textures.mip_views[level]),
+                base.mip_level_size(level as u32, TextureDimension::D2),
+            ));
+        }
+    }
+    if steps.is_empty() {
+        return;
     }
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
@@ -490,7 +659,7 @@ pub(crate) fn build(app: &mut App) {
     };
     render_app
         .init_resource::<ExtractedFilteredShadow>()
-        .init_resource::<MomentParamsBuffer>()
+        .init_resource::<MomentParamsBuffers>()
         .add_systems(RenderStartup, init_pipelines)
         .add_systems(ExtractSchedule, extract_filtered_shadow)
         .add_systems(
@@ -555,12 +724,67 @@ mod tests {
 
     #[test]
     fn the_receivers_buffer_names_light_method_and_mips() {
-        let bytes = receiver_bytes(2, FilterableMethod::Exponential { c: 80.0 }, 12);
-        assert_eq!(bytes.len(), 32);
+        let bytes = receiver_bytes(
+            Some(ServedMap {
+                light_index: 2,
+                method: FilterableMethod::Exponential { c: 80.0 },
+                mips: 12,
+                range: 0.0,
+            }),
+            None,
+        );
+        assert_eq!(bytes.len(), 64);
         let word = |i: usize| u32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().unwrap());
         assert_eq!((word(0), word(1), word(2)), (2, 3, 12));
         assert_eq!(f32::from_bits(word(4)), 80.0);
         assert_eq!(f32::from_bits(word(5)), MIN_VARIANCE);
         assert_eq!(f32::from_bits(word(6)), MOMENT_BIAS);
+        // No spot map.
+        assert_eq!(word(8), u32::MAX);
+        let bytes = receiver_bytes(
+            None,
+            Some(ServedMap {
+                light_index: 5,
+                method: FilterableMethod::PowerCdf,
+                mips: 9,
+                range: 30.0,
+            }),
+        );
+        let word = |i: usize| u32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().unwrap());
+        assert_eq!(word(0), u32::MAX);
+        assert_eq!((word(8), word(9), word(10)), (5, 1, 9));
+        assert_eq!(f32::from_bits(word(15)), 30.0);
+        assert_eq!(bytes, {
+            let mut both = crate::filterable::receiver::inactive_receiver_bytes();
+            both[32..].copy_from_slice(&bytes[32..]);
+            both
+        });
+    }
+
+    /// Bevy's clustered order: point lights, then spot lights with shadows, then without; the
+    /// spots' maps follow the directional cascades in the shadow texture.
+    #[test]
+    fn the_spot_layer_follows_bevys_order_of_clustered_lights() {
+        let l = |spot, shadow_maps_enabled| ClusteredLight {
+            spot,
+            shadow_maps_enabled,
+        };
+        // Two point lights, two shadowed spots, one unshadowed spot; 4 cascades + 2 spot maps.
+        let lights = [
+            l(false, true),
+            l(false, false),
+            l(true, true),
+            l(true, true),
+            l(true, false),
+        ];
+        assert_eq!(spot_layer(&lights, 2, 6), Some(4));
+        assert_eq!(spot_layer(&lights, 3, 6), Some(5));
+        assert_eq!(spot_layer(&lights, 4, 6), None);
+        assert_eq!(spot_layer(&lights, 0, 6), None);
+        assert_eq!(spot_layer(&lights, 9, 6), None);
+        // No directional cascades: the spots' maps are the first layers.
+        assert_eq!(spot_layer(&[l(true, true)], 0, 1), Some(0));
+        // A texture too small to hold them (Bevy's limit reached): no layer.
+        assert_eq!(spot_layer(&lights, 3, 1), None);
     }
 }

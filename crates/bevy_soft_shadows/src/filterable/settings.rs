@@ -3,18 +3,28 @@
 use super::filter::FilterableMethod;
 use bevy::prelude::*;
 
-/// Put on a shadow-casting `DirectionalLight`: its cascades are resolved into a filterable
-/// shadow map of `method`'s statistics, blurred by a Gaussian of `blur_sigma` shadow-map texels
-/// and mip-mapped, every frame after the shadow passes, for the scene's camera; meshes'
+/// Put on a shadow-casting `DirectionalLight` or `SpotLight`: its shadow maps (a directional
+/// light's cascades, a spot light's one map) are resolved into a filterable shadow map of
+/// `method`'s statistics, blurred by a Gaussian of `blur_sigma` shadow-map texels and
+/// mip-mapped, every frame after the shadow passes, for the scene's camera; meshes'
 /// `StandardMaterial`s become [`SoftShadowMaterial`](crate::SoftShadowMaterial)s that read it
-/// as this light's shadow term (where Screen Space Soft Shadows are off). The first such light
-/// is served; spot lights are not yet.
+/// as this light's shadow term (where Screen Space Soft Shadows do not shadow the same light).
+/// The first such directional light and the first such spot light are served, each with its own
+/// method; point lights are not.
 ///
-/// It costs memory: three textures of the light's cascades at Bevy's directional shadow-map size
+/// A spot light's map holds the distance along its axis over its `range` (Bevy's perspective
+/// depth would crowd every distance beyond a few near planes into the last percent of the
+/// range): keep the range close to the scene it lights.
+///
+/// It costs memory: three textures of the light's maps at Bevy's directional shadow-map size
 /// (the resolved texels, the blur's scratch and the mip-mapped map), 32-bit floats in as many
 /// channels as the method needs: with the default 2048² maps and four cascades, about 0.22 GB
 /// for ESM, 0.45 GB for VSM and the Gaussian CDF, 0.9 GB for the power CDF and four moments
-/// (16-bit storage is to come).
+/// (a spot light's a quarter of that; 16-bit storage is to come).
+///
+/// Diagnostics: [`FILTERED_MAPS`](super::receiver::FILTERED_MAPS) (maps made) and
+/// [`FILTERED_MAP_MIB`](super::receiver::FILTERED_MAP_MIB) (their GPU memory); with Bevy's
+/// `RenderDiagnosticsPlugin`, the passes' GPU time as `render/filtered_shadow/elapsed_gpu`.
 #[derive(Component, Clone, Copy, Debug, PartialEq, Reflect)]
 #[reflect(Component, Debug, PartialEq, Default)]
 pub struct FilteredShadowMap {

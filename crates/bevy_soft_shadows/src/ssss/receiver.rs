@@ -29,13 +29,17 @@ pub struct SoftShadowReceiver {
     /// −1 for a directional light).
     #[texture(100, sample_type = "float", filterable = false)]
     pub visibility: Handle<Image>,
-    /// The filterable shadow map ([`FilteredShadowImages::moments`]; `None` reads a fallback
-    /// and must come with a buffer saying no map).
+    /// The directional light's filterable shadow map ([`FilteredShadowImages::moments`]; `None`
+    /// reads a fallback and must come with a buffer saying no map).
     #[texture(101, dimension = "2d_array", sample_type = "float", filterable = false)]
     pub moments: Option<Handle<Image>>,
-    /// Which light the filterable shadow map is for ([`FilteredShadowImages::receiver`]).
+    /// Which lights the filterable shadow maps are for ([`FilteredShadowImages::receiver`]).
     #[storage(102, read_only)]
     pub filtered: Handle<ShaderBuffer>,
+    /// The spot light's filterable shadow map ([`FilteredShadowImages::spot_moments`]; `None`
+    /// as for `moments`).
+    #[texture(103, dimension = "2d_array", sample_type = "float", filterable = false)]
+    pub spot_moments: Option<Handle<Image>>,
 }
 
 impl SoftShadowReceiver {
@@ -45,6 +49,7 @@ impl SoftShadowReceiver {
             visibility: textures.visibility.clone(),
             moments: Some(maps.moments.clone()),
             filtered: maps.receiver.clone(),
+            spot_moments: Some(maps.spot_moments.clone()),
         }
     }
 }
@@ -327,10 +332,14 @@ fn convert_receivers(
     }
 }
 
-/// The textures' layouts the receivers' bind groups were last made with.
+/// A filterable map's layout (`FilteredShadowImages::layout`).
+type MapLayout = Option<(UVec3, TextureFormat)>;
+
+/// The textures' layouts the receivers' bind groups were last made with: the SSSS textures'
+/// size, the directional and the spot light's filterable maps.
 #[derive(Default)]
 struct BoundTextures {
-    layouts: Option<(UVec2, Option<(UVec3, TextureFormat)>)>,
+    layouts: Option<(UVec2, [MapLayout; 2])>,
     /// A frame after a change the bind groups are made again.
     pending: bool,
 }
@@ -355,7 +364,7 @@ fn refresh_bind_groups(
         }
         bound.pending = false;
     }
-    let layouts = Some((textures.size, maps.layout));
+    let layouts = Some((textures.size, [maps.layout, maps.spot_layout]));
     if bound.layouts != layouts {
         bound.pending = bound.layouts.is_some();
         bound.layouts = layouts;

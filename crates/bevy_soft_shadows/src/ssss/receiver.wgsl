@@ -1,6 +1,7 @@
 // A StandardMaterial receiving the suite's shadows: Bevy's lighting with the SSSS visibility at
-// this fragment's pixel as the SSSS light's shadow term (receiver_functions.wgsl), or where SSSS
-// is inactive, the filterable shadow map's visibility as its light's (filtered_receiver.wgsl).
+// this fragment's pixel as the SSSS light's shadow term (receiver_functions.wgsl), and the
+// filterable shadow maps' visibilities as their lights' (filtered_receiver.wgsl) — where SSSS is
+// active, for a filtered spot light other than the SSSS light only.
 #import bevy_pbr::{
     pbr_fragment::pbr_input_from_standard_material,
     pbr_functions::{alpha_discard, apply_pbr_lighting, main_pass_post_lighting_processing},
@@ -8,11 +9,14 @@
     forward_io::{VertexOutput, FragmentOutput},
 }
 #import bevy_soft_shadows::receiver_functions::{apply_soft_shadow, soft_visibility_at}
-#import bevy_soft_shadows::filtered_receiver::{FilteredReceiver, apply_filtered_shadow}
+#import bevy_soft_shadows::filtered_receiver::{
+    FilteredReceiver, apply_filtered_shadow, apply_filtered_spot_shadow,
+}
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var soft_visibility: texture_2d<f32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(101) var moments: texture_2d_array<f32>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(102) var<storage, read> filtered: FilteredReceiver;
+@group(#{MATERIAL_BIND_GROUP}) @binding(103) var spot_moments: texture_2d_array<f32>;
 
 @fragment
 fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> FragmentOutput {
@@ -26,8 +30,14 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
         let soft = soft_visibility_at(soft_visibility, in.position.xy);
         if soft.x >= 0.0 {
             color = apply_soft_shadow(pbr_input, color, in.position.xy, soft);
+            // SSSS's light is a spot light's clustered index i ≥ 0, or negative.
+            if soft.y < 0.0 || u32(soft.y) != filtered.spot_mode.x {
+                color = apply_filtered_spot_shadow(
+                    pbr_input, color, in.position.xy, dp, spot_moments, filtered);
+            }
         } else {
-            color = apply_filtered_shadow(pbr_input, color, in.position.xy, dp, moments, filtered);
+            color = apply_filtered_shadow(
+                pbr_input, color, in.position.xy, dp, moments, spot_moments, filtered);
         }
     }
     var out: FragmentOutput;

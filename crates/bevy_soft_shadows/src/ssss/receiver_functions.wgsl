@@ -109,18 +109,32 @@ fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, 
             id, pbr_input.world_position, pbr_input.world_normal, frag_xy);
         direct = lighting::point_light(id, &input, true, true);
     } else {
-        // A spot light: Bevy's `fetch_spot_shadow` and `lighting::spot_light`, as its
-        // clustered light loop calls them.
-        let id = u32(soft.y);
-        let light = &view_bindings::clustered_lights.data[id];
-        if ((*light).flags & POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
-            return color;
-        }
-        bevy_visibility = fetch_spot_shadow(
-            id, pbr_input.world_position, pbr_input.world_normal, (*light).shadow_map_near_z, frag_xy);
-        direct = lighting::spot_light(id, &input, true);
+        return apply_spot_visibility(pbr_input, color, u32(soft.y), frag_xy, soft.x);
     }
     return color + vec4(view_bindings::view.exposure * direct * (soft.x - bevy_visibility), 0.0);
+}
+
+// `color` (Bevy's lighting of `pbr_input`) with spot light `id`'s (its index among the clustered
+// lights) shadow term replaced by `visibility`, as `apply_directional_visibility` does for a
+// directional light: Bevy's `fetch_spot_shadow` and `lighting::spot_light`, as its clustered
+// light loop calls them, give v_b and D.
+fn apply_spot_visibility(
+    pbr_input: PbrInput,
+    color: vec4<f32>,
+    id: u32,
+    frag_xy: vec2<f32>,
+    visibility: f32,
+) -> vec4<f32> {
+    let light = &view_bindings::clustered_lights.data[id];
+    if (pbr_input.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u
+        || ((*light).flags & POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
+        return color;
+    }
+    var input = lighting_input(pbr_input);
+    let bevy_visibility = fetch_spot_shadow(
+        id, pbr_input.world_position, pbr_input.world_normal, (*light).shadow_map_near_z, frag_xy);
+    let direct = lighting::spot_light(id, &input, true);
+    return color + vec4(view_bindings::view.exposure * direct * (visibility - bevy_visibility), 0.0);
 }
 
 // The SSSS (visibility, light) at a fragment (visibility negative — "inactive" — outside the

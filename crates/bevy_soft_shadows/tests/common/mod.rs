@@ -611,3 +611,42 @@ pub fn use_filtered_map(
             blur_sigma: 3.0,
         });
 }
+
+/// A shadow-casting directional light that gives no light: its four cascades take the first
+/// layers of Bevy's directional and spot shadow texture.
+pub fn spawn_dark_sun(world: &mut World) {
+    world.spawn((
+        DirectionalLight {
+            illuminance: 0.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::default().looking_to(Vec3::new(0.3, -1.0, 0.2), Vec3::Y),
+    ));
+}
+
+/// A shadow-casting point light at `at` that gives no light: it takes a place among Bevy's
+/// clustered lights and its cube faces.
+pub fn spawn_dark_bulb(world: &mut World, at: Vec3) {
+    world.spawn((
+        PointLight {
+            intensity: 0.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_translation(at),
+    ));
+}
+
+/// Every ground pixel of the pole scene's view: its index and world point, but for the pole's
+/// (x within ±0.1, z within ±0.5) and two pixels around it.
+pub fn ground_pixels() -> impl Iterator<Item = (usize, Vec3)> {
+    let m_per_px = VIEW_M / SIZE as f32;
+    (0..SIZE * SIZE).filter_map(move |i| {
+        let (col, row) = (i % SIZE, i / SIZE);
+        let x = CENTRE.x - VIEW_M / 2.0 + (col as f32 + 0.5) * m_per_px;
+        let z = CENTRE.z - VIEW_M / 2.0 + (row as f32 + 0.5) * m_per_px;
+        let on_pole = x.abs() < 0.1 + 2.0 * m_per_px && z.abs() < 0.5 + 2.0 * m_per_px;
+        (!on_pole).then_some((i as usize, Vec3::new(x, 0.0, z)))
+    })
+}
