@@ -309,6 +309,40 @@ impl GltfBuilder {
             "data:application/octet-stream;base64,{}",
             base64::engine::general_purpose::STANDARD.encode(&self.bin)
         );
+        self.document(Some(uri)).to_string()
+    }
+
+    /// The same document as a binary glTF (`.glb`): the JSON chunk, then the buffer as the
+    /// binary chunk (glTF 2.0 spec, "Binary glTF Layout").
+    pub fn to_glb(&self) -> Vec<u8> {
+        let mut json = self.document(None).to_string().into_bytes();
+        while !json.len().is_multiple_of(4) {
+            json.push(b' ');
+        }
+        let mut bin = self.bin.clone();
+        while !bin.len().is_multiple_of(4) {
+            bin.push(0);
+        }
+        let total = 12 + 8 + json.len() + 8 + bin.len();
+        let mut out = Vec::with_capacity(total);
+        out.extend_from_slice(b"glTF");
+        out.extend_from_slice(&2u32.to_le_bytes());
+        out.extend_from_slice(&(total as u32).to_le_bytes());
+        out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(&json);
+        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&bin);
+        out
+    }
+
+    /// The glTF document; its buffer at `uri`, or the GLB binary chunk without one.
+    fn document(&self, uri: Option<String>) -> Value {
+        let buffer = match uri {
+            Some(uri) => json!({ "byteLength": self.bin.len(), "uri": uri }),
+            None => json!({ "byteLength": self.bin.len() }),
+        };
         let mut doc = json!({
             "asset": { "version": "2.0", "generator": "bevy_foliage corpus" },
             "scene": 0,
@@ -317,7 +351,7 @@ impl GltfBuilder {
             "meshes": self.meshes,
             "accessors": self.accessors,
             "bufferViews": self.views,
-            "buffers": [{ "byteLength": self.bin.len(), "uri": uri }],
+            "buffers": [buffer],
         });
         if !self.materials.is_empty() {
             doc["materials"] = json!(self.materials);
@@ -326,7 +360,7 @@ impl GltfBuilder {
             doc["images"] = json!(self.images);
             doc["textures"] = json!(self.textures);
         }
-        doc.to_string()
+        doc
     }
 }
 

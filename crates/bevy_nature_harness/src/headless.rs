@@ -22,6 +22,7 @@ use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::diagnostic::DiagnosticsStore;
 use bevy::prelude::*;
+use bevy::render::error_handler::{RenderError, RenderErrorHandler, RenderErrorPolicy};
 use bevy::render::gpu_readback::{Readback, ReadbackComplete};
 use bevy::render::pipelined_rendering::PipelinedRenderingPlugin;
 use bevy::render::render_resource::{
@@ -57,6 +58,9 @@ pub enum HarnessError {
     ReadbackTimeout(u32),
     /// The read-back data could not be interpreted.
     Readback(String),
+    /// The renderer stopped on an error wgpu reported (a validation error, out of memory, a
+    /// lost device): its kind and description. Rendering does not resume in this harness.
+    Render(String),
 }
 
 impl std::fmt::Display for HarnessError {
@@ -78,6 +82,7 @@ impl std::fmt::Display for HarnessError {
                 write!(f, "readback did not complete within {frames} frames")
             }
             Self::Readback(msg) => write!(f, "readback failed: {msg}"),
+            Self::Render(msg) => write!(f, "the renderer stopped on an error: {msg}"),
         }
     }
 }
@@ -198,6 +203,27 @@ pub fn add_headless_plugins(app: &mut App, config: &HarnessConfig) {
     }
 }
 
+/// The first error the renderer stopped on (main world), recorded by [`record_render_error`].
+#[derive(Resource, Clone, Debug)]
+struct HarnessRenderError(String);
+
+/// The harness's render-error policy: Bevy's default asks the app to exit, which a harness
+/// stepping frames by hand never sees — its readbacks then time out with no hint of the cause.
+/// This records the error for the harness to return, and stops rendering as Bevy would.
+fn record_render_error(
+    error: &RenderError,
+    main_world: &mut World,
+    _render_world: &mut World,
+) -> RenderErrorPolicy {
+    if !main_world.contains_resource::<HarnessRenderError>() {
+        main_world.insert_resource(HarnessRenderError(format!(
+            "{:?}: {}",
+            error.ty, error.description
+        )));
+    }
+    RenderErrorPolicy::StopRendering
+}
+
 /// A windowless Bevy app rendering into an offscreen image. See the module docs.
 pub struct RenderHarness {
     app: App,
@@ -241,7 +267,8 @@ impl RenderHarness {
             let mut images = app.world_mut().resource_mut::<Assets<Image>>();
             create_target_image(&mut images, config.size)
         };
-        app.insert_resource(HeadlessTarget(target.clone()));
+        app.insert_resource(HeadlessTarget(target.clone()))
+            .insert_resource(RenderErrorHandler(record_render_error));
         app.add_observer(redirect_window_cameras);
         Ok(Self {
             app,
@@ -305,6 +332,23 @@ impl RenderHarness {
         start.elapsed()
     }
 
+    /// The error the renderer stopped on, if it did: every frame after it renders nothing.
+    pub fn render_error(&self) -> Option<HarnessError> {
+        self.app
+            .world()
+            .get_resource::<HarnessRenderError>()
+            .map(|e| HarnessError::Render(e.0.clone()))
+    }
+
+    /// [`Self::step`], failing once the renderer has stopped on an error.
+    fn step_checked(&mut self) -> Result<Duration, HarnessError> {
+        let dt = self.step();
+        match self.render_error() {
+            Some(e) => Err(e),
+            None => Ok(dt),
+        }
+    }
+
     /// Pipelines still compiling, total pipelines, and the errors of failed ones.
     fn pipeline_status(&self) -> (usize, usize, Vec<String>) {
         let Some(render_app) = self.app.get_sub_app(RenderApp) else {
@@ -360,7 +404,7 @@ impl RenderHarness {
         let mut stable = 0;
         let mut last_total = usize::MAX;
         for frame in 1..=self.config.max_warmup_frames {
-            self.step();
+            self.step_checked()?;
             self.warmup_frames += 1;
             let (waiting, total, errors) = self.pipeline_status();
             if !errors.is_empty() {
@@ -395,6 +439,9 @@ impl RenderHarness {
         self.finish_setup();
         let start = Instant::now();
         self.app.update();
+        if let Some(e) = self.render_error() {
+            return Err(e);
+        }
         let device = self
             .app
             .get_sub_app(RenderApp)
@@ -422,7 +469,7 @@ impl RenderHarness {
     pub fn run_frames(&mut self, frames: u32) -> Result<(), HarnessError> {
         self.ensure_ready()?;
         for _ in 0..frames {
-            let dt = self.step();
+            let dt = self.step_checked()?;
             self.frame_times.push(dt);
         }
         Ok(())
@@ -538,14 +585,16 @@ impl RenderHarness {
             .or_else(|| other.get(&format!("render/{pass}/elapsed_cpu")).copied())
     }
 
-    /// Steps frames until `slot` is filled, at most `max_frames`.
+    /// Steps frames until `slot` is filled, at most `max_frames`, each waiting for the GPU: a
+    /// readback completes a frame or two after its copy is submitted, and frames that queue GPU
+    /// work faster than a heavy scene executes it would run out the count first.
     fn step_until<T>(
         &mut self,
         slot: &Arc<Mutex<Option<T>>>,
         max_frames: u32,
     ) -> Result<T, HarnessError> {
         for _ in 0..max_frames {
-            self.step();
+            self.step_gpu_synchronised()?;
             if let Some(value) = slot.lock().unwrap().take() {
                 return Ok(value);
             }
@@ -637,7 +686,7 @@ impl RenderHarness {
                 let queue = render_world.resource::<RenderQueue>();
                 return read_buffer_now(device, queue, &buffer);
             }
-            self.step();
+            self.step_checked()?;
         }
         Err(HarnessError::ReadbackTimeout(30))
     }
@@ -731,4 +780,51 @@ pub fn read_buffer_now(
     let data = staging.slice(..).get_mapped_range().to_vec();
     staging.unmap();
     Ok(data)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bevy::render::render_resource::{BufferDescriptor, BufferUsages};
+    use bevy::render::{Render, RenderSystems};
+
+    /// Writes past the end of a 16-byte buffer once: a wgpu validation error.
+    fn overrun(device: Res<RenderDevice>, queue: Res<RenderQueue>, mut done: Local<bool>) {
+        if std::mem::replace(&mut *done, true) {
+            return;
+        }
+        let buffer = device.create_buffer(&BufferDescriptor {
+            label: Some("harness_overrun_test"),
+            size: 16,
+            usage: BufferUsages::COPY_DST | BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        queue.write_buffer(&buffer, 0, &[0u8; 64]);
+    }
+
+    /// A renderer that stopped on an error is reported as that error, not as a readback that
+    /// never arrived.
+    #[test]
+    fn a_render_error_is_returned_not_a_timeout() {
+        let Some(mut harness) = RenderHarness::for_test("harness_render_error", 16, 16) else {
+            return;
+        };
+        harness.app_mut().world_mut().spawn(Camera3d::default());
+        assert!(harness.render().is_ok(), "a frame renders before the error");
+        harness
+            .app_mut()
+            .sub_app_mut(RenderApp)
+            .add_systems(Render, overrun.in_set(RenderSystems::PrepareResources));
+        let err = harness
+            .render()
+            .expect_err("the overrun stops the renderer");
+        let HarnessError::Render(message) = &err else {
+            panic!("expected a render error, got {err}");
+        };
+        assert!(
+            message.starts_with("Validation") && message.contains("write_buffer"),
+            "{message}"
+        );
+        assert!(harness.render().is_err(), "it stays stopped");
+    }
 }

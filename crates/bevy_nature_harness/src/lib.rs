@@ -21,6 +21,7 @@
 pub mod adapter;
 pub mod compare;
 pub mod frame_timer;
+pub mod fuzz;
 pub mod headless;
 #[cfg(feature = "windowed")]
 pub mod panel;

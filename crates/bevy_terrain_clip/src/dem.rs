@@ -117,15 +117,7 @@ pub fn decode_height_tile(
     texel: TexelFormat,
     scale: HeightScale,
 ) -> Result<HeightTile, TileError> {
-    let image = image::load_from_memory(bytes)
-        .map_err(|e| TileError::Decode(path.to_path_buf(), e.to_string()))?;
-    if image.width() != tile_size || image.height() != tile_size {
-        return Err(TileError::WrongSize {
-            path: path.to_path_buf(),
-            found: [image.width(), image.height()],
-            expected: tile_size,
-        });
-    }
+    let image = crate::source::decode_tile_image(bytes, path, tile_size)?;
     let wrong_kind = |image: &image::DynamicImage| TileError::WrongKind {
         path: path.to_path_buf(),
         expected: texel.describe(),

@@ -25,6 +25,7 @@ pub mod builder;
 pub mod cache;
 pub mod clip;
 pub mod dem;
+pub mod faults;
 pub mod flight;
 pub mod geometry;
 pub mod material;

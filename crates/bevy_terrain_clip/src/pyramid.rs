@@ -137,6 +137,9 @@ pub struct PyramidManifest {
     pub extent_texels: Option<[u32; 2]>,
 }
 
+/// The largest height (m, either sign) a manifest's 16-bit scale may give.
+pub const MAX_HEIGHT_M: f64 = 1e7;
+
 /// Why a manifest was rejected.
 #[derive(Debug)]
 pub enum ManifestError {
@@ -182,12 +185,18 @@ impl PyramidManifest {
                 self.metres_per_texel
             ));
         }
+        // Heights are used as f32 metres: every stored value must give one well within range
+        // (±10,000 km; a scale of 1e39 would make them infinite).
+        let highest = self.height_offset_m + self.height_scale_m * u16::MAX as f64;
         if !(self.height_offset_m.is_finite()
             && self.height_scale_m.is_finite()
-            && self.height_scale_m > 0.0)
+            && self.height_scale_m > 0.0
+            && self.height_offset_m.abs() <= MAX_HEIGHT_M
+            && highest.abs() <= MAX_HEIGHT_M)
         {
             p.push(format!(
-                "height_offset_m {} and height_scale_m {} must be finite, the scale positive",
+                "height_offset_m {} and height_scale_m {} must be finite, the scale positive, \
+                 and give heights within ±{MAX_HEIGHT_M} m",
                 self.height_offset_m, self.height_scale_m
             ));
         }
@@ -231,11 +240,19 @@ impl PyramidManifest {
         let path = dir.join(MANIFEST);
         let text =
             std::fs::read_to_string(&path).map_err(|e| ManifestError::Io(path.clone(), e))?;
-        let manifest: Self = serde_json::from_str(&text)
-            .map_err(|e| ManifestError::Parse(path.clone(), e.to_string()))?;
+        Self::parse(&text, &path)
+    }
+
+    /// Parses and checks a manifest's text (`path` names it in errors).
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ManifestError> {
+        let manifest: Self = serde_json::from_str(text)
+            .map_err(|e| ManifestError::Parse(path.to_path_buf(), e.to_string()))?;
         let problems = manifest.problems();
         if !problems.is_empty() {
-            return Err(ManifestError::Invalid(path, problems.join("; ")));
+            return Err(ManifestError::Invalid(
+                path.to_path_buf(),
+                problems.join("; "),
+            ));
         }
         Ok(manifest)
     }
@@ -260,11 +277,15 @@ impl PyramidManifest {
             .all(|l| key.x >= l.min[0] && key.x < l.max[0] && key.y >= l.min[1] && key.y < l.max[1])
     }
 
-    /// Path of tile `key` (XYZ rows) under `dir`, flipping the row for TMS.
+    /// Path of tile `key` (XYZ rows) under `dir`, flipping the row for TMS (a row outside the
+    /// level, which [`Self::may_exist`] rejects, flips to row 0).
     pub fn tile_path(&self, dir: &Path, key: TileKey) -> PathBuf {
         let row = match self.scheme {
             TileScheme::Xyz => key.y,
-            TileScheme::Tms => ((1u64 << key.z) - 1 - key.y as u64) as u32,
+            TileScheme::Tms => 1u64
+                .checked_shl(key.z)
+                .unwrap_or(0)
+                .saturating_sub(1 + key.y as u64) as u32,
         };
         dir.join(key.z.to_string())
             .join(key.x.to_string())

@@ -161,6 +161,14 @@ pub enum TileError {
         /// The manifest's tile size.
         expected: u32,
     },
+    /// The source did not answer within the cache's
+    /// [`load_timeout`](crate::tile_cache::TileCache::load_timeout).
+    TimedOut {
+        /// The tile.
+        key: TileKey,
+        /// How long it was waited for.
+        after: std::time::Duration,
+    },
 }
 
 impl std::fmt::Display for TileError {
@@ -187,6 +195,11 @@ impl std::fmt::Display for TileError {
                 path.display(),
                 found[0],
                 found[1]
+            ),
+            Self::TimedOut { key, after } => write!(
+                f,
+                "tile {}/{}/{}: the source did not answer within {after:?}",
+                key.z, key.x, key.y
             ),
         }
     }
@@ -242,11 +255,28 @@ impl DiskTileSource {
     }
 }
 
-/// Decodes tile bytes (PNG, JPEG or WebP, recognised by content) into RGBA8, checking the size.
-pub fn decode_tile(bytes: &[u8], path: &Path, tile_size: u32) -> Result<TileData, TileError> {
-    let image = image::load_from_memory(bytes)
+/// Decodes an image file's bytes (PNG, JPEG or WebP, recognised by content) that must be
+/// `tile_size`² texels: the size is read from the header and checked before any pixel is
+/// decoded, so a corrupt header claiming gigapixels is refused without allocating them.
+pub fn decode_tile_image(
+    bytes: &[u8],
+    path: &Path,
+    tile_size: u32,
+) -> Result<image::DynamicImage, TileError> {
+    let decode_error = |e: image::ImageError| TileError::Decode(path.to_path_buf(), e.to_string());
+    let (width, height) = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
         .map_err(|e| TileError::Decode(path.to_path_buf(), e.to_string()))?
-        .to_rgba8();
+        .into_dimensions()
+        .map_err(decode_error)?;
+    if width != tile_size || height != tile_size {
+        return Err(TileError::WrongSize {
+            path: path.to_path_buf(),
+            found: [width, height],
+            expected: tile_size,
+        });
+    }
+    let image = image::load_from_memory(bytes).map_err(decode_error)?;
     if image.width() != tile_size || image.height() != tile_size {
         return Err(TileError::WrongSize {
             path: path.to_path_buf(),
@@ -254,6 +284,12 @@ pub fn decode_tile(bytes: &[u8], path: &Path, tile_size: u32) -> Result<TileData
             expected: tile_size,
         });
     }
+    Ok(image)
+}
+
+/// Decodes tile bytes (PNG, JPEG or WebP, recognised by content) into RGBA8, checking the size.
+pub fn decode_tile(bytes: &[u8], path: &Path, tile_size: u32) -> Result<TileData, TileError> {
+    let image = decode_tile_image(bytes, path, tile_size)?.to_rgba8();
     Ok(TileData {
         size: tile_size,
         rgba: image.into_raw(),

@@ -139,6 +139,11 @@ pub fn decode(bytes: &[u8]) -> Result<SliceBake, SliceFormatError> {
     let mut at = 0;
     let source_hash = u64::from_le_bytes(take(payload, &mut at, 8)?.try_into().unwrap());
     let bake_ms = f32_at(payload, &mut at)?;
+    if !(bake_ms.is_finite() && bake_ms >= 0.0) {
+        return Err(SliceFormatError::Invalid(format!(
+            "bake time {bake_ms} ms is not a duration"
+        )));
+    }
     let size = f32_at(payload, &mut at)?;
     let height = f32_at(payload, &mut at)?;
     let per_axis = u32_at(payload, &mut at)?;

@@ -554,6 +554,84 @@ fn decode_image(
     })
 }
 
+/// Whether the gltf crate can read `accessor` as attribute `what` safely: the element type the
+/// glTF 2.0 spec allows for it (§3.7.2.1 and §3.7.2.2: the readers assume it), at least one
+/// element (and one sparse element), and every element's bytes inside its buffer view, and the
+/// view inside its buffer.
+fn check_accessor(
+    what: &str,
+    accessor: &::gltf::Accessor,
+    buffers: &[Vec<u8>],
+) -> Result<(), String> {
+    use ::gltf::accessor::{DataType, Dimensions};
+    let (dimensions, data_type) = (accessor.dimensions(), accessor.data_type());
+    let allowed = match what {
+        "POSITION" | "NORMAL" => dimensions == Dimensions::Vec3 && data_type == DataType::F32,
+        "TEXCOORD_0" => {
+            dimensions == Dimensions::Vec2
+                && matches!(data_type, DataType::F32 | DataType::U8 | DataType::U16)
+        }
+        _ => {
+            dimensions == Dimensions::Scalar
+                && matches!(data_type, DataType::U8 | DataType::U16 | DataType::U32)
+        }
+    };
+    if !allowed {
+        return Err(format!(
+            "{dimensions:?} of {data_type:?} is not a type glTF allows here"
+        ));
+    }
+    let count = accessor.count();
+    if count == 0 {
+        return Err("no elements".into());
+    }
+    let size = accessor.size();
+    let within = |view: &::gltf::buffer::View, offset: usize, stride: usize, n: usize| {
+        let end = stride
+            .checked_mul(n - 1)
+            .and_then(|b| b.checked_add(offset))
+            .and_then(|b| b.checked_add(size));
+        let view_end = view.offset().checked_add(view.length());
+        let buffer = buffers.get(view.buffer().index()).map_or(0, Vec::len);
+        match (end, view_end) {
+            (Some(end), Some(view_end)) if end <= view.length() && view_end <= buffer => Ok(()),
+            _ => Err(format!(
+                "{n} elements of {size} bytes (stride {stride}, offset {offset}) do not fit in \
+                 buffer view {} ({} bytes at {} of a {buffer}-byte buffer)",
+                view.index(),
+                view.length(),
+                view.offset()
+            )),
+        }
+    };
+    if let Some(view) = accessor.view() {
+        within(
+            &view,
+            accessor.offset(),
+            view.stride().unwrap_or(size).max(size),
+            count,
+        )?;
+    }
+    if let Some(sparse) = accessor.sparse() {
+        let n = sparse.count();
+        if n == 0 {
+            return Err("a sparse section with no elements".into());
+        }
+        let indices = sparse.indices();
+        let index_size = indices.index_type().size();
+        let view = indices.view();
+        let end = index_size
+            .checked_mul(n)
+            .and_then(|b| b.checked_add(indices.offset()));
+        if end.is_none_or(|end| end > view.length()) {
+            return Err("its sparse indices do not fit in their buffer view".into());
+        }
+        let values = sparse.values();
+        within(&values.view(), values.offset(), size, n)?;
+    }
+    Ok(())
+}
+
 /// One triangle-list primitive placed in the model, before it is sorted into leaves or bark.
 struct Placed {
     label: String,
@@ -605,7 +683,28 @@ pub fn load_gltf_tree(
     base_dir: Option<&Path>,
     settings: &GltfLeafSettings,
 ) -> Result<GltfTree, GltfTreeError> {
-    let gltf = ::gltf::Gltf::from_slice(bytes).map_err(|e| GltfTreeError::Parse(e.to_string()))?;
+    // The gltf crate's binary reader subtracts the header's size from the declared length
+    // unchecked: a declared length shorter than the header is refused here.
+    if bytes.len() >= 12 && bytes.starts_with(b"glTF") {
+        let length = u32::from_le_bytes(bytes[8..12].try_into().unwrap());
+        if length < 12 {
+            return Err(GltfTreeError::Parse(format!(
+                "binary glTF declares {length} bytes, less than its 12-byte header"
+            )));
+        }
+    }
+    // gltf-json's validation indexes some arrays unchecked (a POSITION accessor index past the
+    // accessors panics in `primitive_validate_hook`): a panic there is a malformed file too.
+    let gltf = std::panic::catch_unwind(|| ::gltf::Gltf::from_slice(bytes))
+        .map_err(|panic| {
+            let message = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_default();
+            GltfTreeError::Parse(format!("malformed glTF (its validation failed: {message})"))
+        })?
+        .map_err(|e| GltfTreeError::Parse(e.to_string()))?;
     let document = gltf.document;
     let buffers = load_buffers(&document, gltf.blob, base_dir)?;
     let mut tree = GltfTree {
@@ -692,6 +791,24 @@ pub fn load_gltf_tree(
                     .name()
                     .is_some_and(|n| settings.leaf_materials.iter().any(|l| l == n))
             };
+            // The gltf crate's readers assume well-formed accessors (an empty one underflows
+            // its range arithmetic): check the ones read here first.
+            let attributes = [
+                ("POSITION", primitive.get(&::gltf::Semantic::Positions)),
+                ("NORMAL", primitive.get(&::gltf::Semantic::Normals)),
+                ("TEXCOORD_0", primitive.get(&::gltf::Semantic::TexCoords(0))),
+                ("indices", primitive.indices()),
+            ];
+            for (what, accessor) in attributes {
+                if let Some(accessor) = accessor {
+                    check_accessor(what, &accessor, &buffers).map_err(|problem| {
+                        GltfTreeError::Invalid(format!(
+                            "{label}: {what} accessor {}: {problem}",
+                            accessor.index()
+                        ))
+                    })?;
+                }
+            }
             let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
             let Some(positions) = reader.read_positions() else {
                 continue;
