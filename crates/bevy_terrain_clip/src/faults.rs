@@ -115,26 +115,32 @@ impl FaultyTileSource {
         if !self.enabled.load(Ordering::Relaxed) {
             return Fault::None;
         }
-        // SplitMix64's finaliser over the seed, the tile and the load's number.
+        self.faults.draw(self.seed, key, n)
+    }
+}
+
+impl TileFaults {
+    /// The fault of load number `n` of `key` in a run seeded `seed`: a uniform draw from a hash
+    /// of the three (SplitMix64's finaliser), placed among the rates.
+    pub fn draw(&self, seed: u64, key: TileKey, n: u64) -> Fault {
         let mix = |mut z: u64| {
             z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
             z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
             z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
             z ^ (z >> 31)
         };
-        let mut h = mix(self.seed);
+        let mut h = mix(seed);
         for v in [key.z as u64, key.x as u64, key.y as u64, n] {
             h = mix(h ^ v);
         }
         let u = (h >> 40) as f32 / (1u64 << 24) as f32;
-        let f = self.faults;
         let mut edge = 0.0;
         for (rate, fault) in [
-            (f.error, Fault::Error),
-            (f.truncated, Fault::Truncated),
-            (f.wrong_size, Fault::WrongSize),
-            (f.hang, Fault::Hang),
-            (f.slow, Fault::Slow),
+            (self.error, Fault::Error),
+            (self.truncated, Fault::Truncated),
+            (self.wrong_size, Fault::WrongSize),
+            (self.hang, Fault::Hang),
+            (self.slow, Fault::Slow),
         ] {
             edge += rate.max(0.0);
             if u < edge {

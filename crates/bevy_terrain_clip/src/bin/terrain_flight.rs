@@ -3,13 +3,16 @@
 //!
 //! ```text
 //! cargo run -p bevy_terrain_clip --bin terrain_flight -- [--paper] [--cold] [--no-prefetch]
-//!     [--no-grid-shift]
+//!     [--no-grid-shift] [--faults]
 //!     [--speed M_S] [--subtiles N] [--frames N] [--latency-ms MS] [--disk-mb-s MB]
 //!     [--decode-ms MS] [--stats FILE]
 //! ```
 //!
 //! `--paper` starts from the paper's own setting (`FlightConfig::paper`: 21 levels, 0.25 m
 //! texels, cold start, 8 ms decode) instead of this crate's default (20 levels, 0.5 m, warm).
+//! `--faults` makes the disk fail, stall and hang now and then (`TileFaults::hostile`: 15 %
+//! errors, 5 % truncated, 5 % mis-sized, 3 % never answering until the 2 s timeout, 10 % 200 ms
+//! late); the JSON then counts `failed_reads` and `given_up`.
 //! `--stats FILE` flies the configuration given and, beside it, the paper's setting with and
 //! without prefetch and the per-level grid shift, and the default warm (with and without the
 //! shift) and cold, and writes
@@ -19,7 +22,7 @@ use bevy_terrain_clip::flight::{FlightConfig, FlightReport, simulate_flight};
 
 fn run_json(name: &str, config: &FlightConfig, r: &FlightReport) -> String {
     format!(
-        "{{\"config\": \"{name}\", \"levels\": {}, \"metres_per_texel\": {}, \"tile\": {}, \"clip\": {}, \"subtile\": {}, \"speed_m_s\": {}, \"subtiles_budget\": {}, \"disk_latency_ms\": {}, \"disk_mb_s\": {:.1}, \"decode_ms\": {}, \"prefetch\": {}, \"grid_shift\": {}, \"cold_start\": {}, \"frames\": {}, \"quality_avg\": {:.4}, \"quality_min\": {:.4}, \"usable_avg\": {:.4}, \"usable_min\": {:.4}, \"subtiles_per_frame_avg\": {:.2}, \"subtiles_per_frame_max\": {}, \"tiles_per_frame_avg\": {:.3}, \"tile_latency_avg_ms\": {:.1}, \"tile_latency_max_ms\": {:.1}, \"upload_mb_s\": {:.2}, \"disk_read_mb_s\": {:.2}}}",
+        "{{\"config\": \"{name}\", \"levels\": {}, \"metres_per_texel\": {}, \"tile\": {}, \"clip\": {}, \"subtile\": {}, \"speed_m_s\": {}, \"subtiles_budget\": {}, \"disk_latency_ms\": {}, \"disk_mb_s\": {:.1}, \"decode_ms\": {}, \"prefetch\": {}, \"grid_shift\": {}, \"cold_start\": {}, \"frames\": {}, \"quality_avg\": {:.4}, \"quality_min\": {:.4}, \"usable_avg\": {:.4}, \"usable_min\": {:.4}, \"subtiles_per_frame_avg\": {:.2}, \"subtiles_per_frame_max\": {}, \"tiles_per_frame_avg\": {:.3}, \"tile_latency_avg_ms\": {:.1}, \"tile_latency_max_ms\": {:.1}, \"upload_mb_s\": {:.2}, \"disk_read_mb_s\": {:.2}, \"failed_reads\": {}, \"given_up\": {}}}",
         config.levels,
         config.metres_per_texel,
         config.tile_size,
@@ -44,7 +47,9 @@ fn run_json(name: &str, config: &FlightConfig, r: &FlightReport) -> String {
         r.tile_latency_avg_ms,
         r.tile_latency_max_ms,
         r.upload_mb_s,
-        r.disk_mb_s
+        r.disk_mb_s,
+        r.failed_reads,
+        r.given_up
     )
 }
 
@@ -68,6 +73,9 @@ fn main() {
     }
     if flag("--no-grid-shift") {
         config.grid_shift = false;
+    }
+    if flag("--faults") {
+        config.faults = bevy_terrain_clip::faults::TileFaults::hostile();
     }
     let mut stats = None;
     let mut it = args.into_iter();
