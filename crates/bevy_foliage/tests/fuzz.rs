@@ -13,8 +13,10 @@
 //! element size (`regression_empty_and_overlong_accessors_are_errors`), and a binary glTF
 //! declaring fewer bytes than its header (`regression_a_glb_shorter_than_its_header_is_an_error`),
 //! an attribute naming an accessor that does not exist (a panic in gltf-json's validation,
-//! `regression_an_attribute_naming_a_missing_accessor_is_an_error`); and a grass-slice cache with
-//! a NaN bake time was accepted (`regression_a_slice_cache_with_a_nan_bake_time_is_refused`).
+//! `regression_an_attribute_naming_a_missing_accessor_is_an_error`), an image with no source or
+//! no MIME type (`regression_an_image_without_a_source_is_noted_not_a_panic`); and a grass-slice
+//! cache with a NaN bake time was accepted
+//! (`regression_a_slice_cache_with_a_nan_bake_time_is_refused`).
 
 use bevy::math::{Vec2, Vec3};
 use bevy_foliage::corpus::{
@@ -221,6 +223,34 @@ fn regression_an_attribute_naming_a_missing_accessor_is_an_error() {
     .map(|_| ())
     .unwrap_err();
     assert!(err.to_string().contains("malformed glTF"), "{err}");
+}
+
+/// Found by the glTF target: an image with neither a uri nor a buffer view, or in a buffer view
+/// without a MIME type, panicked inside the gltf crate (`Image::source` unwraps); now the tree
+/// loads and the material is drawn untextured, with a note saying why.
+#[test]
+fn regression_an_image_without_a_source_is_noted_not_a_panic() {
+    let json: serde_json::Value = serde_json::from_str(&gltf_seed().to_json()).unwrap();
+    let settings = GltfLeafSettings::default();
+    let notes = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut doc = json.clone();
+        edit(&mut doc);
+        load_gltf_tree(doc.to_string().as_bytes(), None, &settings)
+            .expect("the tree loads")
+            .notes
+            .join("; ")
+    };
+    let text = notes(&|doc| {
+        doc["images"][0].as_object_mut().unwrap().remove("uri");
+    });
+    assert!(text.contains("neither a uri nor a bufferView"), "{text}");
+    let text = notes(&|doc| {
+        let image = doc["images"][0].as_object_mut().unwrap();
+        image.remove("uri");
+        image.remove("mimeType");
+        image.insert("bufferView".into(), 0.into());
+    });
+    assert!(text.contains("without a mimeType"), "{text}");
 }
 
 /// Found by the grass-slice target: a cache whose bake time was NaN decoded (and so differed

@@ -521,11 +521,27 @@ fn read_material(index: usize, m: &::gltf::Material) -> GltfMaterial {
     }
 }
 
+/// The largest texture side read (a corrupt header must not allocate gigapixels).
+const MAX_TEXTURE_SIDE: u32 = 16384;
+
 fn decode_image(
+    document: &::gltf::Document,
     image: &::gltf::Image,
     buffers: &[Vec<u8>],
     base_dir: Option<&Path>,
 ) -> Result<DecodedImage, String> {
+    // The gltf crate's `Image::source` unwraps what validation lets through: an image needs a
+    // uri or a buffer view, and one in a buffer view a MIME type.
+    let json = document
+        .as_json()
+        .images
+        .get(image.index())
+        .ok_or("it is not in the document")?;
+    match (&json.uri, &json.buffer_view, &json.mime_type) {
+        (None, None, _) => return Err("it has neither a uri nor a bufferView".into()),
+        (_, Some(_), None) => return Err("it is in a bufferView without a mimeType".into()),
+        _ => {}
+    }
     let bytes = match image.source() {
         ::gltf::image::Source::View { view, .. } => {
             let buffer = buffers
@@ -544,6 +560,16 @@ fn decode_image(
             }
         },
     };
+    let (width, height) = image::ImageReader::new(std::io::Cursor::new(&bytes))
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?
+        .into_dimensions()
+        .map_err(|e| e.to_string())?;
+    if width > MAX_TEXTURE_SIDE || height > MAX_TEXTURE_SIDE {
+        return Err(format!(
+            "it claims {width}×{height} texels (at most {MAX_TEXTURE_SIDE} a side are read)"
+        ));
+    }
     let decoded = image::load_from_memory(&bytes)
         .map_err(|e| e.to_string())?
         .to_rgba8();
@@ -973,7 +999,7 @@ pub fn load_gltf_tree(
             let Some(image) = document.images().nth(texture.image) else {
                 continue;
             };
-            match decode_image(&image, &buffers, base_dir) {
+            match decode_image(&document, &image, &buffers, base_dir) {
                 Ok(decoded) => tree.images[texture.image] = Some(decoded),
                 Err(e) => tree.notes.push(format!(
                     "image {} ('{}') of material '{}' could not be decoded ({e}); the material is drawn without it",
