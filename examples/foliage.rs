@@ -4,19 +4,36 @@
 //! ```text
 //! cargo run --example foliage                      # windowed: the panel shows foliage/* counters
 //! cargo run --example foliage -- --headless --frames 60 --stats foliage.json
+//! cargo run --example foliage -- --opacity-shadows  # the trees' opacity shadow map from the start
 //! ```
-//! Toggle `enabled` in the panel's FoliagePruningSettings to compare with full detail.
+//! Toggle `enabled` in the panel's FoliagePruningSettings to compare with full detail. Key `O`
+//! switches the trees' ground shadows between Bevy's shadow map and the world-space opacity
+//! shadow map (`TreeOpacityShadows`, editable in the panel): dark where leaves pile up, light
+//! where they are sparse, soft away from the crowns.
 
 use bevy::prelude::*;
 use bevy_nature::foliage::pruning::procedural::TreeSpecies;
 use bevy_nature::foliage::pruning::spawn::TreeAssets;
 use bevy_nature::foliage::{FoliagePruningSettings, LodDistances};
-use bevy_nature_harness::ExampleRunner;
+use bevy_nature::soft_shadows::foliage::TreeOpacityShadows;
+use bevy_nature_harness::{ExampleArgs, ExampleRunner};
+
+/// Whether the sun starts with the trees' opacity shadow map.
+#[derive(Resource)]
+struct StartWithOpacityShadows(bool);
 
 fn main() -> AppExit {
-    ExampleRunner::new("foliage")
+    let mut rest: Vec<String> = std::env::args().skip(1).collect();
+    let opacity = rest.iter().any(|a| a == "--opacity-shadows");
+    rest.retain(|a| a != "--opacity-shadows");
+    let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
+        eprintln!("{e} [--opacity-shadows]");
+        std::process::exit(2)
+    });
+    ExampleRunner::with_args("foliage", args)
         .inspect_resource::<FoliagePruningSettings>()
-        .run(|app| {
+        .inspect_component::<TreeOpacityShadows>()
+        .run(move |app| {
             app.add_plugins(bevy_nature::NaturePlugins)
                 .insert_resource(ClearColor(Color::srgb(0.55, 0.7, 0.9)))
                 .insert_resource(FoliagePruningSettings {
@@ -26,12 +43,44 @@ fn main() -> AppExit {
                     },
                     ..default()
                 })
+                .insert_resource(StartWithOpacityShadows(opacity))
                 .add_systems(Startup, setup)
-                .add_systems(Update, fly);
+                .add_systems(Update, (fly, toggle_opacity_shadows));
         })
 }
 
-fn setup(mut commands: Commands, mut trees: TreeAssets) {
+/// The sun's opacity shadow map over the four trees: 100 × 40 m at 2048², 5 cm texels.
+fn opacity_shadows() -> TreeOpacityShadows {
+    TreeOpacityShadows {
+        resolution: 2048,
+        bounds_min: Vec3::new(-50.0, 0.0, -20.0),
+        bounds_max: Vec3::new(50.0, 30.0, 20.0),
+        plane_y: 0.0,
+        ..default()
+    }
+}
+
+/// `O`: the trees' shadows from the opacity shadow map, or from Bevy's shadow map.
+fn toggle_opacity_shadows(
+    mut commands: Commands,
+    keys: Option<Res<ButtonInput<KeyCode>>>,
+    suns: Query<(Entity, Has<TreeOpacityShadows>), With<DirectionalLight>>,
+) {
+    if !keys.is_some_and(|k| k.just_pressed(KeyCode::KeyO)) {
+        return;
+    }
+    for (sun, on) in &suns {
+        if on {
+            commands.entity(sun).remove::<TreeOpacityShadows>();
+            info!("tree shadows: Bevy's shadow map");
+        } else {
+            commands.entity(sun).insert(opacity_shadows());
+            info!("tree shadows: the opacity shadow map");
+        }
+    }
+}
+
+fn setup(mut commands: Commands, mut trees: TreeAssets, start: Res<StartWithOpacityShadows>) {
     commands.spawn((
         Mesh3d(
             trees
@@ -52,7 +101,7 @@ fn setup(mut commands: Commands, mut trees: TreeAssets) {
             error!("{}: {e}", species.name);
         }
     }
-    commands.spawn((
+    let mut sun = commands.spawn((
         DirectionalLight {
             illuminance: 10_000.0,
             shadow_maps_enabled: true,
@@ -60,6 +109,9 @@ fn setup(mut commands: Commands, mut trees: TreeAssets) {
         },
         Transform::default().looking_to(Vec3::new(-0.4, -1.0, -0.3), Vec3::Y),
     ));
+    if start.0 {
+        sun.insert(opacity_shadows());
+    }
     commands.insert_resource(GlobalAmbientLight {
         brightness: 400.0,
         ..default()

@@ -13,6 +13,7 @@
 //! - [`compare`]: [`RgbaImage`] and the image metrics the tests assert on (RMSE, PSNR, SSIM,
 //!   masked coverage); a failed comparison writes both images and a difference image under
 //!   `target/nature-artifacts/` so a person can look.
+//! - [`interrupt`]: killing a bake or a build at random points and comparing what a rerun writes.
 //! - [`stats`]: frame-time statistics (median, p95) and the JSON the example runner prints.
 //! - [`runner`]: [`ExampleRunner`], used by every example: windowed by default, `--headless`,
 //!   `--frames N`, `--size WxH`, `--screenshot PATH`, `--stats PATH`, with a `bevy_egui` panel of
@@ -23,6 +24,7 @@ pub mod compare;
 pub mod frame_timer;
 pub mod fuzz;
 pub mod headless;
+pub mod interrupt;
 #[cfg(feature = "windowed")]
 pub mod panel;
 pub mod runner;

@@ -11,8 +11,10 @@
 //!   a directional light (its cascades) or a spot light (its map) resolves them into a
 //!   blurred, mip-mapped map of statistics after the shadow passes ([`filterable::render`]),
 //!   which [`SoftShadowMaterial`]s read at the pixel's footprint as that light's shadow term.
-//! - foliage shadows (Boulanger 2008, §5.5.2), in progress: the world-space opacity shadow map
-//!   of trees as plain Rust ([`foliage::opacity_map`]); its render pass is still to come.
+//! - foliage shadows (Boulanger 2008, §5.5.2): a [`foliage::TreeOpacityShadows`] on the sun
+//!   gives it a world-space opacity shadow map of the trees ([`foliage::opacity_map`] is the
+//!   algorithm as plain Rust), into which `bevy_foliage` draws the light's pruned leaves; the
+//!   receivers multiply the sun's shadow term by the leaves' transmittance.
 //!
 //! Every technique is measured against Bevy's own PCSS (`DirectionalLight::soft_shadow_size`,
 //! `SpotLight::soft_shadows_enabled`) and shadow filters.
@@ -113,11 +115,13 @@ impl Plugin for SoftShadowsPlugin {
             .add_systems(PreUpdate, settings::sanitize_soft_shadow_settings);
         ssss::build(app);
         filterable::build(app);
+        foliage::build(app);
     }
 }
 
 /// Everything a game usually imports.
 pub mod prelude {
+    pub use crate::foliage::TreeOpacityShadows;
     pub use crate::{
         NoSoftShadowReceiver, ScreenSpaceSoftShadows, SoftShadowMaterial, SoftShadowsPlugin,
     };

@@ -43,6 +43,12 @@ pub const FIXED_ONE: u32 = 1 << 16;
 /// A distance factor meaning "pruning off": every leaf of every cell is kept (full detail).
 pub const KEEP_ALL: u32 = u32::MAX;
 
+/// Set in a distance factor (other than [`KEEP_ALL`]): `LoD(cell)` is the distance factor alone,
+/// every cell keeping the same fraction of its leaves whatever the viewpoint sees. The view term
+/// of eq. 3.5 drops the leaves a view cannot see, which is right for a depth map (a hidden leaf
+/// changes no depth) and wrong for a transmittance map, where every leaf on a ray attenuates it.
+pub const UNIFORM_DISTANCE: u32 = 1 << 30;
+
 /// The three viewpoints used for a view direction and their fixed-point weights
 /// (summing to [`FIXED_ONE`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -105,6 +111,9 @@ pub fn quantize_visibility(v: f32) -> u16 {
 pub fn cell_lod(vis: &[u16], weights: &ViewWeights, distance_fixed: u32) -> u32 {
     if distance_fixed == KEEP_ALL {
         return FIXED_ONE;
+    }
+    if distance_fixed & UNIFORM_DISTANCE != 0 {
+        return (distance_fixed & !UNIFORM_DISTANCE).min(FIXED_ONE);
     }
     // Σ w_k vis_k ≤ 65,536 · 65,535 fits a u32; rescaled so that visibility 1 gives exactly 1.
     let sum: u32 = (0..3)
@@ -272,6 +281,27 @@ pub fn extract_indices(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Without the view term every cell keeps the distance factor's fraction, whatever its
+    /// visibility; with it, a cell no viewpoint sees keeps nothing.
+    #[test]
+    fn a_uniform_distance_ignores_visibility() {
+        let weights = ViewWeights {
+            views: [0, 1, 2],
+            weights: [FIXED_ONE, 0, 0],
+        };
+        let half = FIXED_ONE / 2;
+        for vis in [[0u16; 3], [65535; 3], [1000, 40000, 65535]] {
+            assert_eq!(cell_lod(&vis, &weights, half | UNIFORM_DISTANCE), half);
+        }
+        assert_eq!(cell_lod(&[0; 3], &weights, half), 0);
+        assert_eq!(cell_lod(&[65535; 3], &weights, half), half);
+        // A factor above one is one.
+        assert_eq!(
+            cell_lod(&[0; 3], &weights, (2 * FIXED_ONE) | UNIFORM_DISTANCE),
+            FIXED_ONE
+        );
+    }
 
     #[test]
     fn weights_sum_to_one_and_favour_the_nearest_view() {

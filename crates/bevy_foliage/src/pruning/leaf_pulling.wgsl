@@ -18,43 +18,12 @@
 #define_import_path bevy_foliage::leaf_pulling
 
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view, view_transformations::position_world_to_clip}
+#import bevy_foliage::pruning_types::{Instance, LeafVertex}
 
 // The slot mesh's vertex: only its index (in position.x) and the instance are used.
 struct SlotVertex {
     @builtin(instance_index) instance_index: u32,
     @location(0) position: vec3<f32>,
-}
-
-struct Instance {
-    views: vec3<u32>,
-    distance_fixed: u32,
-    weights: vec3<u32>,
-    output_base: u32,
-    cell_base: u32,
-    cell_count: u32,
-    view_count: u32,
-    visibility_base: u32,
-    leaf_base: u32,
-    index_base: u32,
-    vertex_base: u32,
-    cell_offsets_base: u32,
-    shadow_slot: u32,
-    pad_a: u32,
-    pad_b: u32,
-    pad_c: u32,
-}
-
-struct LeafVertex {
-    position: vec3<f32>,
-    cell: u32,
-    offset: vec3<f32>,
-    // Largest centroid offset of the vertex's leaf.
-    leaf_radius: f32,
-    normal: vec3<f32>,
-    pad_b: u32,
-    uv: vec2<f32>,
-    // Mean texture coordinate of the vertex's leaf.
-    uv_centre: vec2<f32>,
 }
 
 struct LeafParams {

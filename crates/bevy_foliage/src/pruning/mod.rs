@@ -14,7 +14,9 @@
 //!   inputs per tree, slot meshes, diagnostics), [`store`] (the shared GPU buffers),
 //!   [`slot_mesh`], [`spawn`] (one-call tree spawning) and [`asset`] (the `.foliage` loader).
 //! - **Render world**, beside its WGSL: [`render`] (`prune.wgsl`, the compute pass) and
-//!   [`material`] (`leaf*.wgsl`, the leaf material's vertex stages).
+//!   [`material`] (`leaf*.wgsl`, the leaf material's vertex stages), [`opacity_shadow`]
+//!   (`opacity_shadow.wgsl`: the leaves drawn into the trees' opacity shadow map of
+//!   `bevy_soft_shadows`; [`opacity_casting`] is its CPU reference).
 
 pub mod appearance;
 pub mod asset;
@@ -27,6 +29,8 @@ pub mod gltf;
 pub mod leaves;
 pub mod mask;
 pub mod material;
+pub mod opacity_casting;
+pub mod opacity_shadow;
 pub(crate) mod plugin;
 pub mod procedural;
 pub mod render;

@@ -8,8 +8,8 @@ use super::slot_mesh::SlotMeshes;
 use super::store::{FoliageStore, update_foliage_store};
 use super::systems::{
     FoliageSystems, KEPT_PERCENT, SHADOW_TRIANGLES_DRAWN, TREES_PRUNED, TRIANGLES_DRAWN,
-    TRIANGLES_FULL, assign_slot_meshes, compute_pruning_params, refresh_leaf_materials,
-    track_shadow_light,
+    TRIANGLES_FULL, assign_slot_meshes, cast_leaves_through_opacity_map, compute_pruning_params,
+    refresh_leaf_materials, track_shadow_light,
 };
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::diagnostic::{Diagnostic, RegisterDiagnostic};
@@ -50,9 +50,15 @@ pub(crate) fn build(app: &mut App) {
                     .chain()
                     .in_set(FoliageSystems::PruningParams),
                 update_foliage_store.in_set(FoliageSystems::Store),
-                (assign_slot_meshes, refresh_leaf_materials).in_set(FoliageSystems::Draw),
+                (
+                    assign_slot_meshes,
+                    refresh_leaf_materials,
+                    cast_leaves_through_opacity_map,
+                )
+                    .in_set(FoliageSystems::Draw),
             ),
         );
     super::material::build(app);
     super::render::build(app);
+    super::opacity_shadow::build(app);
 }

@@ -14,27 +14,7 @@
 // All LoD arithmetic is 16-bit fixed point on u32, bit-identical to the CPU reference in
 // `extract.rs` (see there for why).
 
-struct Instance {
-    // The three viewpoints and their weights (fractions of 65536, summing to 65536).
-    views: vec3<u32>,
-    distance_fixed: u32,
-    weights: vec3<u32>,
-    // Where this instance's compacted indices start in `output`.
-    output_base: u32,
-    // The tree type's ranges inside the shared baked buffers.
-    cell_base: u32,        // first entry of this type in `cell_first_leaf`
-    cell_count: u32,
-    view_count: u32,
-    visibility_base: u32,  // first entry of this type in `visibility`
-    leaf_base: u32,        // first entry of this type in `leaf_index_start`
-    index_base: u32,       // first entry of this type in `stored_indices`
-    vertex_base: u32,      // added to every index written (types share one vertex buffer)
-    cell_offsets_base: u32, // first `cell_offsets` entry of this instance
-    shadow_slot: u32,      // the record shadow views draw (the light's selection, or this one)
-    pad_a: u32,
-    pad_b: u32,
-    pad_c: u32,
-}
+#import bevy_foliage::pruning_types::Instance
 
 struct DrawIndexedIndirect {
     index_count: u32,
@@ -56,6 +36,7 @@ struct DrawIndexedIndirect {
 
 const WORKGROUP: u32 = 256u;
 const FIXED_ONE: u32 = 65536u;
+const UNIFORM_DISTANCE: u32 = 0x40000000u;
 var<workgroup> partial: array<u32, WORKGROUP>;
 
 // LoD(cell) of eq. 3.5 in 16-bit fixed point, 0..=65536 (`cell_lod` in extract.rs).
@@ -63,6 +44,10 @@ fn cell_lod(inst: Instance, cell: u32) -> u32 {
     if inst.distance_fixed == 0xffffffffu {
         // Pruning off: keep every leaf (KEEP_ALL in extract.rs).
         return FIXED_ONE;
+    }
+    if (inst.distance_fixed & UNIFORM_DISTANCE) != 0u {
+        // No view term (UNIFORM_DISTANCE in extract.rs): the selection of a transmittance map.
+        return min(inst.distance_fixed & ~UNIFORM_DISTANCE, FIXED_ONE);
     }
     let vis = inst.visibility_base + cell * inst.view_count;
     let sum = inst.weights.x * visibility[vis + inst.views.x]

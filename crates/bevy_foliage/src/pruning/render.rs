@@ -27,6 +27,7 @@ use bevy::render::renderer::{
 };
 use bevy::render::storage::{GpuShaderBuffer, ShaderBuffer};
 use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems};
+use bevy::shader::load_shader_library;
 
 /// Layout of one extraction's output for this frame (render world).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,7 +66,7 @@ struct ExtractedPruning {
 }
 
 #[derive(Resource)]
-struct PruningPipelines {
+pub(crate) struct PruningPipelines {
     layout: BindGroupLayoutDescriptor,
     count_and_scan: CachedComputePipelineId,
     compact: CachedComputePipelineId,
@@ -73,6 +74,7 @@ struct PruningPipelines {
 
 /// Registers the pruning pass in the render app.
 pub(crate) fn build(app: &mut App) {
+    load_shader_library!(app, "pruning_types.wgsl");
     embedded_asset!(app, "prune.wgsl");
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
@@ -274,7 +276,7 @@ fn prepare_pruning(
     frame.instance_count = slots;
 }
 
-fn run_pruning(
+pub(crate) fn run_pruning(
     frame: Res<PruningFrame>,
     pipelines: Option<Res<PruningPipelines>>,
     pipeline_cache: Res<PipelineCache>,

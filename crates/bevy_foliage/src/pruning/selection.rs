@@ -13,7 +13,7 @@
 //! shadow. While the camera keeps every visible leaf (distance factor 1, inside `near`), the
 //! shadow draws the full set: near the camera the shadow's outline is seen at its sharpest.
 
-use super::extract::{FIXED_ONE, KEEP_ALL, ViewWeights, view_weights};
+use super::extract::{FIXED_ONE, KEEP_ALL, UNIFORM_DISTANCE, ViewWeights, view_weights};
 use crate::distance::LodView;
 use crate::settings::FoliagePruningSettings;
 use bevy::math::{Affine3A, Vec3};
@@ -36,6 +36,19 @@ impl Selection {
         },
         distance_fixed: 0,
     };
+
+    /// The same selection without the view term: every cell keeps the distance factor's
+    /// fraction of its leaves ([`UNIFORM_DISTANCE`]). What the trees' opacity shadow map draws,
+    /// since every leaf on a sun ray attenuates it, seen from the sun or not.
+    pub fn without_view_term(self) -> Self {
+        if self.distance_fixed == KEEP_ALL {
+            return self;
+        }
+        Self {
+            distance_fixed: self.distance_fixed.min(FIXED_ONE) | UNIFORM_DISTANCE,
+            ..self
+        }
+    }
 
     /// Draws every leaf.
     pub const ALL: Self = Self {
@@ -152,6 +165,23 @@ mod tests {
     use crate::pruning::visibility::fibonacci_directions;
     use crate::settings::ViewWeighting;
     use bevy::math::Quat;
+
+    #[test]
+    fn without_the_view_term_keeps_the_distance_factor() {
+        let s = Selection {
+            distance_fixed: FIXED_ONE / 4,
+            ..Selection::NONE
+        };
+        assert_eq!(
+            s.without_view_term().distance_fixed,
+            (FIXED_ONE / 4) | UNIFORM_DISTANCE
+        );
+        assert_eq!(Selection::ALL.without_view_term(), Selection::ALL);
+        assert_eq!(
+            Selection::NONE.without_view_term().distance_fixed,
+            UNIFORM_DISTANCE
+        );
+    }
 
     fn tree<'a>(views: &'a [Vec3], m: Affine3A) -> TreeView<'a> {
         TreeView {

@@ -16,6 +16,7 @@ use crate::distance::LodView;
 use crate::settings::FoliagePruningSettings;
 use bevy::camera::visibility::NoFrustumCulling;
 use bevy::diagnostic::{DiagnosticPath, Diagnostics};
+use bevy::light::NotShadowCaster;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 
@@ -110,7 +111,11 @@ pub fn compute_pruning_params(
         Without<ManagedPruning>,
     >,
     mut crowns: Local<HashMap<AssetId<BakedFoliage>, (Vec3, f32)>>,
+    opacity_map: Option<Res<bevy_soft_shadows::foliage::receiver::TreeOpacityActive>>,
 ) {
+    // Leaves cast through the trees' opacity shadow map: the light's selection keeps every
+    // cell's share (see `Selection::without_view_term`).
+    let transmittance = opacity_map.is_some_and(|a| a.0);
     for event in asset_events.read() {
         if let AssetEvent::Modified { id } | AssetEvent::Removed { id } = event {
             crowns.remove(id);
@@ -141,7 +146,13 @@ pub fn compute_pruning_params(
         );
         let new = PruningParams {
             camera: camera_selection,
-            light,
+            light: light.map(|l| {
+                if transmittance {
+                    l.without_view_term()
+                } else {
+                    l
+                }
+            }),
         };
         match params {
             Some(mut p) => {
@@ -288,6 +299,37 @@ pub fn refresh_leaf_materials(
         }
     }
     *seen = (store.generation, ids);
+}
+
+/// Marks a pruned tree taken out of Bevy's shadow maps because its leaves cast through the
+/// trees' opacity shadow map (`bevy_soft_shadows::foliage::TreeOpacityShadows`).
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct CastsThroughOpacityMap;
+
+/// While a sun has a trees' opacity shadow map, pruned leaves cast through it only: they get
+/// `NotShadowCaster` (else the ground under them would be darkened by Bevy's map and by the
+/// opacity map); when the map goes, the leaves this system took out cast again.
+#[allow(clippy::type_complexity)]
+pub fn cast_leaves_through_opacity_map(
+    mut commands: Commands,
+    active: Option<Res<bevy_soft_shadows::foliage::receiver::TreeOpacityActive>>,
+    trees: Query<
+        (Entity, Has<CastsThroughOpacityMap>, Has<NotShadowCaster>),
+        (With<PrunedFoliage>, Without<ManagedPruning>),
+    >,
+) {
+    let on = active.is_some_and(|a| a.0);
+    for (entity, marked, not_caster) in &trees {
+        if on && !marked && !not_caster {
+            commands
+                .entity(entity)
+                .insert((NotShadowCaster, CastsThroughOpacityMap));
+        } else if !on && marked {
+            commands
+                .entity(entity)
+                .remove::<(NotShadowCaster, CastsThroughOpacityMap)>();
+        }
+    }
 }
 
 /// The order of the foliage systems in `PostUpdate`, for plugins that draw from the pruning

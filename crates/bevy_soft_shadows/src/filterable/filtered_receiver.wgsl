@@ -226,6 +226,7 @@ fn filtered_spot_visibility(
 
 // `color` with the directional light's shadow term replaced by its filtered visibility (see
 // `apply_filtered_shadow`).
+// `transmittance` multiplies the visibility (the trees' opacity shadow map's, 1 for none).
 fn apply_filtered_directional_shadow(
     pbr_input: PbrInput,
     color: vec4<f32>,
@@ -233,6 +234,7 @@ fn apply_filtered_directional_shadow(
     dp: mat2x3<f32>,
     moments: texture_2d_array<f32>,
     receiver: FilteredReceiver,
+    transmittance: f32,
 ) -> vec4<f32> {
     let light_id = receiver.mode.x;
     if light_id == NO_MAP || light_id >= view_bindings::lights.n_directional_lights
@@ -241,7 +243,7 @@ fn apply_filtered_directional_shadow(
     }
     let visibility = filtered_directional_visibility(
         moments, receiver, pbr_input.world_position.xyz, pbr_input.world_normal, dp);
-    return apply_directional_visibility(pbr_input, color, light_id, frag_xy, visibility);
+    return apply_directional_visibility(pbr_input, color, light_id, frag_xy, visibility * transmittance);
 }
 
 // `color` with the spot light's shadow term replaced by its filtered visibility (see
@@ -275,6 +277,6 @@ fn apply_filtered_shadow(
     spot_moments: texture_2d_array<f32>,
     receiver: FilteredReceiver,
 ) -> vec4<f32> {
-    let lit = apply_filtered_directional_shadow(pbr_input, color, frag_xy, dp, moments, receiver);
+    let lit = apply_filtered_directional_shadow(pbr_input, color, frag_xy, dp, moments, receiver, 1.0);
     return apply_filtered_spot_shadow(pbr_input, lit, frag_xy, dp, spot_moments, receiver);
 }

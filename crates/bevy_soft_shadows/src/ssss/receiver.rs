@@ -6,6 +6,7 @@
 use crate::filterable::receiver::{
     FilteredShadowActive, FilteredShadowImages, FilteredShadowSystems,
 };
+use crate::foliage::receiver::{TreeOpacityActive, TreeOpacityImages, TreeOpacitySystems};
 use crate::settings::ScreenSpaceSoftShadows;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::core_pipeline::prepass::{DepthPrepass, NormalPrepass};
@@ -40,16 +41,31 @@ pub struct SoftShadowReceiver {
     /// as for `moments`).
     #[texture(103, dimension = "2d_array", sample_type = "float", filterable = false)]
     pub spot_moments: Option<Handle<Image>>,
+    /// The trees' opacity shadow map ([`TreeOpacityImages::map`]; `None` reads a fallback and
+    /// must come with a buffer saying no map), sampled trilinearly.
+    #[texture(104)]
+    #[sampler(105)]
+    pub tree_map: Option<Handle<Image>>,
+    /// How to look the trees' map up and for which light ([`TreeOpacityImages::receiver`]).
+    #[storage(106, read_only)]
+    pub tree: Handle<ShaderBuffer>,
 }
 
 impl SoftShadowReceiver {
-    /// The receiver of the plugin's SSSS textures and filterable shadow map.
-    pub fn new(textures: &SsssTextures, maps: &FilteredShadowImages) -> Self {
+    /// The receiver of the plugin's SSSS textures, filterable shadow maps and trees' opacity
+    /// shadow map.
+    pub fn new(
+        textures: &SsssTextures,
+        maps: &FilteredShadowImages,
+        trees: &TreeOpacityImages,
+    ) -> Self {
         Self {
             visibility: textures.visibility.clone(),
             moments: Some(maps.moments.clone()),
             filtered: maps.receiver.clone(),
             spot_moments: Some(maps.spot_moments.clone()),
+            tree_map: Some(trees.map.clone()),
+            tree: trees.receiver.clone(),
         }
     }
 }
@@ -299,17 +315,19 @@ fn convert_receivers(
     convert: Res<ConvertStandardMaterials>,
     active: Res<SsssActive>,
     filtered: Res<FilteredShadowActive>,
+    trees_active: Res<TreeOpacityActive>,
     textures: Res<SsssTextures>,
     maps: Res<FilteredShadowImages>,
+    trees: Res<TreeOpacityImages>,
     meshes: Query<(Entity, &MeshMaterial3d<StandardMaterial>), Without<NoSoftShadowReceiver>>,
     standard: Res<Assets<StandardMaterial>>,
     mut receivers: ResMut<Assets<SoftShadowMaterial>>,
     mut converted: Local<HashMap<AssetId<StandardMaterial>, Handle<SoftShadowMaterial>>>,
     mut bound: Local<BoundTextures>,
 ) {
-    refresh_bind_groups(&mut bound, &textures, &maps, &mut receivers);
+    refresh_bind_groups(&mut bound, &textures, &maps, &trees, &mut receivers);
     let ssss_ready = active.0 && textures.size != UVec2::ZERO;
-    if !convert.0 || !(ssss_ready || filtered.0) {
+    if !convert.0 || !(ssss_ready || filtered.0 || trees_active.0) {
         return;
     }
     for (entity, material) in &meshes {
@@ -321,7 +339,7 @@ fn convert_receivers(
             .or_insert_with(|| {
                 receivers.add(SoftShadowMaterial {
                     base: base.clone(),
-                    extension: SoftShadowReceiver::new(&textures, &maps),
+                    extension: SoftShadowReceiver::new(&textures, &maps, &trees),
                 })
             })
             .clone();
@@ -336,10 +354,10 @@ fn convert_receivers(
 type MapLayout = Option<(UVec3, TextureFormat)>;
 
 /// The textures' layouts the receivers' bind groups were last made with: the SSSS textures'
-/// size, the directional and the spot light's filterable maps.
+/// size, the directional and the spot light's filterable maps, the trees' map's side.
 #[derive(Default)]
 struct BoundTextures {
-    layouts: Option<(UVec2, [MapLayout; 2])>,
+    layouts: Option<(UVec2, [MapLayout; 2], Option<u32>)>,
     /// A frame after a change the bind groups are made again.
     pending: bool,
 }
@@ -352,6 +370,7 @@ fn refresh_bind_groups(
     bound: &mut BoundTextures,
     textures: &SsssTextures,
     maps: &FilteredShadowImages,
+    trees: &TreeOpacityImages,
     receivers: &mut Assets<SoftShadowMaterial>,
 ) {
     if bound.pending {
@@ -364,7 +383,11 @@ fn refresh_bind_groups(
         }
         bound.pending = false;
     }
-    let layouts = Some((textures.size, [maps.layout, maps.spot_layout]));
+    let layouts = Some((
+        textures.size,
+        [maps.layout, maps.spot_layout],
+        trees.resolution,
+    ));
     if bound.layouts != layouts {
         bound.pending = bound.layouts.is_some();
         bound.layouts = layouts;
@@ -387,6 +410,7 @@ pub(crate) fn build(app: &mut App) {
                 convert_receivers,
             )
                 .chain()
-                .after(FilteredShadowSystems),
+                .after(FilteredShadowSystems)
+                .after(TreeOpacitySystems),
         );
 }

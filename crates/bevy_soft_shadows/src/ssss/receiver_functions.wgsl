@@ -81,6 +81,30 @@ fn apply_directional_visibility(
     return color + vec4(view_bindings::view.exposure * direct * (visibility - bevy_visibility), 0.0);
 }
 
+// `color` (Bevy's lighting of `pbr_input`) with directional light `light`'s shadow term
+// multiplied by `transmittance` (the trees' opacity shadow map's): Bevy's own visibility v_b
+// stays, color += exposure · D · v_b · (transmittance − 1).
+fn apply_directional_transmittance(
+    pbr_input: PbrInput,
+    color: vec4<f32>,
+    light: u32,
+    frag_xy: vec2<f32>,
+    transmittance: f32,
+) -> vec4<f32> {
+    if light >= view_bindings::lights.n_directional_lights
+        || (pbr_input.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u
+        || (view_bindings::lights.directional_lights[light].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
+        return color;
+    }
+    var input = lighting_input(pbr_input);
+    let view = view_bindings::view.view_from_world;
+    let view_z = dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), pbr_input.world_position);
+    let bevy_visibility = fetch_directional_shadow(
+        light, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
+    let direct = lighting::directional_light(light, &input, true);
+    return color + vec4(view_bindings::view.exposure * direct * bevy_visibility * (transmittance - 1.0), 0.0);
+}
+
 // `soft` is what `soft_visibility_at` read: (visibility, light), the light being a spot light's
 // clustered index i, a point light's as −2 − i, or −1 for the directional light.
 fn apply_soft_shadow(pbr_input: PbrInput, color: vec4<f32>, frag_xy: vec2<f32>, soft: vec2<f32>) -> vec4<f32> {
