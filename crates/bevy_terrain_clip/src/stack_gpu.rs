@@ -12,7 +12,7 @@ use crate::cache::TileKey;
 use crate::clip::stack::{ClipStack, SubtileUpload, tile_of};
 use crate::material::{ClipmapExtension, ClipmapMaterial, ClipmapParams, MAX_LAYERS};
 use crate::settings::{ClipmapSettings, UpdateBudget};
-use crate::source::{TexelKind, TileSource};
+use crate::source::{TexelKind, TileData, TileError, TileSource};
 use crate::tile_cache::TileCache;
 use bevy::asset::RenderAssetUsages;
 use bevy::diagnostic::{Diagnostic, DiagnosticPath, Diagnostics, RegisterDiagnostic};
@@ -593,8 +593,74 @@ impl TileSource for NoTiles {
 /// downsampled; [`ClipStackTexture`] runs it on the IO task pool). A pyramid
 /// whose finest level is narrower than `c` texels gives its finest level, magnified (nearest) to
 /// `c`: the same ground, blurrier, rather than a level that does not exist. Missing or failed
-/// tiles are left transparent and logged.
+/// tiles are left transparent and logged: a tile is tried up to [`BASE_TILE_ATTEMPTS`] times,
+/// each waited for at most [`BASE_TILE_TIMEOUT`], so a source that fails for a moment does not
+/// leave a hole in the base level for good, and one that never answers does not keep it from
+/// arriving.
 pub fn base_level_data(source: &dyn TileSource, clip_size: u32) -> Vec<u8> {
+    base_level_data_waiting(source, clip_size, BASE_TILE_TIMEOUT)
+}
+
+/// How long the base level's read waits for one tile before trying it again.
+pub const BASE_TILE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// How many times the base level's read tries a tile that fails (with pauses of 40, 80, 160 ms
+/// between, at most a try's wait: a server's brief outage, a file being written).
+pub const BASE_TILE_ATTEMPTS: u32 = 4;
+
+/// Loads `key` (of side `t`) for the base level: up to [`BASE_TILE_ATTEMPTS`] tries of at most
+/// `timeout` each.
+fn load_base_tile(
+    source: &dyn TileSource,
+    key: TileKey,
+    t: u32,
+    timeout: std::time::Duration,
+) -> Result<Option<TileData>, TileError> {
+    let mut result = Ok(None);
+    for attempt in 0..BASE_TILE_ATTEMPTS {
+        if attempt > 0 {
+            // Never longer than a try may wait.
+            std::thread::sleep(std::time::Duration::from_millis(20 << attempt).min(timeout));
+        }
+        result = wait_at_most(source.load(key), key, timeout).and_then(|tile| match tile {
+            Some(tile) => tile.check(key, t).map(|()| Some(tile)),
+            None => Ok(None),
+        });
+        if result.is_ok() {
+            break;
+        }
+    }
+    result
+}
+
+/// Polls `load` until it answers or `timeout` passes (the base level is read on a task of its
+/// own, so it may wait; a load that never answers is dropped).
+fn wait_at_most<T>(
+    mut load: bevy::tasks::BoxedFuture<'static, Result<T, TileError>>,
+    key: TileKey,
+    timeout: std::time::Duration,
+) -> Result<T, TileError> {
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(result) = bevy::tasks::futures::check_ready(&mut load) {
+            return result;
+        }
+        if start.elapsed() >= timeout {
+            return Err(TileError::TimedOut {
+                key,
+                after: timeout,
+            });
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+}
+
+/// [`base_level_data`] waiting at most `timeout` for each try of a tile.
+pub fn base_level_data_waiting(
+    source: &dyn TileSource,
+    clip_size: u32,
+    timeout: std::time::Duration,
+) -> Vec<u8> {
     let t = source.tile_size();
     let base_level = clip_size.trailing_zeros();
     let tile_bits = t.trailing_zeros();
@@ -608,11 +674,7 @@ pub fn base_level_data(source: &dyn TileSource, clip_size: u32) -> Vec<u8> {
     for ty in 0..(1u32 << z) {
         for tx in 0..(1u32 << z) {
             let key = TileKey { z, x: tx, y: ty };
-            let loaded = bevy::tasks::block_on(source.load(key)).and_then(|tile| match tile {
-                Some(tile) => tile.check(key, t).map(|()| Some(tile)),
-                None => Ok(None),
-            });
-            match loaded {
+            match load_base_tile(source, key, t, timeout) {
                 Ok(Some(tile)) => {
                     for row in 0..t {
                         let src = (row * t * 4) as usize;
@@ -1189,6 +1251,75 @@ mod tests {
                 "({x}, {y})"
             );
         }
+    }
+
+    /// A source that fails its first loads of every tile: the first never answers (tile 0/0
+    /// only), then errors, then answers; `failures` per tile in all.
+    struct Flaky {
+        inner: ProceduralTileSource,
+        failures: u32,
+        seen: std::sync::Mutex<std::collections::HashMap<TileKey, u32>>,
+    }
+
+    impl TileSource for Flaky {
+        fn tile_size(&self) -> u32 {
+            self.inner.tile_size()
+        }
+        fn levels(&self) -> u32 {
+            self.inner.levels()
+        }
+        fn may_exist(&self, key: TileKey) -> bool {
+            self.inner.may_exist(key)
+        }
+        fn load(
+            &self,
+            key: TileKey,
+        ) -> bevy::tasks::BoxedFuture<'static, Result<Option<TileData>, TileError>> {
+            let n = {
+                let mut seen = self.seen.lock().unwrap();
+                let n = seen.entry(key).or_insert(0);
+                *n += 1;
+                *n
+            };
+            if n > self.failures {
+                return self.inner.load(key);
+            }
+            if n == 1 && key.x == 0 && key.y == 0 {
+                return Box::pin(std::future::pending());
+            }
+            Box::pin(async move {
+                Err(TileError::Io(
+                    "flaky".into(),
+                    std::io::Error::other("a brief outage"),
+                ))
+            })
+        }
+    }
+
+    /// A base level read through a source that hangs and fails for a while is the clean one;
+    /// through one that never recovers it comes back, with holes, instead of waiting forever.
+    #[test]
+    fn the_base_level_survives_a_flaky_source() {
+        let texel = |level: u32, x: u64, y: u64| [level as u8 * 40, x as u8, y as u8, 255];
+        let clean = base_level_data(&ProceduralTileSource::new(16, 4, texel), 64);
+        let flaky = |failures| Flaky {
+            inner: ProceduralTileSource::new(16, 4, texel),
+            failures,
+            seen: Default::default(),
+        };
+        let timeout = std::time::Duration::from_millis(10);
+        // Three failures (a hang, two errors), within the four tries.
+        let recovered = base_level_data_waiting(&flaky(3), 64, timeout);
+        assert!(
+            recovered == clean,
+            "the retried base level is the clean one"
+        );
+        let broken = base_level_data_waiting(&flaky(u32::MAX), 64, timeout);
+        assert_eq!(broken.len(), clean.len());
+        assert!(
+            broken[..64 * 64 * 4].iter().all(|&b| b == 0),
+            "holes, transparent"
+        );
     }
 
     #[test]
