@@ -4,7 +4,10 @@
 //! cargo run --example nature                 # windowed, with a statistics/settings panel
 //! cargo run --example nature -- --headless --frames 60 --screenshot nature.png --stats nature.json
 //! cargo run --example nature -- --leaf-scale 1   # the backdrop forest at full leaf counts
+//! cargo run --release --example nature -- --soak 10000 --size 320x180 --stats soak.json
 //! ```
+//! `--soak N` flies the camera over the scene for N frames (headless), sampling resident and GPU
+//! memory every 500 frames.
 //! `--leaf-scale F` sets the backdrop forest's leaf counts as a fraction of the species' full
 //! counts (default 0.15; fewer leaves are larger, so the crowns stay as full).
 
@@ -36,6 +39,8 @@ fn main() -> bevy::app::AppExit {
         eprintln!("{e} [--leaf-scale F]");
         std::process::exit(2)
     });
+    // A soak run flies the camera, so streaming, LoD and shadows keep changing.
+    options.fly = args.soak.is_some();
     ExampleRunner::with_args("nature", args)
         .inspect_resource::<FoliagePruningSettings>()
         .inspect_resource::<ClipmapSettings>()

@@ -87,7 +87,14 @@ pub struct ShowcaseOptions {
     /// the box and the trunk (slices cached in `assets/grass/`). Tests turn it off: when the
     /// slice bake finishes depends on the machine.
     pub grass: bool,
+    /// The camera flies a closed path out over the hills and back every
+    /// [`FLIGHT_FRAMES`] frames, so streaming, LoD and shadows change all the time (the
+    /// `nature` example's `--soak` run turns it on).
+    pub fly: bool,
 }
+
+/// Frames of one lap of the camera's flight ([`ShowcaseOptions::fly`]).
+pub const FLIGHT_FRAMES: u32 = 2_000;
 
 impl Default for ShowcaseOptions {
     fn default() -> Self {
@@ -101,6 +108,7 @@ impl Default for ShowcaseOptions {
             terrain: true,
             soft_shadows: true,
             grass: true,
+            fly: false,
         }
     }
 }
@@ -115,7 +123,36 @@ pub fn build_showcase(app: &mut App, options: ShowcaseOptions) {
         })
         .insert_resource(options)
         .insert_resource(ClearColor(Color::srgb(0.55, 0.7, 0.9)))
-        .add_systems(Startup, spawn_showcase);
+        .add_systems(Startup, spawn_showcase)
+        .add_systems(Update, fly_showcase_camera);
+}
+
+/// With [`ShowcaseOptions::fly`], moves the showcase camera one frame along its flight: out from
+/// the meadow to 400 m and back each lap while circling twice, 15 m above the ground, looking at
+/// the meadow — the near trees, the forest's LoD bands, the impostors and new terrain tiles all
+/// pass through the view.
+fn fly_showcase_camera(
+    options: Res<ShowcaseOptions>,
+    mut frame: Local<u32>,
+    mut cameras: Query<&mut Transform, With<ShowcaseCamera>>,
+) {
+    if !options.fly {
+        return;
+    }
+    *frame += 1;
+    let lap = (*frame % FLIGHT_FRAMES) as f32 / FLIGHT_FRAMES as f32 * std::f32::consts::TAU;
+    let radius = 40.0 + 180.0 * (1.0 - lap.cos());
+    let angle = 2.0 * lap;
+    let (x, z) = (radius * angle.cos(), radius * angle.sin());
+    let ground = if options.terrain {
+        layout::ground_height(x as f64, z as f64) as f32
+    } else {
+        0.0
+    };
+    for mut transform in &mut cameras {
+        *transform =
+            Transform::from_xyz(x, ground + 15.0, z).looking_at(Vec3::new(0.0, 5.0, 0.0), Vec3::Y);
+    }
 }
 
 /// Marks the showcase camera.

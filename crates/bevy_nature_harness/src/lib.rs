@@ -14,6 +14,7 @@
 //!   masked coverage); a failed comparison writes both images and a difference image under
 //!   `target/nature-artifacts/` so a person can look.
 //! - [`interrupt`]: killing a bake or a build at random points and comparing what a rerun writes.
+//! - [`soak`]: `--soak N`, a long run sampling resident and GPU memory.
 //! - [`stats`]: frame-time statistics (median, p95) and the JSON the example runner prints.
 //! - [`runner`]: [`ExampleRunner`], used by every example: windowed by default, `--headless`,
 //!   `--frames N`, `--size WxH`, `--screenshot PATH`, `--stats PATH`, with a `bevy_egui` panel of
@@ -28,6 +29,7 @@ pub mod interrupt;
 #[cfg(feature = "windowed")]
 pub mod panel;
 pub mod runner;
+pub mod soak;
 pub mod stats;
 
 pub use adapter::{AdapterSummary, probe_adapter, require_adapter};

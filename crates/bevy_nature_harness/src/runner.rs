@@ -14,6 +14,9 @@
 //! - `--stats PATH`: write one JSON object (frame time median and p95, GPU pass times where
 //!   supported, and every counter the plugins publish as Bevy diagnostics). Headless runs also
 //!   print it on stdout.
+//! - `--soak N`: run N frames headless, sampling resident and GPU memory every 500 frames
+//!   ([`crate::soak`]); the samples and their growth are the JSON (printed, and written to
+//!   `--stats`).
 //!
 //! With no display (`DISPLAY` and `WAYLAND_DISPLAY` unset) an example says so and runs
 //! headless instead of failing to open a window.
@@ -36,11 +39,13 @@ pub struct ExampleArgs {
     pub screenshot: Option<PathBuf>,
     /// Where to write the JSON statistics.
     pub stats: Option<PathBuf>,
+    /// Frames of a soak run (implies headless).
+    pub soak: Option<u32>,
 }
 
 /// Usage text printed for `--help` and bad flags.
 pub const USAGE: &str =
-    "flags: [--headless] [--frames N] [--size WxH] [--screenshot PATH] [--stats PATH]";
+    "flags: [--headless] [--frames N] [--size WxH] [--screenshot PATH] [--stats PATH] [--soak N]";
 
 impl ExampleArgs {
     /// Parses flags (without the program name).
@@ -55,6 +60,7 @@ impl ExampleArgs {
             size: None,
             screenshot: None,
             stats: None,
+            soak: None,
         };
         let mut args = args.into_iter().map(Into::into);
         while let Some(arg) = args.next() {
@@ -83,6 +89,16 @@ impl ExampleArgs {
                 "--size" => parsed.size = Some(parse_size(&value("--size")?)?),
                 "--screenshot" => parsed.screenshot = Some(value("--screenshot")?.into()),
                 "--stats" => parsed.stats = Some(value("--stats")?.into()),
+                "--soak" => {
+                    let v = value("--soak")?;
+                    let n: u32 = v
+                        .parse()
+                        .ok()
+                        .filter(|&n| n > 0)
+                        .ok_or_else(|| format!("--soak: '{v}' is not a number of frames"))?;
+                    parsed.soak = Some(n);
+                    parsed.headless = true;
+                }
                 "--help" | "-h" => return Err(USAGE.into()),
                 other => return Err(format!("unknown flag '{other}'; {USAGE}")),
             }
@@ -238,6 +254,16 @@ impl ExampleRunner {
             "{}: scene ready after {warmup} frames; measuring {frames} frames",
             self.name
         );
+        if let Some(frames) = self.args.soak {
+            let samples = crate::soak::soak(&mut harness, &self.name, frames)?;
+            let json = crate::soak::report_json(&self.name, frames, &samples);
+            println!("{json}");
+            if let Some(path) = &self.args.stats {
+                write_atomically(path, &json)?;
+                eprintln!("{}: soak samples written to {}", self.name, path.display());
+            }
+            return Ok(());
+        }
         harness.reset_timing();
         harness.run_frames(frames).map_err(|e| e.to_string())?;
         let stats = harness.run_stats(&self.name);
@@ -313,6 +339,10 @@ mod tests {
         assert_eq!(args.size, Some(UVec2::new(320, 200)));
         assert_eq!(args.screenshot, Some(PathBuf::from("a.png")));
         assert_eq!(args.stats, Some(PathBuf::from("s.json")));
+        let soak = ExampleArgs::parse_from(["--soak", "10000"]).unwrap();
+        assert_eq!(soak.soak, Some(10_000));
+        assert!(soak.headless, "a soak runs headless");
+        assert!(ExampleArgs::parse_from(["--soak", "0"]).is_err());
     }
 
     #[test]
