@@ -44,6 +44,7 @@ pub mod distance;
 pub mod forest;
 pub mod grass;
 pub mod impostor;
+pub mod lighting;
 pub mod meshes;
 pub mod pruning;
 pub mod rng;

@@ -250,10 +250,16 @@ impl ExampleRunner {
         scene(harness.app_mut());
         let condition = self.ready_when.unwrap_or(|_| true);
         let warmup = harness.wait_until(condition).map_err(|e| e.to_string())?;
-        eprintln!(
-            "{}: scene ready after {warmup} frames; measuring {frames} frames",
-            self.name
-        );
+        match self.args.soak {
+            Some(soak) => eprintln!(
+                "{}: scene ready after {warmup} frames; soaking {soak} frames",
+                self.name
+            ),
+            None => eprintln!(
+                "{}: scene ready after {warmup} frames; measuring {frames} frames",
+                self.name
+            ),
+        }
         if let Some(frames) = self.args.soak {
             let samples = crate::soak::soak(&mut harness, &self.name, frames)?;
             let json = crate::soak::report_json(&self.name, frames, &samples);

@@ -126,13 +126,15 @@ pub fn soak_sampling_every(
         |b: Option<u64>| b.map_or("n/a".into(), |b| format!("{:.1} MiB", b as f64 / 1048576.0));
     let mut samples = vec![sample(harness, 0)];
     let mut done = 0;
+    let started = std::time::Instant::now();
     while done < frames {
         let n = interval.min(frames - done);
         harness.run_frames(n).map_err(|e| e.to_string())?;
         done += n;
         let s = sample(harness, done);
         eprintln!(
-            "{name}: soak frame {done}/{frames}: resident {}, GPU allocated {} (reserved {})",
+            "{name}: soak frame {done}/{frames} ({:.0} s): resident {}, GPU allocated {} (reserved {})",
+            started.elapsed().as_secs_f64(),
             mib(s.rss_bytes),
             mib(s.gpu_allocated_bytes),
             mib(s.gpu_reserved_bytes)
