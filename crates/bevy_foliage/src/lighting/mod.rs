@@ -1,6 +1,7 @@
 //! Trees lit as volumes of leaves (Boulanger 2008, ch. 5; in progress): [`envelope`] holds the
 //! per-leaf precomputation of §5.6 — the light each leaf receives through its neighbours in
 //! eight directions, the distances to the crown's envelope and the crown's fitted extinction τ —
-//! as plain Rust.
+//! as plain Rust, with [`leaf_tree`] taking far groups of leaves as one for large crowns.
 
 pub mod envelope;
+pub mod leaf_tree;
