@@ -19,8 +19,10 @@
 //! - **grass** with geometry / slice LoD (Boulanger, ch. 4): a [`grass::GrassField`] is drawn
 //!   near as blade geometry, at middle distance as GPU-baked volume slices lit through five
 //!   baked light directions, far as the horizontal slice on macro-cells, with seamless
-//!   transitions and density maps ([`grass`], [`grass::GrassPlugin`]); tree lighting (ch. 5)
-//!   later.
+//!   transitions and density maps ([`grass`], [`grass::GrassPlugin`]).
+//! - **tree lighting** (Boulanger, ch. 5), in progress: the per-leaf envelope of §5.6 — the
+//!   light each leaf gets through its neighbours in eight directions, the crown's extinction —
+//!   is baked with every tree ([`lighting`]); the shaders that use it are still to come.
 //!
 //! Add [`FoliagePlugin`]; tune [`FoliagePruningSettings`] (a reflected resource, so inspectors can
 //! edit it live).

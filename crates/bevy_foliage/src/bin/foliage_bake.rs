@@ -121,6 +121,7 @@ fn main() {
                 BakeStage::Cells => "cells",
                 BakeStage::Visibility => "visibility",
                 BakeStage::Order => "order",
+                BakeStage::Envelope => "envelope",
             };
             eprint!("\r{species_name}: {stage} {}/{}        ", p.done, p.total);
             let _ = std::io::stderr().flush();
@@ -139,7 +140,7 @@ fn main() {
             std::process::exit(1);
         }
         println!(
-            "{{\"tree\": \"{}\", \"leaves\": {}, \"skipped\": {}, \"cells\": {}, \"views\": {}, \"resolution\": {}, \"bake_ms\": {{\"cells\": {:.1}, \"visibility\": {:.1}, \"order\": {:.1}, \"total\": {:.1}}}, \"gpu_bytes\": {}, \"file\": \"{}\"}}",
+            "{{\"tree\": \"{}\", \"leaves\": {}, \"skipped\": {}, \"cells\": {}, \"views\": {}, \"resolution\": {}, \"bake_ms\": {{\"cells\": {:.1}, \"visibility\": {:.1}, \"order\": {:.1}, \"envelope\": {:.1}, \"total\": {:.1}}}, \"gpu_bytes\": {}, \"file\": \"{}\"}}",
             species_name,
             baked.leaf_count(),
             baked.skipped.total(),
@@ -149,6 +150,7 @@ fn main() {
             timings.cells.as_secs_f64() * 1e3,
             timings.visibility.as_secs_f64() * 1e3,
             timings.order.as_secs_f64() * 1e3,
+            timings.envelope.as_secs_f64() * 1e3,
             timings.total().as_secs_f64() * 1e3,
             baked.gpu_bytes(),
             file.display()

@@ -65,6 +65,16 @@ pub struct LeafProxy {
     pub area: f32,
 }
 
+/// An attenuation in `[0, 1]` as stored in a bake (65,535 = 1).
+pub fn quantize_light(a: f32) -> u16 {
+    (a.clamp(0.0, 1.0) * 65535.0).round() as u16
+}
+
+/// A stored attenuation back in `[0, 1]`.
+pub fn light_of(q: u16) -> f32 {
+    q as f32 / 65535.0
+}
+
 /// The proxies of every leaf of `leaves`: centroid, the unit normal of its first triangle,
 /// its area.
 pub fn proxies(leaves: &LeafSet) -> Vec<LeafProxy> {

@@ -121,6 +121,8 @@ pub enum BakeStage {
     Visibility,
     /// Shuffling and writing the buffers.
     Order,
+    /// The crown's envelope: the light each leaf gets through its neighbours.
+    Envelope,
 }
 
 /// Why a bake failed.
@@ -162,12 +164,14 @@ pub struct BakeTimings {
     pub visibility: Duration,
     /// Shuffle and buffers.
     pub order: Duration,
+    /// The crown's envelope for the tree lighting (§5.6 of Boulanger 2008).
+    pub envelope: Duration,
 }
 
 impl BakeTimings {
     /// Total bake time.
     pub fn total(&self) -> Duration {
-        self.cells + self.visibility + self.order
+        self.cells + self.visibility + self.order + self.envelope
     }
 }
 
@@ -195,6 +199,13 @@ pub struct BakedFoliage {
     pub uvs: Vec<Vec2>,
     /// Per-vertex offset from its leaf's centroid, `e_i` (eq. 3.10).
     pub centroid_offsets: Vec<Vec3>,
+    /// Per stored leaf, the light let through by its neighbours in each of the eight
+    /// directions of [`DIRECTIONS`](crate::lighting::envelope::DIRECTIONS) (Boulanger 2008,
+    /// §5.6; [`crate::lighting::envelope`]), quantised to `u16` (65,535 = all of it).
+    pub leaf_light: Vec<[u16; 8]>,
+    /// The crown's fitted extinction τ per unit of model space (eq. 5.5; 0 for a crown with no
+    /// leaf behind another): `s_max(P, ω_j) = −ln(a_j) / τ`.
+    pub extinction: f32,
     /// Leaves skipped as unusable.
     pub skipped: SkippedLeaves,
 }
@@ -387,6 +398,8 @@ pub fn bake_masked(
         normals: Vec::new(),
         uvs: Vec::new(),
         centroid_offsets: Vec::new(),
+        leaf_light: Vec::new(),
+        extinction: 0.0,
         skipped,
     };
     for &leaf in &stored_leaves {
@@ -475,6 +488,40 @@ pub fn bake_masked(
     );
     baked.visibility = vis.into_iter().map(quantize_visibility).collect();
     timings.visibility = t.elapsed();
+
+    // 4. The crown's envelope for the tree lighting, in stored order; a textured leaf counts
+    // with its texture's opaque area.
+    let t = Instant::now();
+    progress(BakeProgress {
+        stage: BakeStage::Envelope,
+        done: 0,
+        total: 1,
+    });
+    let opaque = mask
+        .and_then(|m| m.opaque_fraction_of(&leaves))
+        .unwrap_or(1.0);
+    let all = crate::lighting::envelope::proxies(&leaves);
+    let stored: Vec<_> = stored_leaves
+        .iter()
+        .map(|&l| {
+            let mut proxy = all[l as usize];
+            proxy.area *= opaque;
+            proxy
+        })
+        .collect();
+    let envelope = crate::lighting::envelope::crown_envelope(&stored, threads);
+    baked.leaf_light = envelope
+        .leaves
+        .iter()
+        .map(|e| e.attenuation.map(crate::lighting::envelope::quantize_light))
+        .collect();
+    baked.extinction = envelope.tau;
+    progress(BakeProgress {
+        stage: BakeStage::Envelope,
+        done: 1,
+        total: 1,
+    });
+    timings.envelope = t.elapsed();
     Ok((baked, timings))
 }
 
@@ -494,6 +541,64 @@ mod tests {
     }
 
     use bevy::prelude::default;
+
+    /// The bake's leaf light is the crown envelope of its leaves in stored order: each stored
+    /// leaf's eight values are those of the leaf at that place.
+    #[test]
+    fn the_leaf_light_follows_the_stored_order() {
+        use crate::lighting::envelope::{LeafProxy, crown_envelope, quantize_light};
+        let b = small_bake();
+        assert_eq!(b.leaf_light.len(), b.leaf_count());
+        assert!(b.extinction > 0.0);
+        let proxies: Vec<LeafProxy> = (0..b.leaf_count())
+            .map(|l| {
+                let range = b.leaf_index_start[l] as usize..b.leaf_index_start[l + 1] as usize;
+                let tris: Vec<[Vec3; 3]> = b.indices[range]
+                    .chunks_exact(3)
+                    .map(|t| {
+                        t.iter()
+                            .map(|&i| b.positions[i as usize])
+                            .collect::<Vec<_>>()
+                    })
+                    .map(|v| [v[0], v[1], v[2]])
+                    .collect();
+                let mut unique: Vec<u32> = b.indices
+                    [b.leaf_index_start[l] as usize..b.leaf_index_start[l + 1] as usize]
+                    .to_vec();
+                unique.sort();
+                unique.dedup();
+                let centre = unique
+                    .iter()
+                    .map(|&i| b.positions[i as usize])
+                    .sum::<Vec3>()
+                    / unique.len() as f32;
+                let [a, b2, c] = tris[0];
+                LeafProxy {
+                    centre,
+                    normal: (b2 - a).cross(c - a).normalize(),
+                    area: tris
+                        .iter()
+                        .map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length())
+                        .sum(),
+                }
+            })
+            .collect();
+        let envelope = crown_envelope(&proxies, 2);
+        let mut off = 0;
+        for (stored, e) in b.leaf_light.iter().zip(&envelope.leaves) {
+            for j in 0..8 {
+                off += (stored[j] as i32 - quantize_light(e.attenuation[j]) as i32)
+                    .abs()
+                    .gt(&70) as usize;
+            }
+        }
+        assert!(
+            off * 1000 <= b.leaf_count() * 8,
+            "{off} of {} values differ",
+            b.leaf_count() * 8
+        );
+        assert!((envelope.tau - b.extinction).abs() < 1e-3 * b.extinction);
+    }
 
     #[test]
     fn bake_is_consistent() {

@@ -22,7 +22,7 @@ use std::path::Path;
 /// File signature.
 pub const MAGIC: &[u8; 8] = b"BNFOLIAG";
 /// Current format version; bump on any layout change.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Why a baked foliage file could not be read.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -188,6 +188,9 @@ pub fn encode(baked: &BakedFoliage) -> Vec<u8> {
     w.vec3s(&baked.normals);
     w.vec2s(&baked.uvs);
     w.vec3s(&baked.centroid_offsets);
+    let light: Vec<u16> = baked.leaf_light.iter().flatten().copied().collect();
+    w.u16s(&light);
+    w.u32s(&[baked.extinction.to_bits()]);
     let s = baked.skipped;
     w.u32s(&[s.non_finite as u32, s.degenerate as u32, s.malformed as u32]);
     let payload = w.0;
@@ -249,6 +252,15 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
     let normals = r.vec3s()?;
     let uvs = r.vec2s()?;
     let centroid_offsets = r.vec3s()?;
+    let light = r.u16s()?;
+    let extinction = r.u32s()?;
+    if light.len() % 8 != 0 || extinction.len() != 1 {
+        return Err(FormatError::Invalid("leaf light section".into()));
+    }
+    let leaf_light = light
+        .chunks_exact(8)
+        .map(|c| std::array::from_fn(|j| c[j]))
+        .collect();
     let skipped = r.u32s()?;
     if r.at != payload.len() || skipped.len() != 3 {
         return Err(FormatError::Invalid("unexpected trailing data".into()));
@@ -264,6 +276,8 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
         normals,
         uvs,
         centroid_offsets,
+        leaf_light,
+        extinction: f32::from_bits(extinction[0]),
         skipped: SkippedLeaves {
             non_finite: skipped[0] as usize,
             degenerate: skipped[1] as usize,
@@ -323,6 +337,16 @@ pub fn validate(b: &BakedFoliage) -> Result<(), FormatError> {
     if let Some(i) = b.indices.iter().find(|&&i| i as usize >= n) {
         return bad(format!("index {i} out of range ({n} vertices)"));
     }
+    if b.leaf_light.len() != b.leaf_count() {
+        return bad(format!(
+            "leaf light for {} leaves, file has {}",
+            b.leaf_light.len(),
+            b.leaf_count()
+        ));
+    }
+    if !(b.extinction.is_finite() && b.extinction >= 0.0) {
+        return bad(format!("extinction {} is not a finite τ ≥ 0", b.extinction));
+    }
     Ok(())
 }
 
@@ -381,15 +405,28 @@ pub(crate) mod tests {
     fn corrupt_or_mismatched_files_are_clear_errors() {
         let bytes = encode(&sample());
         assert_eq!(decode(b"nonsense"), Err(FormatError::BadMagic));
-        let mut v2 = bytes.clone();
-        v2[8] = 2;
+        // Version 1 (before the leaf light) is refused: re-bake.
+        let mut v1 = bytes.clone();
+        v1[8] = 1;
         assert_eq!(
-            decode(&v2),
+            decode(&v1),
             Err(FormatError::UnsupportedVersion {
-                found: 2,
+                found: 1,
                 expected: FORMAT_VERSION
             })
         );
+        let mut short_light = sample();
+        short_light.leaf_light.pop();
+        assert!(matches!(
+            decode(&encode(&short_light)),
+            Err(FormatError::Invalid(_))
+        ));
+        let mut bad_tau = sample();
+        bad_tau.extinction = f32::NAN;
+        assert!(matches!(
+            decode(&encode(&bad_tau)),
+            Err(FormatError::Invalid(_))
+        ));
         assert_eq!(
             decode(&bytes[..bytes.len() - 1]),
             Err(FormatError::Truncated)
