@@ -586,10 +586,8 @@ mod tests {
         let envelope = crown_envelope(&proxies, 2);
         let mut off = 0;
         for (stored, e) in b.leaf_light.iter().zip(&envelope.leaves) {
-            for j in 0..8 {
-                off += (stored[j] as i32 - quantize_light(e.attenuation[j]) as i32)
-                    .abs()
-                    .gt(&70) as usize;
+            for (&q, &a) in stored.iter().zip(&e.attenuation) {
+                off += ((q as i32 - quantize_light(a) as i32).abs() > 70) as usize;
             }
         }
         assert!(
