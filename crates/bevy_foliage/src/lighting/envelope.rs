@@ -24,83 +24,11 @@
 //! fifth below (0.286): closer, and the bias left is the envelope's varying distance across an
 //! off-centre leaf's bins.
 
-use super::leaf_tree::{BinSums, LeafTree};
-use crate::pruning::leaves::LeafSet;
-use bevy::math::Vec3;
-
-/// ξ = √3/3: the sampling directions are (±ξ, ±ξ, ±ξ).
-pub const XI: f32 = 0.577_350_26;
-
-/// Sampling directions: `DIRECTIONS` bit 0 set means +x, bit 1 +y, bit 2 +z.
-pub const DIRECTIONS: [Vec3; 8] = {
-    let mut out = [Vec3::ZERO; 8];
-    let mut j = 0;
-    while j < 8 {
-        out[j] = Vec3::new(
-            if j & 1 != 0 { XI } else { -XI },
-            if j & 2 != 0 { XI } else { -XI },
-            if j & 4 != 0 { XI } else { -XI },
-        );
-        j += 1;
-    }
-    out
+pub use super::bins::{
+    BIN_SOLID_ANGLE, BinSums, DIRECTIONS, LeafProxy, XI, bin_of, light_of, occlusion, proxies,
+    quantize_light,
 };
-
-/// The solid angle of one bin: the sphere's eighth.
-pub const BIN_SOLID_ANGLE: f32 = std::f32::consts::FRAC_PI_2;
-
-/// The bin (index into [`DIRECTIONS`]) of the direction `d`: its octant.
-pub fn bin_of(d: Vec3) -> usize {
-    (d.x >= 0.0) as usize | ((d.y >= 0.0) as usize) << 1 | ((d.z >= 0.0) as usize) << 2
-}
-
-/// A leaf as the envelope sees it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LeafProxy {
-    /// Its centre P.
-    pub centre: Vec3,
-    /// Its unit normal.
-    pub normal: Vec3,
-    /// Its area.
-    pub area: f32,
-}
-
-/// An attenuation in `[0, 1]` as stored in a bake (65,535 = 1).
-pub fn quantize_light(a: f32) -> u16 {
-    (a.clamp(0.0, 1.0) * 65535.0).round() as u16
-}
-
-/// A stored attenuation back in `[0, 1]`.
-pub fn light_of(q: u16) -> f32 {
-    q as f32 / 65535.0
-}
-
-/// The proxies of every leaf of `leaves`: centroid, the unit normal of its first triangle,
-/// its area.
-pub fn proxies(leaves: &LeafSet) -> Vec<LeafProxy> {
-    (0..leaves.len())
-        .map(|i| LeafProxy {
-            centre: leaves.centroid(i),
-            normal: leaves
-                .triangles(i)
-                .next()
-                .and_then(|[a, b, c]| (b - a).cross(c - a).try_normalize())
-                .unwrap_or(Vec3::Y),
-            area: leaves.area(i),
-        })
-        .collect()
-}
-
-/// The fraction of bin's solid angle leaf `q` occludes seen from `p`, in `]0, 1]`.
-pub fn occlusion(p: Vec3, q: &LeafProxy) -> f32 {
-    let d = q.centre - p;
-    let r2 = d.length_squared();
-    if r2 <= 0.0 || !r2.is_finite() {
-        return 0.0;
-    }
-    let cosine = q.normal.dot(d).abs() / r2.sqrt();
-    (q.area * cosine / r2 / BIN_SOLID_ANGLE).min(1.0)
-}
+use super::leaf_tree::LeafTree;
 
 /// What one leaf sees in the eight directions.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -225,16 +153,14 @@ pub fn crown_envelope_with(leaves: &[LeafProxy], threads: usize, clustered: bool
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rng::SplitMix64;
+    use bevy::math::Vec3;
 
-    /// A deterministic uniform in `[0, 1)` (SplitMix64).
-    struct Random(u64);
+    /// A deterministic uniform source, with unit vectors.
+    struct Random(SplitMix64);
     impl Random {
         fn next(&mut self) -> f32 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+            self.0.next_f32()
         }
         fn unit(&mut self) -> Vec3 {
             loop {
@@ -248,7 +174,7 @@ mod tests {
 
     /// `count` leaves of area `area`, uniform in a ball of `radius`, uniformly oriented.
     fn ball(count: usize, radius: f32, area: f32, seed: u64) -> Vec<LeafProxy> {
-        let mut random = Random(seed);
+        let mut random = Random(SplitMix64::new(seed));
         let mut out = Vec::with_capacity(count);
         while out.len() < count {
             let p = Vec3::new(random.next(), random.next(), random.next()) * 2.0 - 1.0;

@@ -10,7 +10,7 @@
 //! the bin's light is multiplied by `e^(−Σ o)`, which the exact product `Π(1 − o)` tends to for
 //! the small `o` of far leaves.
 
-use super::envelope::{BIN_SOLID_ANGLE, LeafProxy, bin_of, occlusion};
+use super::bins::{BIN_SOLID_ANGLE, BinSums, LeafProxy, bin_of, occlusion};
 use bevy::math::{Mat3, Vec3};
 
 /// A node is used as one occluder when its bounding box's diagonal is less than this fraction
@@ -40,46 +40,6 @@ pub struct LeafTree<'a> {
     leaves: &'a [LeafProxy],
     order: Vec<u32>,
     nodes: Vec<Node>,
-}
-
-/// What one leaf sees per bin, summed: the light let through, and the distances of the leaves
-/// seen (for the envelope's first estimate).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BinSums {
-    /// The light let through per bin.
-    pub attenuation: [f32; 8],
-    /// The farthest leaf per bin.
-    pub farthest: [f32; 8],
-    /// The sum of the leaves' distances per bin.
-    pub distance_sum: [f32; 8],
-    /// The leaves per bin.
-    pub count: [u32; 8],
-}
-
-impl Default for BinSums {
-    fn default() -> Self {
-        Self {
-            attenuation: [1.0; 8],
-            farthest: [0.0; 8],
-            distance_sum: [0.0; 8],
-            count: [0; 8],
-        }
-    }
-}
-
-impl BinSums {
-    /// One leaf at `d` from P occluding `o` of its bin.
-    pub fn add_leaf(&mut self, d: Vec3, o: f32) {
-        if o <= 0.0 {
-            return;
-        }
-        let j = bin_of(d);
-        let r = d.length();
-        self.attenuation[j] *= 1.0 - o;
-        self.farthest[j] = self.farthest[j].max(r);
-        self.distance_sum[j] += r;
-        self.count[j] += 1;
-    }
 }
 
 impl<'a> LeafTree<'a> {

@@ -3,5 +3,6 @@
 //! eight directions, the distances to the crown's envelope and the crown's fitted extinction τ —
 //! as plain Rust, with [`leaf_tree`] taking far groups of leaves as one for large crowns.
 
+pub mod bins;
 pub mod envelope;
 pub mod leaf_tree;
