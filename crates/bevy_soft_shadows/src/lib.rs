@@ -5,7 +5,7 @@
 //! - **Screen Space Soft Shadows** (Gumbau 2011, ch. 6): a min-filtered shadow map gives the
 //!   blocker distance, eq. 6.2 the penumbra width in screen space, and a separable anisotropic
 //!   Gaussian blurs the hard shadow — O(2n) per pixel where PCSS is O(n²).
-//! - statistically filtered shadow maps (Gumbau 2011, ch. 7), in progress: their visibility
+//! - statistically filtered shadow maps (Gumbau 2011, ch. 7): their visibility
 //!   functions ([`filterable::visibility`], and as WGSL: the Gaussian and power CDFs beside
 //!   variance, exponential and four-moment shadow maps); a [`filterable::FilteredShadowMap`] on
 //!   a directional light (its cascades) or a spot light (its map) resolves them into a
