@@ -30,7 +30,7 @@
 //! ```text
 //! cargo run --release --example grass_bench -- [--preset gpu|quick] [--distance M]
 //!     [--strata N] [--frames N] [--size WxH] [--transitions G0,G1,V0,V1]...
-//!     [--ours-only] [--no-shadow-maps] [--screenshot DIR] [--stats FILE]
+//!     [--ours-only] [--no-shadow-maps] [--gpu-passes] [--screenshot DIR] [--stats FILE]
 //! ```
 //! `--preset gpu` (default): 400 m of the default species (576 blades per 0.5 m patch); the
 //! all-geometry reference is some 10^9 triangles, for a GPU. `--preset quick`: 40 m of a sparser
@@ -39,7 +39,8 @@
 //! `--ours-only` skips the baseline and the reference (no RMSE): the count of virtual blades
 //! ours draws in view. `--no-shadow-maps`:
 //! the sun casts no shadow map on either side (ours keeps its blade shadow mask). Both sides
-//! draw in still air; each measurement follows a few unmeasured frames.
+//! draw in still air; each measurement follows a few unmeasured frames. `--gpu-passes` records
+//! GPU timestamps and prints each configuration's whole-frame GPU time and its passes' times.
 
 use bevy::camera::primitives::Frustum;
 use bevy::prelude::*;
@@ -69,6 +70,8 @@ struct Args {
     ours_only: bool,
     /// The sun casts no shadow maps (either side).
     no_shadow_maps: bool,
+    /// Record GPU timestamps and print each configuration's GPU frame time and pass times.
+    gpu_passes: bool,
     screenshots: Option<PathBuf>,
     stats: Option<PathBuf>,
     ours_sweep: Vec<TransitionDistances>,
@@ -98,6 +101,7 @@ fn parse_args() -> Args {
         size: UVec2::new(640, 360),
         ours_only: false,
         no_shadow_maps: false,
+        gpu_passes: false,
         screenshots: None,
         stats: None,
         ours_sweep: Vec::new(),
@@ -106,7 +110,7 @@ fn parse_args() -> Args {
     let (mut distance, mut strata, mut size) = (None, None, None);
     let mut transitions: Vec<TransitionDistances> = Vec::new();
     let mut it = std::env::args().skip(1);
-    let usage = "flags: [--preset gpu|quick] [--distance M] [--strata N] [--frames N] [--size WxH] [--transitions G0,G1,V0,V1]... [--ours-only] [--no-shadow-maps] [--screenshot DIR] [--stats FILE]";
+    let usage = "flags: [--preset gpu|quick] [--distance M] [--strata N] [--frames N] [--size WxH] [--transitions G0,G1,V0,V1]... [--ours-only] [--no-shadow-maps] [--gpu-passes] [--screenshot DIR] [--stats FILE]";
     let fail = |m: String| -> ! {
         eprintln!("{m}; {usage}");
         std::process::exit(2)
@@ -164,6 +168,7 @@ fn parse_args() -> Args {
             }
             "--ours-only" => args.ours_only = true,
             "--no-shadow-maps" => args.no_shadow_maps = true,
+            "--gpu-passes" => args.gpu_passes = true,
             "--screenshot" => args.screenshots = Some(value().into()),
             "--stats" => args.stats = Some(value().into()),
             other => fail(format!("unknown flag {other}")),
@@ -372,6 +377,26 @@ fn measure(
         .run_frames_gpu_synchronised(frames)
         .expect("measured frames");
     let stats = harness.frame_stats();
+    if harness.has_gpu_timestamps() {
+        // Timestamp results arrive a frame or two late.
+        harness
+            .run_frames_gpu_synchronised(3)
+            .expect("frames for late timestamps");
+        let passes = harness.run_stats(name).gpu_pass_ms;
+        let mut passes: Vec<_> = passes.into_iter().filter(|(_, ms)| *ms >= 0.05).collect();
+        passes.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let list: Vec<String> = passes
+            .iter()
+            .map(|(pass, ms)| format!("{pass} {ms:.2}"))
+            .collect();
+        eprintln!(
+            "grass_bench: {name}: GPU frame {} ms (timestamps); passes (ms): {}",
+            harness
+                .gpu_frame_time_ms()
+                .map_or_else(|e| e, |ms| format!("{ms:.2}")),
+            list.join(", ")
+        );
+    }
     let image = harness.render().expect("render");
     if let Some(dir) = shots {
         std::fs::create_dir_all(dir).ok();
@@ -402,7 +427,7 @@ fn main() {
     let field_size = Vec2::splat(2.2 * args.distance);
     let grid = field_grid(Vec2::ZERO, field_size, species.patch.size);
     let mut harness = RenderHarness::new(HarnessConfig {
-        gpu_timing: false,
+        gpu_timing: args.gpu_passes,
         ..HarnessConfig::sized(args.size.x, args.size.y)
     })
     .expect("harness");

@@ -135,33 +135,64 @@ pub fn handover_ranges(far: f32, fade_band: f32) -> (VisibilityRange, Visibility
     )
 }
 
+/// Dither levels of Bevy's visibility-range fade: a fading mesh is drawn at one of 16 + 1
+/// levels, `round(16 · fraction)` (`get_visibility_range_dither_level` in `bevy_pbr`).
+pub const FADE_LEVELS: f32 = 16.0;
+
+/// Ratio between consecutive distances a fading tree's window is anchored at.
+///
+/// Bevy keeps every distinct [`VisibilityRange`] it has ever seen in its render-world table
+/// (`RenderVisibilityRanges` never frees a slot, so indices baked into meshes stay valid) and
+/// aliases every range past the 65,535th onto slot 0. A window anchored at each tree's exact
+/// distance would add two ranges per fading tree per frame — a table that grows without bound
+/// (resident memory rising by megabytes a frame in a flying camera's soak) and, after a minute
+/// of fades, wrong dithering. Anchored on this geometric ladder instead, the fade uses at most
+/// `2 · 15 · FADE_ANCHORS` ranges for the life of the app. With the window as wide as the
+/// anchor distance, a tree up to half a step from its anchor is off by at most
+/// `16 · (√ratio − 1) < 0.25` of a dither level, so Bevy rounds it to exactly the level it
+/// would get from a window at its own distance: nothing visible is lost.
+pub const FADE_ANCHOR_RATIO: f32 = 1.0 + 1.0 / 32.0;
+
+/// Nearest anchor distance of the fade's ladder (closer trees use it).
+pub const FADE_NEAREST_ANCHOR: f32 = 0.25;
+
+/// Number of anchors of the fade's ladder, from [`FADE_NEAREST_ANCHOR`] up (about 65 km).
+pub const FADE_ANCHORS: i32 = 406;
+
 /// The visibility ranges that show a tree at `distance` from the camera as `weight` of its
 /// impostor and `1 − weight` of its bark, dithered (the mixed LoD's fade over time): a window
 /// of the dithering ramp placed so the tree's distance falls `weight` of the way into it.
+///
+/// The weight is rounded to Bevy's 16 dither levels and the window anchored on a ladder of
+/// distances ([`FADE_ANCHOR_RATIO`]), so the ranges come from a bounded set however long the
+/// camera flies, and Bevy draws the same dither level as for an exact window.
 pub fn fade_ranges(distance: f32, weight: f32) -> (VisibilityRange, VisibilityRange) {
     let d = if distance.is_finite() {
         distance.max(0.0)
     } else {
         0.0
     };
-    let w = weight.clamp(0.0, 1.0);
-    // Settled trees get ranges that do not depend on the distance, so only the few trees fading
-    // right now change their ranges from frame to frame (every change re-uploads Bevy's table of
-    // visibility ranges).
-    if w >= 1.0 {
+    let level = (weight.clamp(0.0, 1.0) * FADE_LEVELS).round();
+    // Settled trees (and trees within half a level of settling) get ranges that do not depend
+    // on the distance, so only the trees fading right now change their ranges.
+    if level >= FADE_LEVELS {
         return (
             VisibilityRange::abrupt(0.0, f32::MAX),
             VisibilityRange::abrupt(0.0, 0.0),
         );
     }
-    if w <= 0.0 {
+    if level <= 0.0 {
         return (
             VisibilityRange::abrupt(0.0, 0.0),
             VisibilityRange::abrupt(0.0, f32::MAX),
         );
     }
-    let width = (0.1 * d).max(1.0);
-    let window = (d - w * width)..(d - w * width + width);
+    let w = level / FADE_LEVELS;
+    let step = (d.max(FADE_NEAREST_ANCHOR) / FADE_NEAREST_ANCHOR).ln() / FADE_ANCHOR_RATIO.ln();
+    let anchor =
+        FADE_NEAREST_ANCHOR * FADE_ANCHOR_RATIO.powi((step.round() as i32).min(FADE_ANCHORS - 1));
+    // The window is as wide as the anchor distance: [anchor·(1 − w), anchor·(2 − w)].
+    let window = anchor * (1.0 - w)..anchor * (2.0 - w);
     (
         VisibilityRange {
             start_margin: window.clone(),
@@ -429,6 +460,15 @@ mod tests {
         assert!(bark.is_visible_at_all(79.0));
     }
 
+    /// Bevy's dither level for a mesh at `d` fading in through `range` (`bevy_pbr`'s
+    /// `get_visibility_range_dither_level`, start margin only).
+    fn bevy_fade_in_level(range: &VisibilityRange, d: f32) -> i32 {
+        let s = &range.start_margin;
+        ((d - s.start) / (s.end - s.start) * 16.0)
+            .round()
+            .clamp(0.0, 16.0) as i32
+    }
+
     #[test]
     fn the_fade_window_puts_the_tree_its_weight_of_the_way_in() {
         for (d, w) in [
@@ -437,14 +477,17 @@ mod tests {
             (50.0, 0.875),
             (300.0, 0.6),
             (3.0, 0.5),
+            (0.5, 0.3),
+            (20_000.0, 0.7),
         ] {
             let (imp, bark) = fade_ranges(d, w);
-            let s = &imp.start_margin;
-            let shown = (d - s.start) / (s.end - s.start);
-            assert!((shown - w).abs() < 1e-4, "{d} {w}: {shown}");
+            // Exactly the dither level of the weight, as Bevy computes it from the window.
+            let level = (w * 16.0_f32).round() as i32;
+            assert_eq!(bevy_fade_in_level(&imp, d), level, "{d} {w}");
             let e = &bark.end_margin;
             let bark_shown = (e.end - d) / (e.end - e.start);
-            assert!((bark_shown - (1.0 - w)).abs() < 1e-4);
+            let s = &imp.start_margin;
+            assert!((bark_shown - (1.0 - (d - s.start) / (s.end - s.start))).abs() < 1e-4);
         }
         // Settled: all of one and none of the other, at any distance.
         let (imp, bark) = fade_ranges(80.0, 1.0);
@@ -452,6 +495,44 @@ mod tests {
         assert!(imp.is_visible_at_all(3.0) && imp.is_visible_at_all(5000.0));
         let (imp, bark) = fade_ranges(80.0, 0.0);
         assert!(!imp.is_visible_at_all(80.0) && bark.is_visible_at_all(5000.0));
+    }
+
+    #[test]
+    fn fades_draw_bevys_exact_level_from_a_bounded_set_of_ranges() {
+        // A long flight: every distance from 0 to 100 km, finely, at every weight. Bevy never
+        // frees a visibility range it has seen and aliases those past 65,535 onto slot 0.
+        let mut seen = std::collections::HashSet::new();
+        let mut d = 0.0_f32;
+        let mut worst = 0;
+        while d < 100_000.0 {
+            for i in 0..=64 {
+                let w = i as f32 / 64.0;
+                let (imp, bark) = fade_ranges(d, w);
+                for r in [&imp, &bark] {
+                    seen.insert([
+                        r.start_margin.start.to_bits(),
+                        r.start_margin.end.to_bits(),
+                        r.end_margin.start.to_bits(),
+                        r.end_margin.end.to_bits(),
+                    ]);
+                }
+                if (FADE_NEAREST_ANCHOR..60_000.0).contains(&d) && imp.start_margin.start > 0.0 {
+                    let want = (w * 16.0).round() as i32;
+                    worst = worst.max((bevy_fade_in_level(&imp, d) - want).abs());
+                }
+            }
+            d = d * 1.001 + 0.01;
+        }
+        assert_eq!(
+            worst, 0,
+            "a tree drew another dither level than its weight's"
+        );
+        let bound = 2 * 15 * FADE_ANCHORS as usize + 4;
+        assert!(
+            seen.len() <= bound && seen.len() < 65_535 / 2,
+            "{} distinct ranges (bound {bound})",
+            seen.len()
+        );
     }
 
     #[test]
