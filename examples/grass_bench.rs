@@ -8,9 +8,12 @@
 //! - `reference`: every blade as geometry to `distance`, full segments (rendered once, untimed);
 //! - `geometry`: the baseline — the base patch mesh instanced per cell (mirrored as ours) with
 //!   Bevy's `StandardMaterial`, opaque, no discard, no dither, nothing of ours switched on; swept
-//!   over blade segments and how far it reaches (beyond: bare ground);
-//! - `ours`: a `GrassField`, swept over the transition distances, the vertical slices per axis
-//!   and the silhouette slices.
+//!   over blade segments, how far it reaches (beyond: bare ground) and whether the blades cast
+//!   into the sun's shadow maps;
+//! - `ours`: a `GrassField`, swept over the transition distances, the vertical slices per axis,
+//!   the silhouette slices and whether the blades cast into the shadow maps
+//!   (`GrassSettings::cast_shadow_maps`; off, the blade shadow mask alone shades them). The
+//!   reference's blades cast.
 //!
 //! Both draw the same blades in the same colours (the species' root-to-tip gradient as vertex
 //! colours for the baseline, with no ambient occlusion on either side), so the reference is the
@@ -43,6 +46,7 @@
 //! GPU timestamps and prints each configuration's whole-frame GPU time and its passes' times.
 
 use bevy::camera::primitives::Frustum;
+use bevy::light::NotShadowCaster;
 use bevy::prelude::*;
 use bevy_nature::bench_curves::{matched_speedups, speedups_at_baseline_points};
 use bevy_nature::foliage::grass::bake::GrassSliceBakeCamera;
@@ -288,7 +292,23 @@ fn coloured_patch_mesh(patch: &BasePatch, species: &GrassSpecies, segments: u32)
     mesh
 }
 
-/// Replaces the baseline's cells: `segments` per blade, cells within `reach`.
+/// The baseline's sweep: (segments a blade, reach as a share of the distance, casts into the
+/// shadow maps).
+fn baseline_sweep(full_segments: u32) -> Vec<(u32, f32, bool)> {
+    let mut sweep = Vec::new();
+    for casts in [true, false] {
+        for segments in [full_segments, 2, 1] {
+            for reach in [1.0, 0.5, 0.25] {
+                sweep.push((segments, reach, casts));
+            }
+        }
+    }
+    sweep
+}
+
+/// Replaces the baseline's cells: `segments` per blade, cells within `reach`, casting into the
+/// sun's shadow maps or not.
+#[allow(clippy::too_many_arguments)]
 fn spawn_baseline(
     harness: &mut RenderHarness,
     cells: &[CellNode],
@@ -297,6 +317,7 @@ fn spawn_baseline(
     species: &GrassSpecies,
     segments: u32,
     reach: f32,
+    casts: bool,
 ) -> u64 {
     let world = harness.world_mut();
     let old: Vec<Entity> = world
@@ -336,12 +357,15 @@ fn spawn_baseline(
             continue;
         }
         let mirror = Mirror::of_cell(node.x as i64, node.z as i64, species.patch.seed);
-        world.spawn((
+        let mut cell = world.spawn((
             BaselineCell,
             Mesh3d(mesh.clone()),
             MeshMaterial3d(material.clone()),
             cell_transform(corner, side, mirror),
         ));
+        if !casts {
+            cell.insert(NotShadowCaster);
+        }
         drawn += patch.blades.len() as u64;
     }
     drawn
@@ -503,6 +527,7 @@ fn main() {
             &species,
             species.patch.segments,
             args.distance,
+            true,
         );
         harness.wait_until_ready().expect("reference ready");
         let image = harness.render().expect("reference");
@@ -510,9 +535,12 @@ fn main() {
             std::fs::create_dir_all(dir).ok();
             image.save_png(dir.join("reference.png")).ok();
         }
-        for segments in [species.patch.segments, 2, 1] {
-            for reach in [1.0, 0.5, 0.25] {
-                let reach = args.distance * reach;
+        // Swept over segments, reach and whether the blades cast into the shadow maps (the
+        // reference's blades do: without, the blades lose their shadows on one another and on
+        // the ground, and every shadow pass skips them).
+        for (segments, reach, casts) in baseline_sweep(species.patch.segments) {
+            let reach = args.distance * reach;
+            {
                 let drawn = spawn_baseline(
                     &mut harness,
                     &cells,
@@ -521,8 +549,10 @@ fn main() {
                     &species,
                     segments,
                     reach,
+                    casts,
                 );
-                let name = format!("geometry_s{segments}_r{reach:.0}");
+                let cast_tag = if casts { "" } else { "_nocast" };
+                let name = format!("geometry_s{segments}_r{reach:.0}{cast_tag}");
                 let (ms, p95, rmse) =
                     measure(&mut harness, args.frames, Some(&image), &name, shots);
                 let (rmse, rmse_4x4) = rmse.expect("a reference");
@@ -531,7 +561,14 @@ fn main() {
                 );
                 rows.push(Row {
                     mode: "geometry",
-                    params: format!("segments {segments}, reach {reach:.0} m"),
+                    params: format!(
+                        "segments {segments}, reach {reach:.0} m, {}",
+                        if casts {
+                            "casts shadow maps"
+                        } else {
+                            "casts no shadow map"
+                        }
+                    ),
                     virtual_blades,
                     geometry_blades: drawn,
                     frame_ms: ms,
@@ -541,7 +578,7 @@ fn main() {
                 });
             }
         }
-        spawn_baseline(&mut harness, &[], &grid, &patch, &species, 1, 0.0);
+        spawn_baseline(&mut harness, &[], &grid, &patch, &species, 1, 0.0, true);
         Some(image)
     };
     // Ours, swept over its transitions, the slices per axis (K: fewer slices, fewer fragments
@@ -565,7 +602,7 @@ fn main() {
             })
             .id();
         for t in &args.ours_sweep {
-            for silhouettes in [true, false] {
+            for (silhouettes, casts) in [(true, true), (false, true), (true, false), (false, false)] {
                 let t = TransitionDistances {
                     max_silhouettes: if silhouettes {
                         t.max_silhouettes
@@ -580,14 +617,16 @@ fn main() {
                     settings.geometry = true;
                     settings.slices = true;
                     settings.shadow_mask = true;
+                    settings.cast_shadow_maps = casts;
                 }
                 let name = format!(
-                    "ours_g{}-{}_v{}-{}_k{per_axis}{}",
+                    "ours_g{}-{}_v{}-{}_k{per_axis}{}{}",
                     t.min_geom,
                     t.max_geom,
                     t.min_btf,
                     t.max_btf,
-                    if silhouettes { "_sil" } else { "" }
+                    if silhouettes { "_sil" } else { "" },
+                    if casts { "" } else { "_nocast" }
                 );
                 let (ms, p95, rmse) =
                     measure(&mut harness, args.frames, reference.as_ref(), &name, shots);
@@ -598,7 +637,7 @@ fn main() {
                 rows.push(Row {
                     mode: "ours",
                     params: format!(
-                        "geometry {}–{} m, vertical slices to {}–{} m, K = {per_axis}, silhouettes {}",
+                        "geometry {}–{} m, vertical slices to {}–{} m, K = {per_axis}, silhouettes {}, {}",
                         t.min_geom,
                         t.max_geom,
                         t.min_btf,
@@ -607,6 +646,11 @@ fn main() {
                             format!("to {} m", t.max_silhouettes)
                         } else {
                             "off".to_string()
+                        },
+                        if casts {
+                            "blades cast shadow maps"
+                        } else {
+                            "blades cast no shadow map"
                         }
                     ),
                     virtual_blades,

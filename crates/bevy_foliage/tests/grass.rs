@@ -8,7 +8,8 @@ use bevy::prelude::*;
 use bevy_foliage::grass::density::DensityMap;
 use bevy_foliage::grass::mesh::patch_mesh;
 use bevy_foliage::grass::patch::{BasePatch, Mirror, PatchSettings};
-use bevy_foliage::grass::systems::field_grid;
+use bevy::light::NotShadowCaster;
+use bevy_foliage::grass::systems::{GrassCell, field_grid};
 use bevy_foliage::grass::transition::{
     DISCARD, TransitionDistances, geometry_opacity, ordered_dither,
 };
@@ -330,6 +331,33 @@ fn blade_pass_keeps_the_blades_the_cpu_keeps() {
     assert!(differ * 100 < c, "{differ} px differ of {c}");
     // The gradient shows: the sparse third is clearly thinner.
     assert!(cl < 0.75 * cr, "{cl} vs {cr}");
+
+    // The cells cast into the shadow maps by default; switched off, every drawn cell (those
+    // already there too) stops casting, and casts again when switched back on.
+    let casting = |harness: &mut RenderHarness| {
+        let world = harness.world_mut();
+        let cells = world
+            .query_filtered::<Has<NotShadowCaster>, With<GrassCell>>()
+            .iter(world)
+            .collect::<Vec<_>>();
+        (cells.len(), cells.iter().filter(|not| !**not).count())
+    };
+    let (cells, cast) = casting(&mut harness);
+    assert!(cells > 0 && cast == cells, "{cast} of {cells} cells cast");
+    harness
+        .world_mut()
+        .resource_mut::<GrassSettings>()
+        .cast_shadow_maps = false;
+    harness.step();
+    harness.step();
+    assert_eq!(casting(&mut harness), (cells, 0));
+    harness
+        .world_mut()
+        .resource_mut::<GrassSettings>()
+        .cast_shadow_maps = true;
+    harness.step();
+    harness.step();
+    assert_eq!(casting(&mut harness), (cells, cells));
 
     // Inside the geometry's transition window (d ≈ 10 m between min_geom 8 and max_geom 12):
     // eq. 4.6's partial opacities, dithered.

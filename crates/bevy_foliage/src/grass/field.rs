@@ -148,6 +148,13 @@ pub struct GrassSettings {
     /// Darken the blades with the blade shadow mask (§4.2.6, eq. 4.7): the shadows of their
     /// neighbours, which a shadow map cannot resolve, on geometry and slices alike.
     pub shadow_mask: bool,
+    /// The blade geometry casts into Bevy's shadow maps (the sun's cascades, other lights'
+    /// maps): the blades shadow the ground, other objects and, coarsely, one another. Off, the
+    /// blades are [`NotShadowCaster`](bevy::light::NotShadowCaster)s: every shadow pass skips
+    /// them — the cascades draw each blade up to once per cascade, more than the blade pass
+    /// itself — and their shadows on one another come from the blade shadow mask alone, as in
+    /// the thesis (§4.2.6). The slices never cast.
+    pub cast_shadow_maps: bool,
     /// The wind over every field (the map it reads is the [`GrassWindMap`] resource).
     ///
     /// [`GrassWindMap`]: super::ground_map::GrassWindMap
@@ -170,6 +177,7 @@ impl Default for GrassSettings {
             slice_resolution: 64,
             slice_mip_alpha: MipAlpha::Mean,
             shadow_mask: true,
+            cast_shadow_maps: true,
             wind: GrassWind::default(),
             slice_cache: None,
         }

@@ -80,6 +80,9 @@ pub struct GrassFieldState {
     mesh: Handle<Mesh>,
     material: Handle<GrassBladeMaterial>,
     cells: HashMap<(u32, u32), Entity>,
+    /// Whether the cells in `cells` cast into shadow maps ([`GrassSettings::cast_shadow_maps`]
+    /// when they were last updated).
+    cells_cast_shadow_maps: bool,
     /// Cells drawn as blade geometry in the last frame.
     pub geometry_cells: u32,
     /// The slice bake's request entity (a child of the field).
@@ -314,6 +317,7 @@ pub fn prepare_grass_fields(
                 mesh,
                 material,
                 cells: HashMap::default(),
+                cells_cast_shadow_maps: true,
                 geometry_cells: 0,
                 slice_bake,
                 slices: None,
@@ -699,6 +703,17 @@ pub fn update_grass_cells(
             }
             keep
         });
+        // The setting changed: the cells already drawn follow it.
+        if state.cells_cast_shadow_maps != settings.cast_shadow_maps {
+            for &cell in state.cells.values() {
+                if settings.cast_shadow_maps {
+                    commands.entity(cell).remove::<NotShadowCaster>();
+                } else {
+                    commands.entity(cell).insert(NotShadowCaster);
+                }
+            }
+            state.cells_cast_shadow_maps = settings.cast_shadow_maps;
+        }
         let field_origin = transform.translation();
         for &(x, z) in &wanted {
             if state.cells.contains_key(&(x, z)) {
@@ -736,6 +751,9 @@ pub fn update_grass_cells(
                     ChildOf(entity),
                 ))
                 .id();
+            if !settings.cast_shadow_maps {
+                commands.entity(cell).insert(NotShadowCaster);
+            }
             state.cells.insert((x, z), cell);
         }
         state.geometry_cells = wanted.len() as u32;
