@@ -602,7 +602,8 @@ fn main() {
             })
             .id();
         for t in &args.ours_sweep {
-            for (silhouettes, casts) in [(true, true), (false, true), (true, false), (false, false)] {
+            for (silhouettes, casts) in [(true, true), (false, true), (true, false), (false, false)]
+            {
                 let t = TransitionDistances {
                     max_silhouettes: if silhouettes {
                         t.max_silhouettes

@@ -3,12 +3,12 @@
 //! `grass::density`), pixel by pixel, under a density gradient and inside a transition window.
 
 use bevy::camera::ScalingMode;
+use bevy::light::NotShadowCaster;
 use bevy::mesh::{Indices, VertexAttributeValues};
 use bevy::prelude::*;
 use bevy_foliage::grass::density::DensityMap;
 use bevy_foliage::grass::mesh::patch_mesh;
 use bevy_foliage::grass::patch::{BasePatch, Mirror, PatchSettings};
-use bevy::light::NotShadowCaster;
 use bevy_foliage::grass::systems::{GrassCell, field_grid};
 use bevy_foliage::grass::transition::{
     DISCARD, TransitionDistances, geometry_opacity, ordered_dither,

@@ -1,8 +1,11 @@
 //! Trees lit as volumes of leaves (Boulanger 2008, ch. 5; in progress): [`envelope`] holds the
 //! per-leaf precomputation of §5.6 — the light each leaf receives through its neighbours in
 //! eight directions, the distances to the crown's envelope and the crown's fitted extinction τ —
-//! as plain Rust, with [`leaf_tree`] taking far groups of leaves as one for large crowns.
+//! as plain Rust, with [`leaf_tree`] taking far groups of leaves as one for large crowns; and
+//! [`model`] the light a leaf sends to the eye from it (the leaf BSDF, sky, sun and one bounce
+//! of sunlight of §5.2–5.4), the CPU reference of the leaf shaders.
 
 pub mod bins;
 pub mod envelope;
 pub mod leaf_tree;
+pub mod model;

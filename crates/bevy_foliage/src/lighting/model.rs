@@ -1,0 +1,442 @@
+//! The light a leaf sends to the eye, from the per-leaf envelope of [`super::envelope`]
+//! (Boulanger 2008, §5.2–5.4): the leaf's two-sided BSDF (eq. 5.4), the sky and the ground
+//! through the crown (eq. 5.6), the sun through the crown (eq. 5.7–5.8) and one bounce of
+//! sunlight off the neighbouring leaves in closed form (eq. 5.11 with 5.24). Plain Rust: the CPU
+//! reference of the leaf shaders, and what the per-tree constants ([`SunBounce`], [`SkyLight`])
+//! are computed with when the lighting changes.
+//!
+//! Radiances are linear RGB; the leaf's reflectances and transmittances per channel. All
+//! directions are unit vectors in the tree's model space, pointing away from the leaf.
+
+use super::bins::DIRECTIONS;
+use bevy::math::Vec3;
+use bevy::reflect::Reflect;
+use std::f32::consts::PI;
+
+/// The four sides of a leaf's material (§5.2.3): what its front and back reflect, and what
+/// crosses it entering by either face, per RGB channel, in `[0, 1]`.
+#[derive(Clone, Copy, Debug, PartialEq, Reflect)]
+pub struct LeafMaterial {
+    /// ρ_rf: reflectance of the front face (the side of the leaf's normal).
+    pub reflectance_front: Vec3,
+    /// ρ_rb: reflectance of the back face.
+    pub reflectance_back: Vec3,
+    /// ρ_tf: transmittance for light entering the front face.
+    pub transmittance_front: Vec3,
+    /// ρ_tb: transmittance for light entering the back face.
+    pub transmittance_back: Vec3,
+}
+
+impl Default for LeafMaterial {
+    /// A broad-leaved tree's leaf: the front darker and glossier than the matte back, about a
+    /// tenth of the green light crossing it (§5.2.3's description; values of the order of
+    /// measured leaf spectra averaged to RGB).
+    fn default() -> Self {
+        Self {
+            reflectance_front: Vec3::new(0.06, 0.12, 0.04),
+            reflectance_back: Vec3::new(0.10, 0.18, 0.07),
+            transmittance_front: Vec3::new(0.05, 0.14, 0.03),
+            transmittance_back: Vec3::new(0.05, 0.14, 0.03),
+        }
+    }
+}
+
+impl LeafMaterial {
+    /// ρ̄ of eq. 5.19: the sum of the four.
+    pub fn rho_bar(&self) -> Vec3 {
+        self.reflectance_front
+            + self.reflectance_back
+            + self.transmittance_front
+            + self.transmittance_back
+    }
+
+    /// This material with every value clamped into `[0, 1]` (NaN to 0), and whether it changed.
+    pub fn sanitized(&self) -> (Self, bool) {
+        let fix = |v: Vec3| {
+            Vec3::from_array(
+                v.to_array()
+                    .map(|x| if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) }),
+            )
+        };
+        let s = Self {
+            reflectance_front: fix(self.reflectance_front),
+            reflectance_back: fix(self.reflectance_back),
+            transmittance_front: fix(self.transmittance_front),
+            transmittance_back: fix(self.transmittance_back),
+        };
+        (s, s != *self)
+    }
+}
+
+/// M(x) = max(x, 0).
+fn m(x: f32) -> f32 {
+    x.max(0.0)
+}
+
+/// The cosine-weighted BSDF F(P, ω_o, ω) of eq. 5.4 for a leaf of normal `n`: light from `w`
+/// reflected or transmitted towards `wo`, the cosine of incidence included.
+pub fn bsdf(material: &LeafMaterial, n: Vec3, wo: Vec3, w: Vec3) -> Vec3 {
+    let lit_front = m(n.dot(w));
+    let lit_back = m(-n.dot(w));
+    if n.dot(wo) >= 0.0 {
+        // Seen from the front: the front's reflection and what crossed from the back.
+        (material.reflectance_front * lit_front + material.transmittance_back * lit_back) / PI
+    } else {
+        (material.transmittance_front * lit_front + material.reflectance_back * lit_back) / PI
+    }
+}
+
+/// The radiance of the sky (upper directions) and of the ground reflecting it (lower
+/// directions) averaged over each of the eight solid angles Ω_j (§5.3.1), per tree.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SkyLight {
+    /// `L_sky(ω_j)` per direction of [`DIRECTIONS`].
+    pub radiance: [Vec3; 8],
+}
+
+impl SkyLight {
+    /// A uniform sky of radiance `sky` over the upper hemisphere, and below it a Lambertian
+    /// ground of albedo `ground_albedo` lit by that sky (radiance `albedo · sky`: the sky's
+    /// irradiance π·sky reflected over π), as §5.3.1 models the lower hemisphere.
+    pub fn uniform(sky: Vec3, ground_albedo: Vec3) -> Self {
+        Self {
+            radiance: DIRECTIONS.map(|d| if d.y > 0.0 { sky } else { sky * ground_albedo }),
+        }
+    }
+}
+
+/// Eq. 5.6: the sky and the ground's light the leaf sends towards `wo`, each direction's
+/// radiance attenuated by the leaves in its bin (`attenuation[j]` = e^(−τ·s_max(P, ω_j))).
+pub fn sky_radiance(
+    material: &LeafMaterial,
+    n: Vec3,
+    wo: Vec3,
+    attenuation: &[f32; 8],
+    sky: &SkyLight,
+) -> Vec3 {
+    let mut sum = Vec3::ZERO;
+    for j in 0..8 {
+        sum += bsdf(material, n, wo, DIRECTIONS[j]) * attenuation[j] * sky.radiance[j];
+    }
+    sum * (4.0 * PI / 8.0)
+}
+
+/// The cosine lobe weights M(ω_l · ω_j) of eq. 5.7 and their sum.
+fn lobes(wl: Vec3) -> ([f32; 8], f32) {
+    let w = DIRECTIONS.map(|d| m(wl.dot(d)));
+    let sum = w.iter().sum();
+    (w, sum)
+}
+
+/// Eq. 5.7: the envelope's distance towards an arbitrary direction `wl`, the s_max of the
+/// directions in its hemisphere blended by cosine lobes (continuous as the sun moves).
+pub fn smooth_s_max(s_max: &[f32; 8], wl: Vec3) -> f32 {
+    let (w, sum) = lobes(wl);
+    if sum <= 0.0 {
+        return 0.0;
+    }
+    (0..8).map(|j| w[j] * s_max[j]).sum::<f32>() / sum
+}
+
+/// Eq. 5.8: the sun's light (direction to the sun `wl`, irradiance `e_sun` on a surface facing
+/// it) the leaf sends towards `wo`, attenuated by the crown between it and the sun.
+pub fn sun_radiance(
+    material: &LeafMaterial,
+    n: Vec3,
+    wo: Vec3,
+    wl: Vec3,
+    tau: f32,
+    s_max: &[f32; 8],
+    e_sun: Vec3,
+) -> Vec3 {
+    bsdf(material, n, wo, wl) * (-tau * smooth_s_max(s_max, wl)).exp() * e_sun
+}
+
+/// The per-tree constants of one bounce of sunlight (eq. 5.18, 5.25, 5.26), computed on the CPU
+/// when the sun, the leaves' material or τ change; the leaves' shaders then evaluate eq. 5.24
+/// with their own s_max alone.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SunBounce {
+    /// `A·G1(j, ω_l)` per direction and channel: G1 of eq. 5.18 times the leaf area A of
+    /// eq. 5.11 (A·ρ = 2τ, so the product needs τ alone).
+    pub a_g1: [Vec3; 8],
+    /// G2(ω_l) of eq. 5.25.
+    pub g2: f32,
+    /// G3(j, ω_l) of eq. 5.26 per direction.
+    pub g3: [f32; 8],
+    /// M(ω_l · ω_j) per direction (the lobes eq. 5.24 sums s_max with).
+    pub lobes: [f32; 8],
+}
+
+impl SunBounce {
+    /// The constants for the sun in direction `wl` (towards the sun), a crown of extinction τ
+    /// and leaves of `material`.
+    pub fn new(material: &LeafMaterial, wl: Vec3, tau: f32) -> Self {
+        let (lobes, lobe_sum) = lobes(wl);
+        let rho_bar = material.rho_bar();
+        let through = material.transmittance_front + material.transmittance_back;
+        let a_g1 = DIRECTIONS.map(|d| {
+            let alpha = d.dot(wl).clamp(-1.0, 1.0).acos();
+            // Eq. 5.18 with A·ρ = 2τ (eq. 5.5): 2ρ·A = 4τ.
+            (rho_bar * (alpha.sin() - alpha * alpha.cos()) + through * (PI * alpha.cos()))
+                * (4.0 * tau / (3.0 * PI * 8.0))
+        });
+        let g2 = if lobe_sum > 0.0 { tau / lobe_sum } else { 0.0 };
+        let g3 = DIRECTIONS.map(|d| {
+            let mean = if lobe_sum > 0.0 {
+                (0..8).map(|k| lobes[k] * d.dot(DIRECTIONS[k])).sum::<f32>() / lobe_sum
+            } else {
+                0.0
+            };
+            tau * (1.0 - mean)
+        });
+        Self {
+            a_g1,
+            g2,
+            g3,
+            lobes,
+        }
+    }
+}
+
+/// `(1 − e^(−g·s)) / g`, and its limit `s` as `g` goes to 0.
+fn one_minus_exp_over(g: f32, s: f32) -> f32 {
+    let x = g * s;
+    if x.abs() < 1e-4 {
+        s * (1.0 - 0.5 * x)
+    } else {
+        -(-x).exp_m1() / g
+    }
+}
+
+/// Eq. 5.24 (times the leaf area A): the light the leaves of bin j send back towards the leaf,
+/// lit by the sun through the crown, for a leaf whose envelope is `s_max`.
+pub fn bounce_sample(bounce: &SunBounce, s_max: &[f32; 8], j: usize, e_sun: Vec3) -> Vec3 {
+    let lit: f32 = (0..8).map(|k| bounce.lobes[k] * s_max[k]).sum();
+    bounce.a_g1[j] * e_sun * (-bounce.g2 * lit).exp() * one_minus_exp_over(bounce.g3[j], s_max[j])
+}
+
+/// Eq. 5.11 with eq. 5.24: one bounce of sunlight off the neighbouring leaves, sent towards `wo`.
+pub fn bounce_radiance(
+    material: &LeafMaterial,
+    n: Vec3,
+    wo: Vec3,
+    bounce: &SunBounce,
+    s_max: &[f32; 8],
+    e_sun: Vec3,
+) -> Vec3 {
+    (0..8)
+        .map(|j| bsdf(material, n, wo, DIRECTIONS[j]) * bounce_sample(bounce, s_max, j, e_sun))
+        .sum()
+}
+
+/// The whole of eq. 5.2 for one leaf: sky and ground, sun, one bounce of sunlight.
+#[allow(clippy::too_many_arguments)]
+pub fn leaf_radiance(
+    material: &LeafMaterial,
+    n: Vec3,
+    wo: Vec3,
+    attenuation: &[f32; 8],
+    s_max: &[f32; 8],
+    tau: f32,
+    sky: &SkyLight,
+    wl: Vec3,
+    e_sun: Vec3,
+    bounce: &SunBounce,
+) -> Vec3 {
+    sky_radiance(material, n, wo, attenuation, sky)
+        + sun_radiance(material, n, wo, wl, tau, s_max, e_sun)
+        + bounce_radiance(material, n, wo, bounce, s_max, e_sun)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    fn random_unit(rng: &mut SplitMix64) -> Vec3 {
+        loop {
+            let v = Vec3::new(
+                rng.next_f32() * 2.0 - 1.0,
+                rng.next_f32() * 2.0 - 1.0,
+                rng.next_f32() * 2.0 - 1.0,
+            );
+            let l = v.length();
+            if l > 0.1 && l <= 1.0 {
+                return v / l;
+            }
+        }
+    }
+
+    #[test]
+    fn the_bsdf_reflects_on_the_lit_side_and_transmits_through() {
+        let mat = LeafMaterial::default();
+        let n = Vec3::Y;
+        let up = Vec3::new(0.0, 1.0, 0.0);
+        let eye_above = Vec3::new(0.6, 0.8, 0.0);
+        let eye_below = Vec3::new(0.6, -0.8, 0.0);
+        // Lit from above, seen from above: the front's reflection, cos = 1.
+        assert!((bsdf(&mat, n, eye_above, up) - mat.reflectance_front / PI).length() < 1e-6);
+        // Lit from above, seen from below: what crossed the front face.
+        assert!((bsdf(&mat, n, eye_below, up) - mat.transmittance_front / PI).length() < 1e-6);
+        // Lit from below at 60°: the back's reflection seen from below, times cos 60°.
+        let low = Vec3::new(0.0, -0.5, 0.75_f32.sqrt());
+        assert!((bsdf(&mat, n, eye_below, low) - mat.reflectance_back * 0.5 / PI).length() < 1e-6);
+        assert!(
+            (bsdf(&mat, n, eye_above, low) - mat.transmittance_back * 0.5 / PI).length() < 1e-6
+        );
+        // Grazing light adds nothing.
+        assert_eq!(bsdf(&mat, n, eye_above, Vec3::X), Vec3::ZERO);
+    }
+
+    #[test]
+    fn an_unoccluded_leaf_under_a_uniform_sky_gets_eq_5_6s_sum() {
+        let mat = LeafMaterial::default();
+        let sky = SkyLight::uniform(Vec3::ONE, Vec3::ZERO);
+        // Facing up, seen from above, nothing around it: the four upper directions at cos ξ
+        // reflect, the lower ones are black (no ground light).
+        let l = sky_radiance(&mat, Vec3::Y, Vec3::Y, &[1.0; 8], &sky);
+        let want = mat.reflectance_front / PI * (4.0 * super::super::bins::XI) * (PI / 2.0);
+        assert!((l - want).length() < 1e-5, "{l} vs {want}");
+        // A leaf whose every bin is dark receives nothing.
+        assert_eq!(
+            sky_radiance(&mat, Vec3::Y, Vec3::Y, &[0.0; 8], &sky),
+            Vec3::ZERO
+        );
+        // Light from the ground reaches a leaf facing down through its front.
+        let ground = SkyLight::uniform(Vec3::ONE, Vec3::splat(0.5));
+        let down = sky_radiance(&mat, -Vec3::Y, -Vec3::Y, &[1.0; 8], &ground);
+        let want = mat.reflectance_front / PI * (4.0 * super::super::bins::XI * 0.5) * (PI / 2.0)
+            + mat.transmittance_back / PI * (4.0 * super::super::bins::XI) * (PI / 2.0);
+        assert!((down - want).length() < 1e-5, "{down} vs {want}");
+    }
+
+    #[test]
+    fn the_smooth_envelope_is_exact_for_a_round_crown_and_continuous() {
+        let mut rng = SplitMix64::new(7);
+        for _ in 0..100 {
+            let wl = random_unit(&mut rng);
+            assert!((smooth_s_max(&[2.5; 8], wl) - 2.5).abs() < 1e-5);
+        }
+        // Continuous in the sun's direction: a small turn changes it a little.
+        let s = [0.5, 3.0, 1.0, 2.0, 0.1, 4.0, 2.5, 1.5];
+        let mut worst = 0.0_f32;
+        for i in 0..2000 {
+            let a = i as f32 * 0.00314;
+            let b = a + 0.00314;
+            let d = (smooth_s_max(&s, Vec3::new(a.cos(), 0.3, a.sin()).normalize())
+                - smooth_s_max(&s, Vec3::new(b.cos(), 0.3, b.sin()).normalize()))
+            .abs();
+            worst = worst.max(d);
+        }
+        assert!(worst < 0.05, "a step of {worst}");
+        // Towards a direction ω_j itself it leans on that direction's s_max.
+        let towards = smooth_s_max(&s, DIRECTIONS[5]);
+        assert!(towards > 2.0, "{towards}");
+    }
+
+    /// Eq. 5.24 is the closed form of eq. 5.21's integral with eq. 5.22–5.23: the same
+    /// integral taken numerically must agree.
+    #[test]
+    fn the_closed_form_bounce_is_the_integral_it_solves() {
+        let mat = LeafMaterial::default();
+        let mut rng = SplitMix64::new(11);
+        let e_sun = Vec3::new(1.0, 0.9, 0.8);
+        let mut worst = 0.0_f32;
+        for _ in 0..200 {
+            let tau = 0.05 + rng.next_f32() * 2.0;
+            let wl = random_unit(&mut rng);
+            let s_max: [f32; 8] = std::array::from_fn(|_| rng.next_f32() * 4.0);
+            let bounce = SunBounce::new(&mat, wl, tau);
+            let (lobes, lobe_sum) = lobes(wl);
+            for j in 0..8 {
+                // I(P, j) = ∫₀^s_max e^(−τs) · E_sun · e^(−τ·s̃(P + s·ω_j, ω_l)) ds, midpoint rule.
+                let steps = 4000;
+                let ds = s_max[j] / steps as f32;
+                let mut integral = 0.0_f64;
+                for i in 0..steps {
+                    let s = (i as f32 + 0.5) * ds;
+                    let moved: f32 = (0..8)
+                        .map(|k| lobes[k] * (s_max[k] - DIRECTIONS[j].dot(DIRECTIONS[k]) * s))
+                        .sum::<f32>()
+                        / lobe_sum;
+                    integral += ((-tau * s).exp() * (-tau * moved).exp() * ds) as f64;
+                }
+                let numeric = bounce.a_g1[j] * e_sun * integral as f32;
+                let closed = bounce_sample(&bounce, &s_max, j, e_sun);
+                let scale = numeric.max_element().abs().max(1e-6);
+                worst = worst.max((numeric - closed).abs().max_element() / scale);
+            }
+        }
+        assert!(worst < 2e-3, "closed form off by {worst} (relative)");
+    }
+
+    #[test]
+    fn g1_is_eq_5_18() {
+        // The sun straight along ω_0: α_0 = 0, so A·G1 = 4τ·π(ρ_tf + ρ_tb)/(3π·8) — the
+        // leaves behind the leaf, lit from behind them, send it what crosses them; α = π (the
+        // opposite direction, ω_7): only what they reflect, 4τ·π(ρ̄ − ρ_tf − ρ_tb)/(3π·8).
+        let mat = LeafMaterial::default();
+        let tau = 0.7;
+        let bounce = SunBounce::new(&mat, DIRECTIONS[0], tau);
+        let through = mat.transmittance_front + mat.transmittance_back;
+        let want0 = through * (4.0 * tau * PI / (3.0 * PI * 8.0));
+        assert!(
+            (bounce.a_g1[0] - want0).length() < 1e-5,
+            "{} vs {want0}",
+            bounce.a_g1[0]
+        );
+        let want7 =
+            (mat.reflectance_front + mat.reflectance_back) * (4.0 * tau * PI / (3.0 * PI * 8.0));
+        assert!(
+            (bounce.a_g1[7] - want7).length() < 1e-5,
+            "{} vs {want7}",
+            bounce.a_g1[7]
+        );
+        // G2 and G3: eq. 5.25 and 5.26 by hand for the sun on ω_0 (only ω_0 and its three
+        // neighbours at cos 1/3 are in its hemisphere).
+        let lobe_sum = 1.0 + 3.0 / 3.0;
+        assert!((bounce.g2 - tau / lobe_sum).abs() < 1e-6);
+        // ω_0's own G3: the lobes' mean of ω_0·ω_k is (1 + 3·(1/3)·(1/3)) / 2.
+        let mean = (1.0 + 3.0 * (1.0 / 3.0) * (1.0 / 3.0)) / lobe_sum;
+        assert!((bounce.g3[0] - tau * (1.0 - mean)).abs() < 1e-5);
+    }
+
+    #[test]
+    fn a_deeper_leaf_is_darker_in_every_term() {
+        let mat = LeafMaterial::default();
+        let sky = SkyLight::uniform(Vec3::ONE, Vec3::splat(0.2));
+        let wl = Vec3::new(0.3, 0.9, 0.2).normalize();
+        let tau = 0.8;
+        let bounce = SunBounce::new(&mat, wl, tau);
+        let n = Vec3::new(0.2, 0.9, 0.1).normalize();
+        let wo = Vec3::new(0.0, 0.5, 0.8).normalize();
+        let shallow = [0.3_f32; 8];
+        let deep = [2.5_f32; 8];
+        let a = |s: &[f32; 8]| s.map(|s| (-tau * s).exp());
+        let sky_s = sky_radiance(&mat, n, wo, &a(&shallow), &sky);
+        let sky_d = sky_radiance(&mat, n, wo, &a(&deep), &sky);
+        assert!(sky_d.max_element() < 0.2 * sky_s.max_element());
+        let sun_s = sun_radiance(&mat, n, wo, wl, tau, &shallow, Vec3::ONE);
+        let sun_d = sun_radiance(&mat, n, wo, wl, tau, &deep, Vec3::ONE);
+        assert!(sun_d.max_element() < 0.2 * sun_s.max_element());
+        // The bounce grows with the leaves around (more neighbours to bounce off) but dies
+        // with the depth the sun must cross: at the crown's surface it is zero.
+        let none = bounce_radiance(&mat, n, wo, &bounce, &[0.0; 8], Vec3::ONE);
+        assert_eq!(none, Vec3::ZERO);
+        let some = bounce_radiance(&mat, n, wo, &bounce, &shallow, Vec3::ONE);
+        assert!(some.max_element() > 0.0);
+    }
+
+    #[test]
+    fn bad_materials_are_clamped() {
+        let (m, changed) = LeafMaterial {
+            reflectance_front: Vec3::new(f32::NAN, 2.0, -1.0),
+            ..LeafMaterial::default()
+        }
+        .sanitized();
+        assert!(changed);
+        assert_eq!(m.reflectance_front, Vec3::new(0.0, 1.0, 0.0));
+        assert!(!LeafMaterial::default().sanitized().1);
+    }
+}
