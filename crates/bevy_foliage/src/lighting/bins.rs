@@ -42,6 +42,10 @@ pub struct LeafProxy {
     pub area: f32,
 }
 
+/// The least light a stored attenuation above zero can hold: the lighting takes a bin that lets
+/// nothing through as letting this much (its envelope distance stays finite).
+pub const DARKEST_LIGHT: f32 = 1.0 / 65535.0;
+
 /// An attenuation in `[0, 1]` as stored in a bake (65,535 = 1).
 pub fn quantize_light(a: f32) -> u16 {
     (a.clamp(0.0, 1.0) * 65535.0).round() as u16

@@ -25,8 +25,8 @@
 //! off-centre leaf's bins.
 
 pub use super::bins::{
-    BIN_SOLID_ANGLE, BinSums, DIRECTIONS, LeafProxy, XI, bin_of, light_of, occlusion, proxies,
-    quantize_light,
+    BIN_SOLID_ANGLE, BinSums, DARKEST_LIGHT, DIRECTIONS, LeafProxy, XI, bin_of, light_of,
+    occlusion, proxies, quantize_light,
 };
 use super::leaf_tree::LeafTree;
 
@@ -136,11 +136,11 @@ pub fn crown_envelope_with(leaves: &[LeafProxy], threads: usize, clustered: bool
         .iter()
         .map(|(attenuation, _)| LeafEnvelope {
             attenuation: *attenuation,
+            // A bin shut by a leaf lets through the least a bake stores (its distance stays
+            // finite, as the lighting's sums need).
             s_max: attenuation.map(|a| {
-                if tau > 0.0 && a > 0.0 {
-                    -a.ln() / tau
-                } else if a <= 0.0 {
-                    f32::INFINITY
+                if tau > 0.0 {
+                    -a.max(DARKEST_LIGHT).ln() / tau
                 } else {
                     0.0
                 }

@@ -3,9 +3,11 @@
 //! eight directions, the distances to the crown's envelope and the crown's fitted extinction τ —
 //! as plain Rust, with [`leaf_tree`] taking far groups of leaves as one for large crowns; and
 //! [`model`] the light a leaf sends to the eye from it (the leaf BSDF, sky, sun and one bounce
-//! of sunlight of §5.2–5.4), the CPU reference of the leaf shaders.
+//! of sunlight of §5.2–5.4), the CPU reference of the leaf shaders, with [`path_trace`] the
+//! Monte Carlo ground truth it is measured against.
 
 pub mod bins;
 pub mod envelope;
 pub mod leaf_tree;
 pub mod model;
+pub mod path_trace;

@@ -99,8 +99,13 @@ impl SkyLight {
     /// ground of albedo `ground_albedo` lit by that sky (radiance `albedo · sky`: the sky's
     /// irradiance π·sky reflected over π), as §5.3.1 models the lower hemisphere.
     pub fn uniform(sky: Vec3, ground_albedo: Vec3) -> Self {
+        Self::sky_and_ground(sky, sky * ground_albedo)
+    }
+
+    /// Radiance `sky` from every upper direction and `ground` from every lower one.
+    pub fn sky_and_ground(sky: Vec3, ground: Vec3) -> Self {
         Self {
-            radiance: DIRECTIONS.map(|d| if d.y > 0.0 { sky } else { sky * ground_albedo }),
+            radiance: DIRECTIONS.map(|d| if d.y > 0.0 { sky } else { ground }),
         }
     }
 }
