@@ -9,7 +9,7 @@
 //! ```
 
 use bevy::math::Vec3;
-use bevy_foliage::lighting::model::LeafMaterial;
+use bevy_foliage::lighting::model::{LeafMaterial, SunThroughCrown};
 use bevy_foliage::lighting::path_trace::{
     TraceLight, TraceSettings, model_against_tracer, uniform_ball,
 };
@@ -79,12 +79,20 @@ fn main() {
             crown.positions.iter().copied().sum::<Vec3>() / crown.positions.len().max(1) as f32;
         let started = std::time::Instant::now();
         let eye = centre + Vec3::new(0.0, 0.3, 1.0).normalize() * 30.0;
-        let e = model_against_tracer(&crown, &material, &light, eye, stride, &settings, threads);
+        let run = |blend| {
+            model_against_tracer(
+                &crown, &material, &light, eye, stride, &settings, threads, blend,
+            )
+        };
+        let thesis = run(SunThroughCrown::SmoothEnvelope);
+        let e = run(SunThroughCrown::BlendedAttenuation);
         for (label, c) in [
             ("sky direct", e.sky),
-            ("sun direct", e.sun),
-            ("sun indirect (1 bounce)", e.bounce),
-            ("sun indirect (model vs 1–4 bounces)", e.bounces),
+            ("sun direct, eq. 5.7 envelope blend", thesis.sun),
+            ("sun direct, attenuation blend", e.sun),
+            ("sun indirect (1 bounce), eq. 5.7", thesis.bounce),
+            ("sun indirect (1 bounce), attenuation blend", e.bounce),
+            ("sun indirect, attenuation blend vs 1–4 bounces", e.bounces),
         ] {
             println!(
                 "| {name} | {} | {:.3} | {label} | {:.1} % | {:.1} % | {:.1} % | {:.0} % |",

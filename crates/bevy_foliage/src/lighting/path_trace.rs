@@ -12,7 +12,8 @@
 use super::bins::proxies;
 use super::envelope::crown_envelope;
 use super::model::{
-    LeafMaterial, SkyLight, SunBounce, bounce_radiance, bsdf, sky_radiance, sun_radiance,
+    LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bounce_radiance, bsdf, sky_radiance,
+    sun_radiance, sun_through_crown,
 };
 use crate::pruning::leaves::LeafSet;
 use crate::rng::SplitMix64;
@@ -513,8 +514,13 @@ fn component_error(model: &[f32], traced: &[f32], total: f32) -> ComponentError 
     }
 }
 
-/// Compares the model (the crown's envelope computed from `leaves` as a bake does) with the
-/// tracer on every `stride`-th leaf, each seen from `eye`; `threads` for the envelope.
+/// One leaf's model luminances (sky, sun, bounce) and its traced light.
+type ModelAndTrace = ([f32; 3], TracedLeaf);
+
+/// Compares the model (the crown's envelope computed from `leaves` as a bake does, the sun
+/// through the crown by `blend`) with the tracer on every `stride`-th leaf, each seen from
+/// `eye`; `threads` for the envelope and the tracing.
+#[allow(clippy::too_many_arguments)]
 pub fn model_against_tracer(
     leaves: &LeafSet,
     material: &LeafMaterial,
@@ -523,6 +529,7 @@ pub fn model_against_tracer(
     stride: usize,
     settings: &TraceSettings,
     threads: usize,
+    blend: SunThroughCrown,
 ) -> LightingError {
     let scene = LeafScene::new(leaves);
     let leaf_proxies = proxies(leaves);
@@ -531,12 +538,13 @@ pub fn model_against_tracer(
     let sky = SkyLight::sky_and_ground(light.sky, light.ground);
     let bounce = SunBounce::new(material, light.to_sun, tau);
     let picked: Vec<usize> = (0..scene.leaf_count()).step_by(stride.max(1)).collect();
-    let per_leaf: Vec<([f32; 3], TracedLeaf)> = {
+    let per_leaf: Vec<ModelAndTrace> = {
         let work = |&leaf: &usize| {
             let centre = scene.centre(leaf);
             let wo = (eye - centre).normalize_or(Vec3::Y);
             let n = scene.normal(leaf);
             let e = &envelope.leaves[leaf];
+            let through = sun_through_crown(blend, tau, &e.attenuation, &e.s_max, light.to_sun);
             let model = [
                 luminance(sky_radiance(material, n, wo, &e.attenuation, &sky)),
                 luminance(sun_radiance(
@@ -544,12 +552,11 @@ pub fn model_against_tracer(
                     n,
                     wo,
                     light.to_sun,
-                    tau,
-                    &e.s_max,
+                    through,
                     light.sun,
                 )),
                 luminance(bounce_radiance(
-                    material, n, wo, &bounce, &e.s_max, light.sun,
+                    material, n, wo, &bounce, through, &e.s_max, light.sun,
                 )),
             ];
             (
@@ -570,9 +577,8 @@ pub fn model_against_tracer(
                 .collect()
         })
     };
-    let column = |f: &dyn Fn(&([f32; 3], TracedLeaf)) -> f32| -> Vec<f32> {
-        per_leaf.iter().map(f).collect()
-    };
+    let column =
+        |f: &dyn Fn(&ModelAndTrace) -> f32| -> Vec<f32> { per_leaf.iter().map(f).collect() };
     let traced_sky = column(&|x| luminance(x.1.sky));
     let traced_sun = column(&|x| luminance(x.1.sun));
     let traced_bounce = column(&|x| luminance(x.1.bounce));
@@ -663,7 +669,7 @@ mod tests {
             &SkyLight::uniform(l.sky, l.ground / l.sky),
         );
         assert!((model - want).abs().max_element() < 0.2 * want.max_element());
-        let model_sun = sun_radiance(&mat, Vec3::Y, wo, l.to_sun, 0.0, &[0.0; 8], l.sun);
+        let model_sun = sun_radiance(&mat, Vec3::Y, wo, l.to_sun, 1.0, l.sun);
         assert!((model_sun - sun).length() < 1e-5);
     }
 
@@ -734,6 +740,7 @@ mod tests {
                 seed: 1,
             },
             2,
+            SunThroughCrown::BlendedAttenuation,
         );
         eprintln!("{e:#?}");
         assert_eq!(e.leaves, 60);
