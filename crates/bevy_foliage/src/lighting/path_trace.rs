@@ -430,23 +430,27 @@ pub fn uniform_ball(count: usize, radius: f32, half: f32, seed: u64) -> LeafSet 
         if p.length() > radius {
             continue;
         }
-        let n = uniform_direction(&mut rng);
-        let (mut t, mut b) = n.any_orthonormal_pair();
-        // Counter-clockwise seen from the front, as `push_quad` wants.
-        if t.cross(b).dot(n) < 0.0 {
-            std::mem::swap(&mut t, &mut b);
-        }
-        leaves.push_quad(
-            [
-                p - t * half - b * half,
-                p + t * half - b * half,
-                p + t * half + b * half,
-                p - t * half + b * half,
-            ],
-            n,
-        );
+        push_square_leaf(&mut leaves, p, half, uniform_direction(&mut rng));
     }
     leaves
+}
+
+/// Appends a square leaf of side `2·half` centred on `centre`, facing `normal`.
+pub fn push_square_leaf(leaves: &mut LeafSet, centre: Vec3, half: f32, normal: Vec3) -> usize {
+    let (mut t, mut b) = normal.any_orthonormal_pair();
+    // Counter-clockwise seen from the front, as `push_quad` wants.
+    if t.cross(b).dot(normal) < 0.0 {
+        std::mem::swap(&mut t, &mut b);
+    }
+    leaves.push_quad(
+        [
+            centre - t * half - b * half,
+            centre + t * half - b * half,
+            centre + t * half + b * half,
+            centre - t * half + b * half,
+        ],
+        normal,
+    )
 }
 
 /// How far the model is from the tracer for one component over the leaves compared.
@@ -601,22 +605,6 @@ mod tests {
     use super::*;
     use crate::lighting::model::{SkyLight, sky_radiance, sun_radiance};
 
-    fn quad(leaves: &mut LeafSet, centre: Vec3, half: f32, normal: Vec3) {
-        let (mut t, mut b) = normal.any_orthonormal_pair();
-        if t.cross(b).dot(normal) < 0.0 {
-            std::mem::swap(&mut t, &mut b);
-        }
-        leaves.push_quad(
-            [
-                centre - t * half - b * half,
-                centre + t * half - b * half,
-                centre + t * half + b * half,
-                centre - t * half + b * half,
-            ],
-            normal,
-        );
-    }
-
     fn light() -> TraceLight {
         TraceLight {
             sky: Vec3::new(0.4, 0.5, 0.7),
@@ -629,7 +617,7 @@ mod tests {
     #[test]
     fn a_lone_leaf_sees_the_whole_environment_and_the_sun() {
         let mut leaves = LeafSet::default();
-        quad(&mut leaves, Vec3::ZERO, 0.05, Vec3::Y);
+        push_square_leaf(&mut leaves, Vec3::ZERO, 0.05, Vec3::Y);
         let scene = LeafScene::new(&leaves);
         let mat = LeafMaterial::default();
         let l = light();
@@ -676,9 +664,9 @@ mod tests {
     #[test]
     fn a_leaf_under_a_roof_is_in_shade_and_lit_by_what_the_roof_lets_through() {
         let mut leaves = LeafSet::default();
-        quad(&mut leaves, Vec3::ZERO, 0.05, Vec3::Y);
+        push_square_leaf(&mut leaves, Vec3::ZERO, 0.05, Vec3::Y);
         // A wide leaf just above it.
-        quad(&mut leaves, Vec3::Y * 0.02, 2.0, Vec3::Y);
+        push_square_leaf(&mut leaves, Vec3::Y * 0.02, 2.0, Vec3::Y);
         let scene = LeafScene::new(&leaves);
         assert_eq!(scene.hit(Vec3::ZERO, Vec3::Y, 0), Some((0.02, 1)));
         assert_eq!(scene.hit(Vec3::ZERO, -Vec3::Y, 0), None);
