@@ -57,6 +57,19 @@ fn lighting_input(pbr_input: PbrInput) -> lighting::LightingInput {
     return input;
 }
 
+// Directional light `light`'s unshadowed direct contribution to `pbr_input` times the view's
+// exposure (xyz), and Bevy's own shadow visibility v_b for it (w): what both re-weightings
+// below start from.
+fn directional_direct_and_visibility(pbr_input: PbrInput, light: u32, frag_xy: vec2<f32>) -> vec4<f32> {
+    var input = lighting_input(pbr_input);
+    let view = view_bindings::view.view_from_world;
+    let view_z = dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), pbr_input.world_position);
+    let bevy_visibility = fetch_directional_shadow(
+        light, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
+    let direct = lighting::directional_light(light, &input, true);
+    return vec4(view_bindings::view.exposure * direct, bevy_visibility);
+}
+
 // `color` (Bevy's lighting of `pbr_input`) with directional light `light`'s shadow term
 // replaced by `visibility`: its direct contribution D re-weighted from Bevy's visibility v_b,
 // color += exposure · D · (visibility − v_b). For any shadow term computed outside Bevy's
@@ -72,13 +85,8 @@ fn apply_directional_visibility(
         || (view_bindings::lights.directional_lights[light].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
         return color;
     }
-    var input = lighting_input(pbr_input);
-    let view = view_bindings::view.view_from_world;
-    let view_z = dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), pbr_input.world_position);
-    let bevy_visibility = fetch_directional_shadow(
-        light, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
-    let direct = lighting::directional_light(light, &input, true);
-    return color + vec4(view_bindings::view.exposure * direct * (visibility - bevy_visibility), 0.0);
+    let d = directional_direct_and_visibility(pbr_input, light, frag_xy);
+    return color + vec4(d.xyz * (visibility - d.w), 0.0);
 }
 
 // `color` (Bevy's lighting of `pbr_input`) with directional light `light`'s shadow term
@@ -96,13 +104,8 @@ fn apply_directional_transmittance(
         || (view_bindings::lights.directional_lights[light].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
         return color;
     }
-    var input = lighting_input(pbr_input);
-    let view = view_bindings::view.view_from_world;
-    let view_z = dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), pbr_input.world_position);
-    let bevy_visibility = fetch_directional_shadow(
-        light, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
-    let direct = lighting::directional_light(light, &input, true);
-    return color + vec4(view_bindings::view.exposure * direct * bevy_visibility * (transmittance - 1.0), 0.0);
+    let d = directional_direct_and_visibility(pbr_input, light, frag_xy);
+    return color + vec4(d.xyz * d.w * (transmittance - 1.0), 0.0);
 }
 
 // `soft` is what `soft_visibility_at` read: (visibility, light), the light being a spot light's
