@@ -33,14 +33,15 @@
 //! ```text
 //! cargo run --release --example grass_bench -- [--preset gpu|quick] [--distance M]
 //!     [--strata N] [--frames N] [--size WxH] [--transitions G0,G1,V0,V1]...
-//!     [--ours-only] [--no-shadow-maps] [--gpu-passes] [--screenshot DIR] [--stats FILE]
+//!     [--ours-only] [--only-level geometry|slices] [--no-shadow-maps] [--gpu-passes] [--screenshot DIR] [--stats FILE]
 //! ```
 //! `--preset gpu` (default): 400 m of the default species (576 blades per 0.5 m patch); the
 //! all-geometry reference is some 10^9 triangles, for a GPU. `--preset quick`: 40 m of a sparser
 //! species at 160×90, what a software rasteriser can finish. `--transitions` (repeatable)
 //! replaces the preset's sweep of ours' transitions (`min_geom,max_geom,min_btf,max_btf`, m).
 //! `--ours-only` skips the baseline and the reference (no RMSE): the count of virtual blades
-//! ours draws in view. `--no-shadow-maps`:
+//! ours draws in view. `--only-level geometry|slices` draws one of ours' levels alone (to time
+//! them apart; its RMSE then counts what the other level would have drawn). `--no-shadow-maps`:
 //! the sun casts no shadow map on either side (ours keeps its blade shadow mask). Both sides
 //! draw in still air; each measurement follows a few unmeasured frames. `--gpu-passes` records
 //! GPU timestamps and prints each configuration's whole-frame GPU time and its passes' times.
@@ -72,6 +73,8 @@ struct Args {
     frames: u32,
     size: UVec2,
     ours_only: bool,
+    /// Ours draws one level only (`geometry` or `slices`), to time the levels apart.
+    only_level: Option<&'static str>,
     /// The sun casts no shadow maps (either side).
     no_shadow_maps: bool,
     /// Record GPU timestamps and print each configuration's GPU frame time and pass times.
@@ -104,6 +107,7 @@ fn parse_args() -> Args {
         frames: 10,
         size: UVec2::new(640, 360),
         ours_only: false,
+        only_level: None,
         no_shadow_maps: false,
         gpu_passes: false,
         screenshots: None,
@@ -114,7 +118,7 @@ fn parse_args() -> Args {
     let (mut distance, mut strata, mut size) = (None, None, None);
     let mut transitions: Vec<TransitionDistances> = Vec::new();
     let mut it = std::env::args().skip(1);
-    let usage = "flags: [--preset gpu|quick] [--distance M] [--strata N] [--frames N] [--size WxH] [--transitions G0,G1,V0,V1]... [--ours-only] [--no-shadow-maps] [--gpu-passes] [--screenshot DIR] [--stats FILE]";
+    let usage = "flags: [--preset gpu|quick] [--distance M] [--strata N] [--frames N] [--size WxH] [--transitions G0,G1,V0,V1]... [--ours-only] [--only-level geometry|slices] [--no-shadow-maps] [--gpu-passes] [--screenshot DIR] [--stats FILE]";
     let fail = |m: String| -> ! {
         eprintln!("{m}; {usage}");
         std::process::exit(2)
@@ -171,6 +175,15 @@ fn parse_args() -> Args {
                 transitions.push(t);
             }
             "--ours-only" => args.ours_only = true,
+            "--only-level" => {
+                args.only_level = Some(match value().as_str() {
+                    "geometry" => "geometry",
+                    "slices" => "slices",
+                    other => fail(format!(
+                        "--only-level takes geometry or slices, not {other}"
+                    )),
+                })
+            }
             "--no-shadow-maps" => args.no_shadow_maps = true,
             "--gpu-passes" => args.gpu_passes = true,
             "--screenshot" => args.screenshots = Some(value().into()),
@@ -638,8 +651,8 @@ fn main() {
                 {
                     let mut settings = harness.world_mut().resource_mut::<GrassSettings>();
                     settings.transitions = t;
-                    settings.geometry = true;
-                    settings.slices = true;
+                    settings.geometry = args.only_level != Some("slices");
+                    settings.slices = args.only_level != Some("geometry");
                     settings.shadow_mask = true;
                     settings.cast_shadow_maps = casts;
                 }
@@ -663,7 +676,12 @@ fn main() {
                     "grass_bench: {name}: {ms:.1} ms, {geometry_blades} geometry blades, rmse {rmse:?}"
                 );
                 rows.push(Row {
-                    mode: "ours",
+                    // One level alone is not ours as a whole: kept out of the headline.
+                    mode: match args.only_level {
+                        Some("geometry") => "ours_geometry_only",
+                        Some(_) => "ours_slices_only",
+                        None => "ours",
+                    },
                     params: format!(
                         "geometry {}–{} m, vertical slices to {}–{} m, K = {per_axis}, silhouettes {}, {}",
                         t.min_geom,
