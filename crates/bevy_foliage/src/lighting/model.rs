@@ -1,7 +1,9 @@
 //! The light a leaf sends to the eye, from the per-leaf envelope of [`super::envelope`]
 //! (Boulanger 2008, §5.2–5.4): the leaf's two-sided BSDF (eq. 5.4), the sky and the ground
-//! through the crown (eq. 5.6), the sun through the crown (eq. 5.7–5.8) and one bounce of
-//! sunlight off the neighbouring leaves in closed form (eq. 5.11 with 5.24). Plain Rust: the CPU
+//! through the crown (eq. 5.6), the sun through the crown (eq. 5.8, with eq. 5.7's cosine lobes
+//! blending the eight directions — see [`SunThroughCrown`] for which values they blend) and one
+//! bounce of sunlight off the neighbouring leaves in closed form (eq. 5.11 with 5.24). Plain
+//! Rust: the CPU
 //! reference of the leaf shaders, and what the per-tree constants ([`SunBounce`], [`SkyLight`])
 //! are computed with when the lighting changes.
 //!
@@ -28,9 +30,9 @@ pub struct LeafMaterial {
 }
 
 impl Default for LeafMaterial {
-    /// A broad-leaved tree's leaf: the front darker and glossier than the matte back, about a
-    /// tenth of the green light crossing it (§5.2.3's description; values of the order of
-    /// measured leaf spectra averaged to RGB).
+    /// A broad-leaved tree's leaf, illustrative values rather than measured data: the front
+    /// darker than the back (§5.2.3's description), about a seventh of the green light
+    /// crossing it either way.
     fn default() -> Self {
         Self {
             reflectance_front: Vec3::new(0.06, 0.12, 0.04),

@@ -146,7 +146,7 @@ impl LeafScene {
     }
 
     /// The nearest leaf the ray from `origin` along unit `dir` hits, skipping leaf `skip`:
-    /// (distance, leaf, point).
+    /// (distance, leaf).
     pub fn hit(&self, origin: Vec3, dir: Vec3, skip: u32) -> Option<(f32, u32)> {
         if self.nodes.is_empty() {
             return None;
