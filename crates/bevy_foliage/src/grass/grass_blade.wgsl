@@ -17,7 +17,7 @@
 #endif
 #import bevy_foliage::grass_blade::{blade, blade_kept, terrain_occlusion}
 #ifndef PREPASS_PIPELINE
-#import bevy_foliage::grass_blade_light::{shadow_mask_loss, sun_visibility}
+#import bevy_foliage::grass_blade_light::{shadow_mask_loss, shadow_mask_through, sun_visibility}
 #endif
 
 #ifdef PREPASS_PIPELINE
@@ -64,7 +64,11 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
     var out: FragmentOutput;
     out.color = apply_pbr_lighting(pbr_input);
     // The neighbours' shadows (§4.2.6, eq. 4.7).
-    let loss = shadow_mask_loss(pbr_input, sun_visibility(pbr_input, in.position.xy));
+    let through = shadow_mask_through(pbr_input);
+    var loss = vec3(0.0);
+    if through < 1.0 {
+        loss = shadow_mask_loss(pbr_input, sun_visibility(pbr_input, in.position.xy), through);
+    }
     out.color = vec4(max(out.color.rgb - loss, vec3(0.0)), out.color.a);
     out.color = main_pass_post_lighting_processing(pbr_input, out.color);
     return out;

@@ -28,19 +28,29 @@ fn sun_visibility(pbr_input: PbrInput, frag_xy: vec2<f32>) -> f32 {
     return fetch_directional_shadow(0u, pbr_input.world_position, pbr_input.world_normal, view_z, frag_xy);
 }
 
-// The sun's light the shadow mask holds back at this blade point, exposed, given the sun's
-// shadow term `visibility`.
-fn shadow_mask_loss(pbr_input: PbrInput, visibility: f32) -> vec3<f32> {
-    if view_bindings::lights.n_directional_lights == 0u || visibility <= 0.0 || blade.mask_shape.y <= 0.0 {
-        return vec3(0.0);
+// The share of the sun's light the shadow mask lets through to this blade point (1 where it
+// holds nothing back: above the mask's slab, on the blades' upper parts, or with no sun or no
+// mask). Callers fetch the sun's shadow term (a second filtered cascade lookup after the one
+// Bevy's lighting made) only where this is below 1.
+fn shadow_mask_through(pbr_input: PbrInput) -> f32 {
+    if view_bindings::lights.n_directional_lights == 0u || blade.mask_shape.y <= 0.0 {
+        return 1.0;
     }
-    let light = &view_bindings::lights.directional_lights[0];
-    let l = (*light).direction_to_light;
+    let l = view_bindings::lights.directional_lights[0].direction_to_light;
     let world = pbr_input.world_position.xyz;
     let h = grass::height_above_ground(ground_heights, blade.ground_wind, world);
     let ld = grass::density_at(density_map, blade.density_rect, world.xz);
-    let through = grass::shadow_mask_light(shadow_mask, blade.mask_shape, h, l, ld);
-    let c = dot(pbr_input.N, l);
+    return grass::shadow_mask_light(shadow_mask, blade.mask_shape, h, l, ld);
+}
+
+// The sun's light the shadow mask holds back at this blade point, exposed, given the sun's
+// shadow term `visibility` and the mask's `through` (`shadow_mask_through`).
+fn shadow_mask_loss(pbr_input: PbrInput, visibility: f32, through: f32) -> vec3<f32> {
+    if view_bindings::lights.n_directional_lights == 0u || visibility <= 0.0 || through >= 1.0 {
+        return vec3(0.0);
+    }
+    let light = &view_bindings::lights.directional_lights[0];
+    let c = dot(pbr_input.N, (*light).direction_to_light);
     let g = pbr_input.material.diffuse_transmission;
     let diffuse = pbr_input.material.base_color.rgb * ((1.0 - g) * max(c, 0.0) + g * max(-c, 0.0))
         * (1.0 / 3.14159265);

@@ -9,7 +9,7 @@
 }
 #import bevy_soft_shadows::receiver_functions::{apply_pbr_lighting_soft, soft_visibility_at}
 #import bevy_foliage::grass_blade::{blade, blade_kept, terrain_occlusion}
-#import bevy_foliage::grass_blade_light::{shadow_mask_loss, sun_visibility}
+#import bevy_foliage::grass_blade_light::{shadow_mask_loss, shadow_mask_through, sun_visibility}
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(102) var soft_visibility: texture_2d<f32>;
 
@@ -26,12 +26,18 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
     var out: FragmentOutput;
     var color = apply_pbr_lighting_soft(pbr_input, in.position.xy, soft_visibility);
     // The neighbours' shadows (§4.2.6, eq. 4.7), under the soft shadow term where SSSS is active.
-    let soft = soft_visibility_at(soft_visibility, in.position.xy);
-    var visibility = sun_visibility(pbr_input, in.position.xy);
-    if soft.x >= 0.0 && soft.y < -0.5 && soft.y > -1.5 {
-        visibility = soft.x;
+    let through = shadow_mask_through(pbr_input);
+    var loss = vec3(0.0);
+    if through < 1.0 {
+        let soft = soft_visibility_at(soft_visibility, in.position.xy);
+        var visibility = 1.0;
+        if soft.x >= 0.0 && soft.y < -0.5 && soft.y > -1.5 {
+            visibility = soft.x;
+        } else {
+            visibility = sun_visibility(pbr_input, in.position.xy);
+        }
+        loss = shadow_mask_loss(pbr_input, visibility, through);
     }
-    let loss = shadow_mask_loss(pbr_input, visibility);
     color = vec4(max(color.rgb - loss, vec3(0.0)), color.a);
     out.color = main_pass_post_lighting_processing(pbr_input, color);
     return out;
