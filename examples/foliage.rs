@@ -5,16 +5,20 @@
 //! cargo run --example foliage                      # windowed: the panel shows foliage/* counters
 //! cargo run --example foliage -- --headless --frames 60 --stats foliage.json
 //! cargo run --example foliage -- --opacity-shadows  # the trees' opacity shadow map from the start
+//! cargo run --example foliage -- --tree-lighting    # leaves lit as volumes from the start
+//! cargo run --example foliage -- --still            # a fixed close view of two trees
 //! ```
 //! Toggle `enabled` in the panel's FoliagePruningSettings to compare with full detail. Key `O`
 //! switches the trees' ground shadows between Bevy's shadow map and the world-space opacity
 //! shadow map (`TreeOpacityShadows`, editable in the panel): dark where leaves pile up, light
-//! where they are sparse, soft away from the crowns.
+//! where they are sparse, soft away from the crowns. Key `L` switches the leaves between Bevy's
+//! lighting and the tree lighting (`TreeLightingSettings`, editable in the panel): sky, sun and
+//! one bounce of sunlight through each crown, from the light its leaves' neighbours let through.
 
 use bevy::prelude::*;
 use bevy_nature::foliage::pruning::procedural::TreeSpecies;
 use bevy_nature::foliage::pruning::spawn::TreeAssets;
-use bevy_nature::foliage::{FoliagePruningSettings, LodDistances};
+use bevy_nature::foliage::{FoliagePruningSettings, LodDistances, TreeLightingSettings};
 use bevy_nature::soft_shadows::foliage::TreeOpacityShadows;
 use bevy_nature_harness::{ExampleArgs, ExampleRunner};
 
@@ -25,14 +29,17 @@ struct StartWithOpacityShadows(bool);
 fn main() -> AppExit {
     let mut rest: Vec<String> = std::env::args().skip(1).collect();
     let opacity = rest.iter().any(|a| a == "--opacity-shadows");
-    rest.retain(|a| a != "--opacity-shadows");
+    let tree_lighting = rest.iter().any(|a| a == "--tree-lighting");
+    let still = rest.iter().any(|a| a == "--still");
+    rest.retain(|a| a != "--opacity-shadows" && a != "--tree-lighting" && a != "--still");
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
-        eprintln!("{e} [--opacity-shadows]");
+        eprintln!("{e} [--opacity-shadows] [--tree-lighting] [--still]");
         std::process::exit(2)
     });
     ExampleRunner::with_args("foliage", args)
         .inspect_resource::<FoliagePruningSettings>()
         .inspect_component::<TreeOpacityShadows>()
+        .inspect_resource::<TreeLightingSettings>()
         .run(move |app| {
             app.add_plugins(bevy_nature::NaturePlugins)
                 .insert_resource(ClearColor(Color::srgb(0.55, 0.7, 0.9)))
@@ -43,9 +50,20 @@ fn main() -> AppExit {
                     },
                     ..default()
                 })
+                .insert_resource(TreeLightingSettings {
+                    enabled: tree_lighting,
+                    ..default()
+                })
                 .insert_resource(StartWithOpacityShadows(opacity))
                 .add_systems(Startup, setup)
-                .add_systems(Update, (fly, toggle_opacity_shadows));
+                .add_systems(
+                    Update,
+                    (
+                        fly.run_if(move || !still),
+                        toggle_opacity_shadows,
+                        toggle_tree_lighting,
+                    ),
+                );
         })
 }
 
@@ -77,6 +95,24 @@ fn toggle_opacity_shadows(
             commands.entity(sun).insert(opacity_shadows());
             info!("tree shadows: the opacity shadow map");
         }
+    }
+}
+
+/// `L`: leaves lit as volumes, or by Bevy's lighting.
+fn toggle_tree_lighting(
+    keys: Option<Res<ButtonInput<KeyCode>>>,
+    mut lighting: ResMut<TreeLightingSettings>,
+) {
+    if keys.is_some_and(|k| k.just_pressed(KeyCode::KeyL)) {
+        lighting.enabled = !lighting.enabled;
+        info!(
+            "leaves lit by {}",
+            if lighting.enabled {
+                "the tree lighting"
+            } else {
+                "Bevy's lighting"
+            }
+        );
     }
 }
 
@@ -116,7 +152,11 @@ fn setup(mut commands: Commands, mut trees: TreeAssets, start: Res<StartWithOpac
         brightness: 400.0,
         ..default()
     });
-    commands.spawn((Camera3d::default(), Transform::from_xyz(0.0, 12.0, 60.0)));
+    // The still view (`--still`): the two middle trees from 30 m; `fly` moves it otherwise.
+    commands.spawn((
+        Camera3d::default(),
+        Transform::from_xyz(-2.0, 7.0, 30.0).looking_at(Vec3::new(0.0, 6.0, 0.0), Vec3::Y),
+    ));
 }
 
 /// Circles the trees; the distance swings between 25 m and 140 m every 20 s.

@@ -55,6 +55,7 @@ mod soft_receiver;
 
 pub use distance::LodDistances;
 pub use forest::components::{ForestBudget, ForestSettings, ForestTree, TreeLod};
+pub use lighting::settings::TreeLightingSettings;
 pub use settings::{FoliagePruningSettings, ViewWeighting};
 
 /// The foliage plugin: registers the settings and keeps them valid.
@@ -65,10 +66,16 @@ impl Plugin for FoliagePlugin {
     fn build(&self, app: &mut App) {
         app.register_type::<FoliagePruningSettings>()
             .init_resource::<FoliagePruningSettings>()
+            .register_type::<TreeLightingSettings>()
+            .init_resource::<TreeLightingSettings>()
             .add_systems(
                 PreUpdate,
-                settings::sanitize_pruning_settings
-                    .run_if(resource_changed::<FoliagePruningSettings>),
+                (
+                    settings::sanitize_pruning_settings
+                        .run_if(resource_changed::<FoliagePruningSettings>),
+                    lighting::settings::sanitize_tree_lighting
+                        .run_if(resource_changed::<TreeLightingSettings>),
+                ),
             );
         // The rendering side needs Bevy's asset and render plugins (absent in pure logic tests).
         if app.world().contains_resource::<AssetServer>() {
@@ -83,6 +90,6 @@ impl Plugin for FoliagePlugin {
 pub mod prelude {
     pub use crate::{
         FoliagePlugin, FoliagePruningSettings, ForestBudget, ForestSettings, ForestTree,
-        LodDistances, TreeLod, ViewWeighting,
+        LodDistances, TreeLightingSettings, TreeLod, ViewWeighting,
     };
 }

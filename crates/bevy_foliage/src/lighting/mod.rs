@@ -4,10 +4,12 @@
 //! as plain Rust, with [`leaf_tree`] taking far groups of leaves as one for large crowns; and
 //! [`model`] the light a leaf sends to the eye from it (the leaf BSDF, sky, sun and one bounce
 //! of sunlight of §5.2–5.4), the CPU reference of the leaf shaders, with [`path_trace`] the
-//! Monte Carlo ground truth it is measured against.
+//! Monte Carlo ground truth it is measured against; [`settings`] switches the leaf shaders between
+//! it and Bevy's lighting.
 
 pub mod bins;
 pub mod envelope;
 pub mod leaf_tree;
 pub mod model;
 pub mod path_trace;
+pub mod settings;

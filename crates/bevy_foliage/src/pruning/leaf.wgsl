@@ -1,7 +1,50 @@
 // Forward vertex stage of pruned leaves: pulls the kept leaf vertex and hands Bevy's PBR fragment
-// stage an ordinary VertexOutput, so leaves receive Bevy's lighting and shadows.
+// stage an ordinary VertexOutput, so leaves receive Bevy's lighting and shadows. With the tree
+// lighting (`TREE_LIGHTING`), the vertex also carries its leaf's light (`tree_lighting.wgsl`) in
+// the vertex colour, which `leaf_volume_fragment.wgsl` shows in place of Bevy's lighting.
 #import bevy_pbr::forward_io::VertexOutput
 #import bevy_foliage::leaf_pulling::{SlotVertex, pull_leaf_vertex}
+#ifdef TREE_LIGHTING
+#import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
+#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_params}
+#import bevy_foliage::tree_lighting::{LeafOptics, TreeLights, leaf_radiance}
+
+// The light leaf vertex `leaf` of instance `instance_index` sends to the eye, in the tree's
+// frame, for a leaf of the material's base colour; divided by that colour, since Bevy's
+// fragment input multiplies the vertex colour by the base colour and texture.
+fn tree_light(leaf: PulledLeafVertex, instance_index: u32) -> vec3<f32> {
+    let world_from_local = mesh_functions::get_world_from_local(instance_index);
+    // World directions into the model's frame: the transpose undoes a rotation (and, once
+    // normalised, a uniform scale).
+    let local_from_world = transpose(mat3x3<f32>(
+        world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz));
+    let to_eye = normalize(local_from_world * (view.world_position - leaf.world_position.xyz));
+    var lights: TreeLights;
+    lights.to_sun = normalize(local_from_world * leaf_params.to_sun.xyz);
+    lights.sun = leaf_params.sun.rgb;
+    lights.sky = leaf_params.sky.rgb;
+    lights.ground = leaf_params.ground.rgb;
+    let albedo = leaf_params.albedo.rgb;
+    let optics = LeafOptics(
+        leaf_params.reflectance_front.rgb * albedo,
+        leaf_params.reflectance_back.rgb * albedo,
+        leaf_params.transmittance_front.rgb * albedo,
+        leaf_params.transmittance_back.rgb * albedo,
+    );
+    let light = leaf_radiance(
+        optics,
+        normalize(leaf.local_normal),
+        to_eye,
+        leaf_attenuation(leaf.leaf),
+        leaf.extinction,
+        lights,
+        leaf_params.smooth_envelope != 0u,
+        leaf_params.bounce != 0u,
+    );
+    // A channel the base colour lacks sends no light either.
+    return select(light / max(albedo, vec3(1e-6)), vec3(0.0), albedo <= vec3(0.0));
+}
+#endif
 
 @vertex
 fn vertex(in: SlotVertex) -> VertexOutput {
@@ -15,6 +58,9 @@ fn vertex(in: SlotVertex) -> VertexOutput {
     out.world_normal = leaf.world_normal;
 #ifdef VERTEX_UVS_A
     out.uv = leaf.uv;
+#endif
+#ifdef TREE_LIGHTING
+    out.color = vec4(tree_light(leaf, in.instance_index), 1.0);
 #endif
 #ifdef VERTEX_OUTPUT_INSTANCE_INDEX
     out.instance_index = in.instance_index;

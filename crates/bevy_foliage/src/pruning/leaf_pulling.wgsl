@@ -40,6 +40,26 @@ struct LeafParams {
     fade_end: f32,
     pad_x: u32,
     pad_y: u32,
+    // The tree lighting (`lighting::settings::TreeLightingSettings`, `tree_lighting.wgsl`): on,
+    // the sun through the crown by eq. 5.7's envelope blend (else the attenuations' blend), the
+    // bounce on.
+    tree_lighting: u32,
+    smooth_envelope: u32,
+    bounce: u32,
+    pad_z: u32,
+    // The leaves' optics (rgb).
+    reflectance_front: vec4<f32>,
+    reflectance_back: vec4<f32>,
+    transmittance_front: vec4<f32>,
+    transmittance_back: vec4<f32>,
+    // World direction towards the sun, the sun's irradiance (zero: no sun), the sky's radiance
+    // and the ground's (rgb), as the CPU found them in the scene.
+    to_sun: vec4<f32>,
+    sun: vec4<f32>,
+    sky: vec4<f32>,
+    ground: vec4<f32>,
+    // The material's base colour (linear rgb): the optics are multiples of it.
+    albedo: vec4<f32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<storage, read> instances: array<Instance>;
@@ -48,6 +68,8 @@ struct LeafParams {
 // Per (instance, cell): kept index count, output offset, LoD(cell), 0.
 @group(#{MATERIAL_BIND_GROUP}) @binding(103) var<storage, read> cell_offsets: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var<storage, read> leaf_vertices: array<LeafVertex>;
+// Per leaf, its eight attenuations as u16 pairs (`store::LEAF_LIGHT_WORDS`).
+@group(#{MATERIAL_BIND_GROUP}) @binding(105) var<storage, read> leaf_light: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(106) var<uniform> leaf_params: LeafParams;
 
 struct PulledLeafVertex {
@@ -58,6 +80,9 @@ struct PulledLeafVertex {
     world_position: vec4<f32>,
     clip_position: vec4<f32>,
     world_normal: vec3<f32>,
+    // The vertex's leaf in `leaf_light`, and its crown's extinction τ per unit of model space.
+    leaf: u32,
+    extinction: f32,
 }
 
 // Pulls the vertex and places it in the world; `clip_position` is CULLED for dropped vertices.
@@ -111,6 +136,8 @@ fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeaf
     }
     out.local_position = centroid + v.offset * scale;
     out.local_normal = v.normal;
+    out.leaf = v.leaf;
+    out.extinction = bitcast<f32>(inst.extinction_bits);
     out.world_position = mesh_functions::mesh_position_local_to_world(world_from_local, vec4<f32>(out.local_position, 1.0));
     out.clip_position = position_world_to_clip(out.world_position.xyz);
     out.world_normal = mesh_functions::mesh_normal_local_to_world(out.local_normal, instance_index);
@@ -119,3 +146,14 @@ fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeaf
 
 // A clip position outside the view volume: triangles made of it are culled.
 const CULLED: vec4<f32> = vec4<f32>(2.0, 2.0, 2.0, 1.0);
+
+// The eight attenuations of leaf `leaf` (`lighting::bins::light_of` of the stored u16s).
+fn leaf_attenuation(leaf: u32) -> array<f32, 8> {
+    let words = leaf_light[leaf];
+    var a: array<f32, 8>;
+    for (var k = 0u; k < 4u; k += 1u) {
+        a[2u * k] = f32(words[k] & 0xffffu) / 65535.0;
+        a[2u * k + 1u] = f32(words[k] >> 16u) / 65535.0;
+    }
+    return a;
+}

@@ -11,7 +11,7 @@ use bevy::prelude::*;
 use bevy::render::render_resource::{AsBindGroup, ShaderType, TextureFormat};
 use bevy::render::storage::ShaderBuffer;
 use bevy::shader::ShaderRef;
-use bevy::shader::load_shader_library;
+use bevy::shader::{ShaderDefVal, load_shader_library};
 
 /// The material of pruned leaves: a `StandardMaterial` (colour, texture, alpha mode) whose vertex
 /// stage draws the pruned leaf set. Make one with [`leaf_material`].
@@ -38,6 +38,34 @@ pub struct LeafParams {
     pub pad_x: u32,
     /// Padding.
     pub pad_y: u32,
+    /// 1 to light the leaves as a volume ([`TreeLightingSettings`](crate::TreeLightingSettings)) instead of by Bevy's PBR.
+    pub tree_lighting: u32,
+    /// 1: the sun through the crown by eq. 5.7's envelope blend
+    /// ([`SunThroughCrown::SmoothEnvelope`](crate::lighting::model::SunThroughCrown::SmoothEnvelope)); 0: the attenuations' blend.
+    pub smooth_envelope: u32,
+    /// 1 to add one bounce of sunlight (eq. 5.24).
+    pub bounce: u32,
+    /// Padding.
+    pub pad_z: u32,
+    /// The leaves' ρ_rf (rgb).
+    pub reflectance_front: Vec4,
+    /// ρ_rb (rgb).
+    pub reflectance_back: Vec4,
+    /// ρ_tf (rgb).
+    pub transmittance_front: Vec4,
+    /// ρ_tb (rgb).
+    pub transmittance_back: Vec4,
+    /// World direction towards the sun (xyz).
+    pub to_sun: Vec4,
+    /// The sun's irradiance (rgb; zero for no sun), as Bevy's lights carry it: colour times
+    /// illuminance.
+    pub sun: Vec4,
+    /// The sky's radiance (rgb): the ambient light's colour times its brightness.
+    pub sky: Vec4,
+    /// The ground's radiance (rgb).
+    pub ground: Vec4,
+    /// The material's base colour (linear rgb): the optics are multiples of it.
+    pub albedo: Vec4,
 }
 
 impl Default for LeafParams {
@@ -52,6 +80,19 @@ impl Default for LeafParams {
             fade_end: s.fade_end_pixels,
             pad_x: 0,
             pad_y: 0,
+            tree_lighting: 0,
+            smooth_envelope: 0,
+            bounce: 1,
+            pad_z: 0,
+            reflectance_front: Vec4::ZERO,
+            reflectance_back: Vec4::ZERO,
+            transmittance_front: Vec4::ZERO,
+            transmittance_back: Vec4::ZERO,
+            to_sun: Vec4::Y,
+            sun: Vec4::ZERO,
+            sky: Vec4::ZERO,
+            ground: Vec4::ZERO,
+            albedo: Vec4::ONE,
         }
     }
 }
@@ -75,6 +116,9 @@ pub struct LeafExtension {
     /// Packed leaf vertices.
     #[storage(104, read_only, visibility(vertex))]
     pub leaf_vertices: Handle<ShaderBuffer>,
+    /// Per leaf, the light its neighbours let through in eight directions (tree lighting).
+    #[storage(105, read_only, visibility(vertex))]
+    pub leaf_light: Handle<ShaderBuffer>,
     /// Switches.
     #[uniform(106, visibility(vertex))]
     pub params: LeafParams,
@@ -92,18 +136,25 @@ pub struct LeafExtension {
 pub struct LeafKey {
     /// The leaves receive screen-space soft shadows.
     pub soft_shadows: bool,
+    /// The leaves are lit as a volume ([`TreeLightingSettings`](crate::TreeLightingSettings)).
+    pub tree_lighting: bool,
 }
 
 impl From<&LeafExtension> for LeafKey {
     fn from(material: &LeafExtension) -> Self {
         Self {
             soft_shadows: material.soft_visibility.is_some(),
+            tree_lighting: material.params.tree_lighting != 0,
         }
     }
 }
 
 /// The soft-shadow fragment stage, loaded at start-up and swapped in by `specialize`.
 static LEAF_SOFT_SHADER: std::sync::OnceLock<Handle<bevy::shader::Shader>> =
+    std::sync::OnceLock::new();
+
+/// The tree lighting's fragment stage, loaded at start-up and swapped in by `specialize`.
+static LEAF_VOLUME_SHADER: std::sync::OnceLock<Handle<bevy::shader::Shader>> =
     std::sync::OnceLock::new();
 
 const LEAF_SHADER: &str = "embedded://bevy_foliage/pruning/leaf.wgsl";
@@ -126,6 +177,25 @@ impl MaterialExtension for LeafExtension {
         _layout: &bevy::mesh::MeshVertexBufferLayoutRef,
         key: bevy::pbr::MaterialExtensionKey<Self>,
     ) -> Result<(), bevy::render::render_resource::SpecializedMeshPipelineError> {
+        let prepass = descriptor
+            .vertex
+            .shader_defs
+            .iter()
+            .any(|d| *d == ShaderDefVal::from("PREPASS_PIPELINE"));
+        if key.bind_group_data.tree_lighting && !prepass {
+            // The main pass lit as a volume: the vertex stage computes each leaf's light and
+            // hands it over as the vertex colour (Bevy's `VertexOutput::color`), the fragment
+            // stage shows it. Soft shadows do not apply in this mode.
+            if let (Some(fragment), Some(volume)) =
+                (descriptor.fragment.as_mut(), LEAF_VOLUME_SHADER.get())
+            {
+                fragment.shader = volume.clone();
+                fragment.shader_defs.push("VERTEX_COLORS".into());
+                descriptor.vertex.shader_defs.push("VERTEX_COLORS".into());
+                descriptor.vertex.shader_defs.push("TREE_LIGHTING".into());
+            }
+            return Ok(());
+        }
         // Only the main pass: the prepass and shadow pipelines keep Bevy's prepass shader.
         crate::soft_receiver::use_soft_fragment(
             descriptor,
@@ -194,21 +264,26 @@ pub fn opaque_fraction(image: &Image, cutoff: f32) -> Option<f32> {
     Some(opaque as f32 / texels as f32)
 }
 
-/// Keeps the soft-shadow leaf fragment stage loaded.
+/// Keeps the soft-shadow and the tree-lighting leaf fragment stages loaded.
 #[derive(Resource)]
 #[allow(dead_code)]
-struct LeafSoftShader(Handle<bevy::shader::Shader>);
+struct LeafSoftShader(Handle<bevy::shader::Shader>, Handle<bevy::shader::Shader>);
 
 /// Registers the leaf material and its shaders.
 pub(crate) fn build(app: &mut App) {
     load_shader_library!(app, "leaf_pulling.wgsl");
+    load_shader_library!(app, "tree_lighting.wgsl");
     embedded_asset!(app, "leaf.wgsl");
     embedded_asset!(app, "leaf_prepass.wgsl");
     embedded_asset!(app, "leaf_soft_fragment.wgsl");
     let soft: Handle<bevy::shader::Shader> =
         bevy::asset::load_embedded_asset!(app, "leaf_soft_fragment.wgsl");
     let _ = LEAF_SOFT_SHADER.set(soft.clone());
-    app.insert_resource(LeafSoftShader(soft))
+    embedded_asset!(app, "leaf_volume_fragment.wgsl");
+    let volume: Handle<bevy::shader::Shader> =
+        bevy::asset::load_embedded_asset!(app, "leaf_volume_fragment.wgsl");
+    let _ = LEAF_VOLUME_SHADER.set(volume.clone());
+    app.insert_resource(LeafSoftShader(soft, volume))
         .add_plugins(MaterialPlugin::<LeafMaterial>::default());
 }
 

@@ -19,7 +19,7 @@ struct Instance {
     vertex_base: u32,      // added to every index written (types share one vertex buffer)
     cell_offsets_base: u32, // first `cell_offsets` entry of this instance
     shadow_slot: u32,      // the record shadow views draw (the light's selection, or this one)
-    pad_a: u32,
+    extinction_bits: u32,  // the crown's extinction τ per unit of model space (f32 bits)
     pad_b: u32,
     pad_c: u32,
 }
@@ -32,7 +32,8 @@ struct LeafVertex {
     // Largest centroid offset of the vertex's leaf.
     leaf_radius: f32,
     normal: vec3<f32>,
-    pad_b: u32,
+    // The vertex's leaf in `leaf_light`.
+    leaf: u32,
     uv: vec2<f32>,
     // Mean texture coordinate of the vertex's leaf.
     uv_centre: vec2<f32>,

@@ -217,7 +217,7 @@ fn prepare_pruning(
             ty.vertex_base,
             region.cell_offsets_base,
             shadow_slot,
-            0,
+            ty.extinction_bits,
             0,
             0,
         ]);

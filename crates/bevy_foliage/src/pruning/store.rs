@@ -57,6 +57,9 @@ pub struct TypeSlot {
     /// Every leaf is a canonical quad ([`BakedFoliage::quad_leaves`]): drawn with quad slot
     /// meshes.
     pub quads: bool,
+    /// The crown's extinction τ per unit of model space ([`BakedFoliage::extinction`]), as `f32`
+    /// bits: the tree lighting's s_max = −ln(a)/τ.
+    pub extinction_bits: u32,
 }
 
 /// Set in a pruned tree's `MeshTag` when it is drawn with a quad slot mesh; the low bits are the
@@ -69,8 +72,13 @@ pub fn mesh_tag(slot: u32, ty: &TypeSlot) -> u32 {
 }
 
 /// Words per packed leaf vertex in the `leaf_vertices` buffer:
-/// `position.xyz, cell, offset.xyz, leaf radius, normal.xyz, 0, uv.xy, leaf uv centre.xy`.
+/// `position.xyz, cell, offset.xyz, leaf radius, normal.xyz, leaf, uv.xy, leaf uv centre.xy`,
+/// where `leaf` indexes the `leaf_light` buffer (every type's leaves, in turn).
 pub const LEAF_VERTEX_WORDS: usize = 16;
+
+/// Words per leaf in the `leaf_light` buffer: its eight attenuations (`BakedFoliage::leaf_light`),
+/// two `u16` a word, direction `2k` in the low half of word `k`.
+pub const LEAF_LIGHT_WORDS: usize = 4;
 
 /// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf_pulling.wgsl`).
 pub const INSTANCE_WORDS: usize = 20;
@@ -88,6 +96,9 @@ pub struct StoreBuffers {
     pub stored_indices: Handle<ShaderBuffer>,
     /// Per type, packed leaf vertices.
     pub leaf_vertices: Handle<ShaderBuffer>,
+    /// Per type, per stored leaf: the light its neighbours let through in the tree lighting's
+    /// eight directions ([`LEAF_LIGHT_WORDS`] words a leaf).
+    pub leaf_light: Handle<ShaderBuffer>,
     /// Per-instance records (uploaded each frame).
     pub instances: Handle<ShaderBuffer>,
     /// Kept indices, one region per instance (GPU written).
@@ -169,6 +180,7 @@ pub fn update_foliage_store(
         });
         let (mut cfl, mut vis, mut lis, mut idx, mut verts) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut light: Vec<u32> = Vec::new();
         store.types.clear();
         for id in ids {
             let tree = baked.get(id).unwrap();
@@ -182,7 +194,14 @@ pub fn update_foliage_store(
                 vertex_base: (verts.len() / LEAF_VERTEX_WORDS) as u32,
                 full_index_count: tree.indices.len() as u32,
                 quads: tree.quad_leaves() && !store_force_triangles,
+                extinction_bits: tree.extinction.to_bits(),
             };
+            // The leaves' attenuations; a bake without them (none stored) lets all light through.
+            let light_base = (light.len() / LEAF_LIGHT_WORDS) as u32;
+            for leaf in 0..tree.leaf_count() {
+                let a = tree.leaf_light.get(leaf).copied().unwrap_or([u16::MAX; 8]);
+                light.extend((0..4).map(|k| a[2 * k] as u32 | (a[2 * k + 1] as u32) << 16));
+            }
             cfl.extend_from_slice(&tree.cell_first_leaf);
             vis.extend(tree.visibility.iter().map(|&v| v as u32));
             lis.extend_from_slice(&tree.leaf_index_start);
@@ -202,6 +221,7 @@ pub fn update_foliage_store(
             // (for the sub-pixel fade, see `appearance`).
             let mut leaf_radius = vec![0.0f32; tree.positions.len()];
             let mut uv_centre = vec![Vec2::ZERO; tree.positions.len()];
+            let mut vertex_leaf = vec![light_base; tree.positions.len()];
             let mut corners: Vec<u32> = Vec::new();
             for leaf in 0..tree.leaf_count() {
                 let (start, end) = (
@@ -221,6 +241,7 @@ pub fn update_foliage_store(
                 for &v in &corners {
                     leaf_radius[v as usize] = radius;
                     uv_centre[v as usize] = centre;
+                    vertex_leaf[v as usize] = light_base + leaf as u32;
                 }
             }
             for v in 0..tree.positions.len() {
@@ -242,7 +263,7 @@ pub fn update_foliage_store(
                     n.x.to_bits(),
                     n.y.to_bits(),
                     n.z.to_bits(),
-                    0,
+                    vertex_leaf[v],
                     uv.x.to_bits(),
                     uv.y.to_bits(),
                     uv_centre[v].x.to_bits(),
@@ -257,6 +278,7 @@ pub fn update_foliage_store(
         b.leaf_index_start = buffers.add(words_buffer(&lis, "foliage_leaf_index_start"));
         b.stored_indices = buffers.add(words_buffer(&idx, "foliage_stored_indices"));
         b.leaf_vertices = buffers.add(words_buffer(&verts, "foliage_leaf_vertices"));
+        b.leaf_light = buffers.add(words_buffer(&light, "foliage_leaf_light"));
         store.generation += 1;
     }
 

@@ -12,7 +12,9 @@ use super::material::{LeafExtension, LeafMaterial, LeafParams};
 use super::selection::{ShadowLight, TreeView, select};
 use super::slot_mesh::SlotMeshes;
 use super::store::{FoliageSlot, FoliageStore};
+use crate::TreeLightingSettings;
 use crate::distance::LodView;
+use crate::lighting::model::SunThroughCrown;
 use crate::settings::FoliagePruningSettings;
 use bevy::camera::visibility::NoFrustumCulling;
 use bevy::diagnostic::{DiagnosticPath, Diagnostics};
@@ -258,9 +260,17 @@ pub fn assign_slot_meshes(
 pub fn refresh_leaf_materials(
     store: Res<FoliageStore>,
     settings: Res<FoliagePruningSettings>,
+    lighting: Res<TreeLightingSettings>,
+    ambient: Option<Res<GlobalAmbientLight>>,
+    suns: Query<(&DirectionalLight, &GlobalTransform)>,
     mut materials: ResMut<Assets<LeafMaterial>>,
     mut seen: Local<(u32, Vec<AssetId<LeafMaterial>>)>,
 ) {
+    let lights = tree_lights(
+        &lighting,
+        ambient.as_deref(),
+        suns.iter().map(|(l, t)| (l, t.back().as_vec3())),
+    );
     let mut ids: Vec<AssetId<LeafMaterial>> = materials.ids().collect();
     ids.sort();
     let changed = store.is_changed() && seen.0 != store.generation;
@@ -275,7 +285,10 @@ pub fn refresh_leaf_materials(
             max_scale: settings.max_leaf_scale,
             fade_start: settings.fade_start_pixels,
             fade_end: settings.fade_end_pixels,
-            ..material.extension.params
+            // The material's own.
+            opaque_fraction: material.extension.params.opaque_fraction,
+            albedo: LinearRgba::from(material.base.base_color).to_vec4(),
+            ..lights
         };
         let b = &store.buffers;
         let ext = &material.extension;
@@ -285,6 +298,7 @@ pub fn refresh_leaf_materials(
             || ext.params != params
             || ext.output != b.output
             || ext.leaf_vertices != b.leaf_vertices
+            || ext.leaf_light != b.leaf_light
         {
             let mut material = materials.get_mut(*id).unwrap();
             material.extension = LeafExtension {
@@ -293,12 +307,52 @@ pub fn refresh_leaf_materials(
                 draws: b.draws.clone(),
                 cell_offsets: b.cell_offsets.clone(),
                 leaf_vertices: b.leaf_vertices.clone(),
+                leaf_light: b.leaf_light.clone(),
                 params,
                 soft_visibility,
             };
         }
     }
     *seen = (store.generation, ids);
+}
+
+/// The tree lighting's part of the leaf materials' parameters (the rest default): the switches
+/// and optics of `lighting`, the sky's radiance from the global ambient light (its colour times
+/// its brightness), the ground's from the sky and the ground's albedo, and the sun — the
+/// brightest of `suns` (each a light and its world direction towards the light; none: no sun).
+pub fn tree_lights<'a>(
+    lighting: &TreeLightingSettings,
+    ambient: Option<&GlobalAmbientLight>,
+    suns: impl Iterator<Item = (&'a DirectionalLight, Vec3)>,
+) -> LeafParams {
+    let sky = ambient
+        .map(|a| LinearRgba::from(a.color).to_vec3() * a.brightness)
+        .unwrap_or(Vec3::ZERO);
+    let sun = suns
+        .filter(|(l, d)| l.illuminance.is_finite() && l.illuminance > 0.0 && d.is_finite())
+        .max_by(|a, b| a.0.illuminance.total_cmp(&b.0.illuminance));
+    let (to_sun, sun) = match sun {
+        Some((light, direction)) => (
+            direction.normalize_or(Vec3::Y),
+            LinearRgba::from(light.color).to_vec3() * light.illuminance,
+        ),
+        None => (Vec3::Y, Vec3::ZERO),
+    };
+    let optics = &lighting.optics;
+    LeafParams {
+        tree_lighting: lighting.enabled as u32,
+        smooth_envelope: (lighting.sun_through_crown == SunThroughCrown::SmoothEnvelope) as u32,
+        bounce: lighting.bounce as u32,
+        reflectance_front: optics.reflectance_front.extend(0.0),
+        reflectance_back: optics.reflectance_back.extend(0.0),
+        transmittance_front: optics.transmittance_front.extend(0.0),
+        transmittance_back: optics.transmittance_back.extend(0.0),
+        to_sun: to_sun.extend(0.0),
+        sun: sun.extend(0.0),
+        sky: sky.extend(0.0),
+        ground: (sky * lighting.ground_albedo).extend(0.0),
+        ..default()
+    }
 }
 
 /// Marks a pruned tree taken out of Bevy's shadow maps because its leaves cast through the

@@ -1,0 +1,142 @@
+// Trees lit as volumes of leaves (Boulanger 2008, §5.2–5.4), per leaf vertex: the light a leaf
+// sends to the eye from the sky and the ground through the crown (eq. 5.6), from the sun through
+// the crown (eq. 5.8) and from one bounce of sunlight off its neighbours (eq. 5.11 with 5.24), by
+// the two-sided leaf BSDF of eq. 5.4. `bevy_foliage::lighting::model` is the CPU reference,
+// function for function; every direction is in the tree's model space, pointing away from the
+// leaf.
+#define_import_path bevy_foliage::tree_lighting
+
+// ξ = √3/3: the eight sampling directions are (±ξ, ±ξ, ±ξ), bit 0 of j meaning +x, bit 1 +y,
+// bit 2 +z (`lighting::bins::DIRECTIONS`).
+const XI: f32 = 0.57735026;
+const PI: f32 = 3.14159265;
+// The least light a stored attenuation holds (`lighting::bins::DARKEST_LIGHT`).
+const DARKEST_LIGHT: f32 = 1.52590219e-5;
+
+// The leaf's reflectances and transmittances per channel (`model::LeafMaterial`).
+struct LeafOptics {
+    reflectance_front: vec3<f32>,
+    reflectance_back: vec3<f32>,
+    transmittance_front: vec3<f32>,
+    transmittance_back: vec3<f32>,
+}
+
+// What lights the tree: the sun (towards it, and its irradiance; zero irradiance for no sun),
+// the sky's radiance over the upper hemisphere and the ground's under it.
+struct TreeLights {
+    to_sun: vec3<f32>,
+    sun: vec3<f32>,
+    sky: vec3<f32>,
+    ground: vec3<f32>,
+}
+
+fn direction(j: u32) -> vec3<f32> {
+    return vec3(
+        select(-XI, XI, (j & 1u) != 0u),
+        select(-XI, XI, (j & 2u) != 0u),
+        select(-XI, XI, (j & 4u) != 0u),
+    );
+}
+
+// Eq. 5.4, cosine included (`model::bsdf`); `seen_front`: the eye is on the normal's side.
+fn bsdf(optics: LeafOptics, n: vec3<f32>, seen_front: bool, w: vec3<f32>) -> vec3<f32> {
+    let c = dot(n, w);
+    let lit_front = max(c, 0.0);
+    let lit_back = max(-c, 0.0);
+    if seen_front {
+        return (optics.reflectance_front * lit_front + optics.transmittance_back * lit_back) / PI;
+    }
+    return (optics.transmittance_front * lit_front + optics.reflectance_back * lit_back) / PI;
+}
+
+// `model::one_minus_exp_over`: (1 − e^(−g·s)) / g, and its limit s as g goes to 0.
+fn one_minus_exp_over(g: f32, s: f32) -> f32 {
+    let x = g * s;
+    if abs(x) < 1e-4 {
+        return s * (1.0 - 0.5 * x);
+    }
+    return (1.0 - exp(-x)) / g;
+}
+
+// The whole of eq. 5.2 for one leaf of unit normal `n` seen from `to_eye`, whose eight
+// directions let `attenuation` through, in a crown of extinction `tau` (`model::leaf_radiance`).
+// `smooth_envelope` picks eq. 5.7's blend of envelope distances for the sun through the crown
+// (`SunThroughCrown::SmoothEnvelope`) over the blend of attenuations (`BlendedAttenuation`);
+// `bounce` adds eq. 5.24's bounce. The per-tree constants of the bounce (A·G1, G2, G3 of eq.
+// 5.18, 5.25, 5.26: `model::SunBounce`) depend on the sun's direction in the tree's frame, which
+// differs between instances turned differently, so they are computed here from it.
+fn leaf_radiance(
+    optics: LeafOptics,
+    n: vec3<f32>,
+    to_eye: vec3<f32>,
+    attenuation_in: array<f32, 8>,
+    tau: f32,
+    lights: TreeLights,
+    smooth_envelope: bool,
+    bounce: bool,
+) -> vec3<f32> {
+    var attenuation = attenuation_in;
+    let seen_front = dot(n, to_eye) >= 0.0;
+    // s_max(P, ω_j) = −ln(a_j) / τ (§5.6), a shut bin letting the least a bake stores through.
+    var s_max: array<f32, 8>;
+    for (var j = 0u; j < 8u; j += 1u) {
+        s_max[j] = select(0.0, -log(max(attenuation[j], DARKEST_LIGHT)) / tau, tau > 0.0);
+    }
+    // Eq. 5.6: the sky and the ground through each bin.
+    var sky = vec3(0.0);
+    for (var j = 0u; j < 8u; j += 1u) {
+        let d = direction(j);
+        let radiance = select(lights.ground, lights.sky, d.y > 0.0);
+        sky += bsdf(optics, n, seen_front, d) * attenuation[j] * radiance;
+    }
+    var color = sky * (4.0 * PI / 8.0);
+    if all(lights.sun == vec3(0.0)) {
+        return color;
+    }
+    let wl = lights.to_sun;
+    // Eq. 5.7's cosine lobes M(ω_l · ω_j) = max(ω_l · ω_j, 0) around the sun.
+    var lobes: array<f32, 8>;
+    var lobe_sum = 0.0;
+    var lobe_mean = vec3(0.0);
+    var blended_attenuation = 0.0;
+    var blended_s_max = 0.0;
+    for (var j = 0u; j < 8u; j += 1u) {
+        let d = direction(j);
+        lobes[j] = max(dot(wl, d), 0.0);
+        lobe_sum += lobes[j];
+        lobe_mean += lobes[j] * d;
+        blended_attenuation += lobes[j] * attenuation[j];
+        blended_s_max += lobes[j] * s_max[j];
+    }
+    // `model::sun_through_crown`.
+    var through = 1.0;
+    if lobe_sum > 0.0 {
+        if smooth_envelope {
+            through = exp(-tau * blended_s_max / lobe_sum);
+        } else {
+            through = blended_attenuation / lobe_sum;
+        }
+        lobe_mean /= lobe_sum;
+    }
+    // Eq. 5.8.
+    color += bsdf(optics, n, seen_front, wl) * through * lights.sun;
+    if !bounce {
+        return color;
+    }
+    // Eq. 5.11 with eq. 5.24 (`model::bounce_radiance`), A·G1 with A·ρ = 2τ.
+    let rho_bar = optics.reflectance_front + optics.reflectance_back
+        + optics.transmittance_front + optics.transmittance_back;
+    let crossing = optics.transmittance_front + optics.transmittance_back;
+    var bounced = vec3(0.0);
+    for (var j = 0u; j < 8u; j += 1u) {
+        let d = direction(j);
+        let cos_alpha = clamp(dot(d, wl), -1.0, 1.0);
+        let alpha = acos(cos_alpha);
+        let a_g1 = (rho_bar * (sin(alpha) - alpha * cos_alpha) + crossing * (PI * cos_alpha))
+            * (4.0 * tau / (3.0 * PI * 8.0));
+        let g3 = tau * (1.0 - dot(d, lobe_mean));
+        let sample = a_g1 * lights.sun * through * one_minus_exp_over(g3, s_max[j]);
+        bounced += bsdf(optics, n, seen_front, d) * sample;
+    }
+    return color + bounced;
+}

@@ -1,0 +1,401 @@
+//! Render test of the tree lighting in the leaf shaders (Boulanger 2008, ch. 5): a small tree
+//! drawn with `TreeLightingSettings::enabled`, every pixel inside a leaf compared with the CPU
+//! reference (`lighting::model::leaf_radiance`) of the leaf a ray through that pixel hits first
+//! — sky and ground through the crown, the sun through the crown, one bounce of sunlight.
+
+use bevy::camera::Exposure;
+use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
+use bevy::prelude::*;
+use bevy_foliage::lighting::bins::{DARKEST_LIGHT, light_of};
+use bevy_foliage::lighting::model::{SkyLight, SunBounce, SunThroughCrown, leaf_radiance};
+use bevy_foliage::lighting::path_trace::LeafScene;
+use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
+use bevy_foliage::pruning::components::{PrunedFoliage, PruningParams};
+use bevy_foliage::pruning::extract::kept_index_total;
+use bevy_foliage::pruning::leaves::LeafSet;
+use bevy_foliage::pruning::material::{LeafMaterial, leaf_material};
+use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
+use bevy_foliage::{FoliagePlugin, FoliagePruningSettings, LodDistances, TreeLightingSettings};
+use bevy_nature_harness::compare::RgbaImage;
+use bevy_nature_harness::{RenderHarness, artifacts_dir};
+use common::render_with_settings;
+
+mod common;
+
+const SIZE: u32 = 96;
+const SKY: f32 = 1.2;
+const SUN: f32 = 3.0;
+/// The leaves' base colour (linear): the optics are multiples of it.
+const BASE: Vec3 = Vec3::new(0.9, 0.8, 0.6);
+/// How far a crown pruned to about half its leaves (area compensated) may move the crown's light
+/// from full detail's at the same view.
+const TOLERANCE: f64 = 0.08;
+
+fn srgb(linear: f32) -> f32 {
+    let c = linear.clamp(0.0, 1.0);
+    if c <= 0.003_130_8 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// The baked tree's stored leaves as a leaf set (leaf `l` = stored leaf `l`).
+fn stored_leaves(baked: &BakedFoliage) -> LeafSet {
+    LeafSet {
+        positions: baked.positions.clone(),
+        normals: baked.normals.clone(),
+        uvs: baked.uvs.clone(),
+        indices: baked.indices.clone(),
+        leaves: baked
+            .leaf_index_start
+            .windows(2)
+            .map(|w| w[0]..w[1])
+            .collect(),
+    }
+}
+
+/// The test scene: a small olive, turned, under a sky and a sun, its leaves lit as a volume,
+/// seen from a camera at exposure 1 with no tone mapping.
+struct Scene {
+    harness: RenderHarness,
+    baked: BakedFoliage,
+    lighting: TreeLightingSettings,
+    instance: Transform,
+    to_sun_world: Vec3,
+    eye: Vec3,
+    tree: Entity,
+}
+
+fn scene(name: &str) -> Option<Scene> {
+    let mut harness = RenderHarness::for_test(name, SIZE, SIZE)?;
+    let lighting = TreeLightingSettings {
+        enabled: true,
+        // Bright optics (multiples of the base colour), so the bounce is a visible share of the
+        // light.
+        optics: bevy_foliage::lighting::model::LeafMaterial {
+            reflectance_front: Vec3::new(0.25, 0.45, 0.15),
+            reflectance_back: Vec3::new(0.3, 0.5, 0.2),
+            transmittance_front: Vec3::new(0.2, 0.4, 0.1),
+            transmittance_back: Vec3::new(0.2, 0.4, 0.1),
+        },
+        ground_albedo: Vec3::new(0.3, 0.25, 0.2),
+        sun_through_crown: SunThroughCrown::BlendedAttenuation,
+        bounce: true,
+    };
+    harness.app_mut().add_plugins(FoliagePlugin);
+    harness.app_mut().insert_resource(FoliagePruningSettings {
+        enabled: false,
+        subpixel_fade: false,
+        area_compensation: false,
+        ..default()
+    });
+    harness.app_mut().insert_resource(lighting.clone());
+    harness.app_mut().insert_resource(ClearColor(Color::BLACK));
+    harness.app_mut().insert_resource(GlobalAmbientLight {
+        color: Color::WHITE,
+        brightness: SKY,
+        ..default()
+    });
+    let tree = generate(&TreeSpecies::olea().with_leaf_count(400));
+    let (baked, _) = bake(
+        &tree.leaves,
+        &BakeSettings {
+            cells: CellCount::Depth(4),
+            resolution: 48,
+            ..default()
+        },
+        &|_| {},
+    )
+    .unwrap();
+    assert!(baked.extinction > 0.0, "the crown has leaves behind leaves");
+    let crown = baked.crown_center();
+    let radius = baked
+        .positions
+        .iter()
+        .map(|p| p.distance(crown))
+        .fold(0.0f32, f32::max);
+    let handle = harness
+        .world_mut()
+        .resource_mut::<Assets<BakedFoliage>>()
+        .add(baked.clone());
+    let material = harness
+        .world_mut()
+        .resource_mut::<Assets<LeafMaterial>>()
+        .add(leaf_material(StandardMaterial {
+            base_color: Color::linear_rgb(BASE.x, BASE.y, BASE.z),
+            ..default()
+        }));
+    // A turned instance: the shader must carry the sun and the eye into the tree's frame.
+    let instance = Transform::from_rotation(Quat::from_rotation_y(0.7));
+    let tree = harness
+        .world_mut()
+        .spawn((
+            PrunedFoliage {
+                baked: handle,
+                material,
+            },
+            instance,
+        ))
+        .id();
+    let to_sun_world = Vec3::new(0.5, 0.8, 0.3).normalize();
+    harness.world_mut().spawn((
+        DirectionalLight {
+            illuminance: SUN,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::default().looking_to(-to_sun_world, Vec3::Y),
+    ));
+    let centre_world = instance.transform_point(crown);
+    let eye = centre_world + Vec3::new(-0.6, 0.25, 0.75).normalize() * radius * 3.2;
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Tonemapping::None,
+        DebandDither::Disabled,
+        // Exposure 1: ev100 = log2(1 / 1.2).
+        Exposure {
+            ev100: -(1.2f32).log2(),
+        },
+        Transform::from_translation(eye).looking_at(centre_world, Vec3::Y),
+    ));
+    harness.wait_until_ready().unwrap();
+    Some(Scene {
+        harness,
+        baked,
+        lighting,
+        instance,
+        to_sun_world,
+        eye,
+        tree,
+    })
+}
+
+#[test]
+fn leaves_show_the_light_the_cpu_model_gives_them() {
+    let Some(Scene {
+        mut harness,
+        baked,
+        lighting,
+        instance,
+        to_sun_world,
+        eye,
+        ..
+    }) = scene("tree_lighting")
+    else {
+        return;
+    };
+    for _ in 0..8 {
+        harness.step();
+    }
+    let image = harness.render().unwrap();
+    let dir = artifacts_dir().join("tree_lighting");
+    std::fs::create_dir_all(&dir).ok();
+    image.save_png(dir.join("tree_lit.png")).ok();
+
+    // The CPU side: a ray through each pixel's centre and corners; pixels whose five rays hit
+    // the same leaf are compared.
+    let world = harness.world_mut();
+    let (camera, camera_transform) = world
+        .query::<(&Camera, &GlobalTransform)>()
+        .single(world)
+        .unwrap();
+    let (camera, camera_transform) = (camera.clone(), *camera_transform);
+    let scene = LeafScene::new(&stored_leaves(&baked));
+    let from_world = instance.compute_affine().inverse();
+    let ray_leaf = |px: Vec2| -> Option<u32> {
+        let ray = camera.viewport_to_world(&camera_transform, px).ok()?;
+        let origin = from_world.transform_point3(ray.origin);
+        let dir = from_world.transform_vector3(*ray.direction).normalize();
+        scene.hit(origin, dir, u32::MAX).map(|(_, leaf)| leaf)
+    };
+    // The leaves' optics: the settings' multiples of the base colour.
+    let optics = bevy_foliage::lighting::model::LeafMaterial {
+        reflectance_front: lighting.optics.reflectance_front * BASE,
+        reflectance_back: lighting.optics.reflectance_back * BASE,
+        transmittance_front: lighting.optics.transmittance_front * BASE,
+        transmittance_back: lighting.optics.transmittance_back * BASE,
+    };
+    let to_sun = from_world.transform_vector3(to_sun_world).normalize();
+    let tau = baked.extinction;
+    let sky = SkyLight::uniform(Vec3::splat(SKY), lighting.ground_albedo);
+    let bounce = SunBounce::new(&optics, to_sun, tau);
+    let eye_local = from_world.transform_point3(eye);
+    // The bounce's constants zeroed: the same light without it.
+    let no_bounce = SunBounce {
+        a_g1: [Vec3::ZERO; 8],
+        ..bounce
+    };
+    let expected = |leaf: u32, bounce_on: bool| -> Vec3 {
+        let a = baked.leaf_light[leaf as usize].map(light_of);
+        let s_max = a.map(|a| -a.max(DARKEST_LIGHT).ln() / tau);
+        let first = baked.indices[baked.leaf_index_start[leaf as usize] as usize] as usize;
+        let n = baked.normals[first].normalize();
+        let wo = (eye_local - baked.positions[first]).normalize();
+        leaf_radiance(
+            &optics,
+            n,
+            wo,
+            &a,
+            &s_max,
+            tau,
+            &sky,
+            to_sun,
+            Vec3::splat(SUN),
+            if bounce_on { &bounce } else { &no_bounce },
+            SunThroughCrown::BlendedAttenuation,
+        )
+    };
+    let (mut compared, mut within, mut worst) = (0u32, 0u32, 0.0f32);
+    let mut bounce_visible = 0u32;
+    let mut reference = RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let Some(leaf) = ray_leaf(centre) else {
+                continue;
+            };
+            let corners = [
+                Vec2::new(-0.5, -0.5),
+                Vec2::new(0.5, -0.5),
+                Vec2::new(-0.5, 0.5),
+                Vec2::new(0.5, 0.5),
+            ];
+            if corners.iter().any(|c| ray_leaf(centre + *c) != Some(leaf)) {
+                continue;
+            }
+            let want = expected(leaf, true).to_array().map(|c| srgb(c) * 255.0);
+            let plain = expected(leaf, false).to_array().map(|c| srgb(c) * 255.0);
+            let got = image.pixel(x, y);
+            let [r, g, b] = want.map(|c| c.round() as u8);
+            reference.set_pixel(x, y, [r, g, b, 255]);
+            let error = (0..3)
+                .map(|c| (got[c] as f32 - want[c]).abs())
+                .fold(0.0f32, f32::max);
+            compared += 1;
+            if error <= 3.0 {
+                within += 1;
+            }
+            worst = worst.max(error);
+            if (0..3).any(|c| (want[c] - plain[c]).abs() > 6.0) {
+                bounce_visible += 1;
+            }
+        }
+    }
+    reference.save_png(dir.join("tree_cpu.png")).ok();
+    println!(
+        "tree lighting: {compared} pixels inside leaves compared, {within} within 3/255, worst {worst:.1}/255; the bounce moves {bounce_visible} of them by > 6/255"
+    );
+    assert!(
+        compared >= 800,
+        "too few leaf pixels to compare: {compared}"
+    );
+    // The bounce is a visible part of what is checked.
+    assert!(
+        bounce_visible * 4 >= compared,
+        "the bounce shows in too few pixels ({bounce_visible} of {compared}) for the test to see it"
+    );
+    assert!(
+        within as f32 >= 0.99 * compared as f32,
+        "{within} of {compared} leaf pixels within 3/255 of the CPU model (worst {worst:.1})"
+    );
+}
+
+/// The crown's light summed over the image: the mean linear luminance of every pixel (the black
+/// background adds nothing), so leaves lost, leaves shrunk and leaves lit darker all lower it.
+fn crown_light(image: &RgbaImage) -> f64 {
+    let linear = |c: u8| {
+        let c = c as f64 / 255.0;
+        if c <= 0.040_45 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let mut sum = 0.0;
+    for y in 0..image.height {
+        for x in 0..image.width {
+            let p = image.pixel(x, y);
+            sum += 0.2126 * linear(p[0]) + 0.7152 * linear(p[1]) + 0.0722 * linear(p[2]);
+        }
+    }
+    sum / (image.width * image.height) as f64
+}
+
+#[test]
+fn a_pruned_crown_keeps_its_light() {
+    let Some(Scene {
+        mut harness,
+        baked,
+        eye,
+        instance,
+        tree,
+        ..
+    }) = scene("tree_lighting_pruned")
+    else {
+        return;
+    };
+    let distance = eye.distance(instance.transform_point(baked.crown_center()));
+    let full = render_with_settings(&mut harness, |_| {});
+    // Pruned at the same view: under half the leaves kept (eq. 3.4 between near and far; the
+    // leaves kept are the visible ones first).
+    let distances = LodDistances::World {
+        near: 0.7 * distance,
+        far: 3.0 * distance,
+    };
+    let compensated = render_with_settings(&mut harness, |s| {
+        s.enabled = true;
+        s.distances = distances;
+        s.area_compensation = true;
+    });
+    let params = *harness
+        .world_mut()
+        .get::<PruningParams>(tree)
+        .expect("pruning parameters");
+    let kept = kept_index_total(
+        &baked.pruning_input(),
+        &params.camera.weights,
+        params.camera.distance_fixed,
+    ) as f64
+        / baked.indices.len() as f64;
+    let plain = render_with_settings(&mut harness, |s| s.area_compensation = false);
+    let dir = artifacts_dir().join("tree_lighting");
+    std::fs::create_dir_all(&dir).ok();
+    for (name, image) in [
+        ("full", &full),
+        ("pruned", &compensated),
+        ("pruned_plain", &plain),
+    ] {
+        image.save_png(dir.join(format!("crown_{name}.png"))).ok();
+    }
+    let (l_full, l_pruned, l_plain) = (
+        crown_light(&full),
+        crown_light(&compensated),
+        crown_light(&plain),
+    );
+    let change = (l_pruned - l_full) / l_full;
+    let plain_change = (l_plain - l_full) / l_full;
+    println!(
+        "tree lighting under pruning: {:.0} % of the leaves kept; crown light {l_full:.5} full, {l_pruned:.5} pruned ({:+.1} %), {l_plain:.5} pruned without area compensation ({:+.1} %)",
+        kept * 100.0,
+        change * 100.0,
+        plain_change * 100.0
+    );
+    assert!(
+        (0.2..0.6).contains(&kept),
+        "the view should prune a good part of the leaves, kept {kept:.2}"
+    );
+    assert!(
+        change.abs() < TOLERANCE,
+        "the pruned crown's light moved {:+.1} % (tolerance {:.0} %)",
+        change * 100.0,
+        TOLERANCE * 100.0
+    );
+    // The measure sees what pruning without compensation loses.
+    assert!(
+        plain_change < -2.0 * TOLERANCE,
+        "pruning without area compensation should lose clearly more light: {:+.1} %",
+        plain_change * 100.0
+    );
+}
