@@ -65,9 +65,10 @@ struct Scene {
     to_sun_world: Vec3,
     eye: Vec3,
     tree: Entity,
+    radius: f32,
 }
 
-fn scene(name: &str) -> Option<Scene> {
+fn scene(name: &str, sun_shadows: bool) -> Option<Scene> {
     let mut harness = RenderHarness::for_test(name, SIZE, SIZE)?;
     let lighting = TreeLightingSettings {
         enabled: true,
@@ -142,7 +143,7 @@ fn scene(name: &str) -> Option<Scene> {
     harness.world_mut().spawn((
         DirectionalLight {
             illuminance: SUN,
-            shadow_maps_enabled: false,
+            shadow_maps_enabled: sun_shadows,
             ..default()
         },
         Transform::default().looking_to(-to_sun_world, Vec3::Y),
@@ -169,46 +170,66 @@ fn scene(name: &str) -> Option<Scene> {
         to_sun_world,
         eye,
         tree,
+        radius,
     })
 }
 
-#[test]
-fn leaves_show_the_light_the_cpu_model_gives_them() {
-    let Some(Scene {
-        mut harness,
-        baked,
-        lighting,
-        instance,
-        to_sun_world,
-        eye,
-        ..
-    }) = scene("tree_lighting")
-    else {
-        return;
-    };
-    for _ in 0..8 {
-        harness.step();
-    }
-    let image = harness.render().unwrap();
-    let dir = artifacts_dir().join("tree_lighting");
-    std::fs::create_dir_all(&dir).ok();
-    image.save_png(dir.join("tree_lit.png")).ok();
+/// What comparing a render with the CPU model found.
+struct Check {
+    compared: u32,
+    within: u32,
+    worst: f32,
+    bounce_visible: u32,
+    /// Compared pixels the sun reaches from outside the crown, and those it does not.
+    sunlit: u32,
+    shaded: u32,
+    image: RgbaImage,
+    reference: RgbaImage,
+}
 
-    // The CPU side: a ray through each pixel's centre and corners; pixels whose five rays hit
-    // the same leaf are compared.
+impl Check {
+    /// Writes the render and the CPU model's image under `nature-artifacts/tree_lighting/`.
+    fn save(&self, name: &str) {
+        let dir = artifacts_dir().join("tree_lighting");
+        std::fs::create_dir_all(&dir).ok();
+        self.image
+            .save_png(dir.join(format!("{name}_gpu.png")))
+            .ok();
+        self.reference
+            .save_png(dir.join(format!("{name}_cpu.png")))
+            .ok();
+    }
+}
+
+/// Compares the pixels of the next render that lie inside one leaf (a ray through the pixel's
+/// centre and its four corners all hit it first) with the CPU model of that leaf's light;
+/// `sunlit(p)` says whether the sun reaches world point `p` from outside the crown (`None`: too
+/// near a shadow's edge to compare).
+fn compare_with_model(
+    harness: &mut RenderHarness,
+    baked: &BakedFoliage,
+    lighting: &TreeLightingSettings,
+    instance: Transform,
+    to_sun_world: Vec3,
+    eye: Vec3,
+    sunlit: impl Fn(Vec3) -> Option<bool>,
+) -> Check {
+    let image = harness.render().unwrap();
     let world = harness.world_mut();
     let (camera, camera_transform) = world
         .query::<(&Camera, &GlobalTransform)>()
         .single(world)
         .unwrap();
     let (camera, camera_transform) = (camera.clone(), *camera_transform);
-    let scene = LeafScene::new(&stored_leaves(&baked));
+    let scene = LeafScene::new(&stored_leaves(baked));
     let from_world = instance.compute_affine().inverse();
-    let ray_leaf = |px: Vec2| -> Option<u32> {
+    let ray_leaf = |px: Vec2| -> Option<(u32, Vec3)> {
         let ray = camera.viewport_to_world(&camera_transform, px).ok()?;
         let origin = from_world.transform_point3(ray.origin);
         let dir = from_world.transform_vector3(*ray.direction).normalize();
-        scene.hit(origin, dir, u32::MAX).map(|(_, leaf)| leaf)
+        scene
+            .hit(origin, dir, u32::MAX)
+            .map(|(t, leaf)| (leaf, instance.transform_point(origin + dir * t)))
     };
     // The leaves' optics: the settings' multiples of the base colour.
     let optics = bevy_foliage::lighting::model::LeafMaterial {
@@ -221,13 +242,13 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
     let tau = baked.extinction;
     let sky = SkyLight::uniform(Vec3::splat(SKY), lighting.ground_albedo);
     let bounce = SunBounce::new(&optics, to_sun, tau);
-    let eye_local = from_world.transform_point3(eye);
     // The bounce's constants zeroed: the same light without it.
     let no_bounce = SunBounce {
         a_g1: [Vec3::ZERO; 8],
         ..bounce
     };
-    let expected = |leaf: u32, bounce_on: bool| -> Vec3 {
+    let eye_local = from_world.transform_point3(eye);
+    let expected = |leaf: u32, bounce_on: bool, sun: f32| -> Vec3 {
         let a = baked.leaf_light[leaf as usize].map(light_of);
         let s_max = a.map(|a| -a.max(DARKEST_LIGHT).ln() / tau);
         let first = baked.indices[baked.leaf_index_start[leaf as usize] as usize] as usize;
@@ -242,18 +263,25 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
             tau,
             &sky,
             to_sun,
-            Vec3::splat(SUN),
+            Vec3::splat(sun),
             if bounce_on { &bounce } else { &no_bounce },
             SunThroughCrown::BlendedAttenuation,
         )
     };
-    let (mut compared, mut within, mut worst) = (0u32, 0u32, 0.0f32);
-    let mut bounce_visible = 0u32;
-    let mut reference = RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]);
+    let mut check = Check {
+        compared: 0,
+        within: 0,
+        worst: 0.0,
+        bounce_visible: 0,
+        sunlit: 0,
+        shaded: 0,
+        image: RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]),
+        reference: RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]),
+    };
     for y in 0..SIZE {
         for x in 0..SIZE {
             let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-            let Some(leaf) = ray_leaf(centre) else {
+            let Some((leaf, point)) = ray_leaf(centre) else {
                 continue;
             };
             let corners = [
@@ -262,28 +290,81 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
                 Vec2::new(-0.5, 0.5),
                 Vec2::new(0.5, 0.5),
             ];
-            if corners.iter().any(|c| ray_leaf(centre + *c) != Some(leaf)) {
+            if corners
+                .iter()
+                .any(|c| ray_leaf(centre + *c).map(|h| h.0) != Some(leaf))
+            {
                 continue;
             }
-            let want = expected(leaf, true).to_array().map(|c| srgb(c) * 255.0);
-            let plain = expected(leaf, false).to_array().map(|c| srgb(c) * 255.0);
+            let Some(lit) = sunlit(point) else {
+                continue;
+            };
+            let sun = if lit { SUN } else { 0.0 };
+            if lit {
+                check.sunlit += 1;
+            } else {
+                check.shaded += 1;
+            }
+            let want = expected(leaf, true, sun)
+                .to_array()
+                .map(|c| srgb(c) * 255.0);
+            let plain = expected(leaf, false, sun)
+                .to_array()
+                .map(|c| srgb(c) * 255.0);
             let got = image.pixel(x, y);
             let [r, g, b] = want.map(|c| c.round() as u8);
-            reference.set_pixel(x, y, [r, g, b, 255]);
+            check.reference.set_pixel(x, y, [r, g, b, 255]);
             let error = (0..3)
                 .map(|c| (got[c] as f32 - want[c]).abs())
                 .fold(0.0f32, f32::max);
-            compared += 1;
+            check.compared += 1;
             if error <= 3.0 {
-                within += 1;
+                check.within += 1;
             }
-            worst = worst.max(error);
+            check.worst = check.worst.max(error);
             if (0..3).any(|c| (want[c] - plain[c]).abs() > 6.0) {
-                bounce_visible += 1;
+                check.bounce_visible += 1;
             }
         }
     }
-    reference.save_png(dir.join("tree_cpu.png")).ok();
+    check.image = image;
+    check
+}
+
+#[test]
+fn leaves_show_the_light_the_cpu_model_gives_them() {
+    let Some(Scene {
+        mut harness,
+        baked,
+        lighting,
+        instance,
+        to_sun_world,
+        eye,
+        ..
+    }) = scene("tree_lighting", false)
+    else {
+        return;
+    };
+    for _ in 0..8 {
+        harness.step();
+    }
+    let check = compare_with_model(
+        &mut harness,
+        &baked,
+        &lighting,
+        instance,
+        to_sun_world,
+        eye,
+        |_| Some(true),
+    );
+    check.save("tree");
+    let Check {
+        compared,
+        within,
+        worst,
+        bounce_visible,
+        ..
+    } = check;
     println!(
         "tree lighting: {compared} pixels inside leaves compared, {within} within 3/255, worst {worst:.1}/255; the bounce moves {bounce_visible} of them by > 6/255"
     );
@@ -332,7 +413,7 @@ fn a_pruned_crown_keeps_its_light() {
         instance,
         tree,
         ..
-    }) = scene("tree_lighting_pruned")
+    }) = scene("tree_lighting_pruned", false)
     else {
         return;
     };
@@ -397,5 +478,88 @@ fn a_pruned_crown_keeps_its_light() {
         plain_change < -2.0 * TOLERANCE,
         "pruning without area compensation should lose clearly more light: {:+.1} %",
         plain_change * 100.0
+    );
+}
+
+#[test]
+fn a_wall_outside_the_crown_shades_the_leaves_behind_it() {
+    let Some(Scene {
+        mut harness,
+        baked,
+        lighting,
+        instance,
+        to_sun_world,
+        eye,
+        radius,
+        ..
+    }) = scene("tree_lighting_shadow", true)
+    else {
+        return;
+    };
+    // A thin plate across the sun's light above the crown, shading the half of it on one side
+    // of a plane through the crown's centre.
+    let centre = instance.transform_point(baked.crown_center());
+    // The edge of the plate's shadow runs through the crown's centre in a plane holding the
+    // sun's direction and the view's, so the camera sees both halves.
+    let across = to_sun_world.cross(eye - centre).normalize();
+    let along = across.cross(to_sun_world).normalize();
+    let plate_centre = centre + to_sun_world * (2.5 * radius) + across * (2.0 * radius);
+    let plate = Transform::from_translation(plate_centre).with_rotation(Quat::from_mat3(
+        &Mat3::from_cols(across, to_sun_world, along),
+    ));
+    let half = Vec3::new(2.0 * radius, 0.02 * radius, 3.0 * radius);
+    {
+        let world = harness.world_mut();
+        let mesh = world
+            .resource_mut::<Assets<Mesh>>()
+            .add(Cuboid::from_size(half * 2.0));
+        let material = world
+            .resource_mut::<Assets<StandardMaterial>>()
+            .add(StandardMaterial::default());
+        world.spawn((Mesh3d(mesh), MeshMaterial3d(material), plate));
+    }
+    for _ in 0..12 {
+        harness.step();
+    }
+    // Whether the ray from p towards the sun (the plate's normal) crosses the plate, and
+    // whether that holds a little to either side across the shadow's edge.
+    let blocked = |p: Vec3| {
+        let o = p - plate_centre;
+        o.dot(to_sun_world) < 0.0 && o.dot(across).abs() <= half.x && o.dot(along).abs() <= half.z
+    };
+    let margin = 0.08 * radius;
+    let sunlit = |p: Vec3| {
+        let here = blocked(p);
+        (blocked(p + across * margin) == here && blocked(p - across * margin) == here)
+            .then_some(!here)
+    };
+    let check = compare_with_model(
+        &mut harness,
+        &baked,
+        &lighting,
+        instance,
+        to_sun_world,
+        eye,
+        sunlit,
+    );
+    check.save("shadow");
+    let Check {
+        compared,
+        within,
+        worst,
+        sunlit,
+        shaded,
+        ..
+    } = check;
+    println!(
+        "tree lighting under a plate: {compared} leaf pixels compared ({sunlit} sunlit, {shaded} in the plate's shadow), {within} within 3/255 of the CPU model (worst {worst:.1}/255)"
+    );
+    assert!(
+        sunlit >= 200 && shaded >= 200,
+        "the plate should shade part of the crown: {sunlit} sunlit, {shaded} shaded pixels"
+    );
+    assert!(
+        within as f32 >= 0.97 * compared as f32,
+        "{within} of {compared} leaf pixels within 3/255 of the CPU model with the plate's shadow (worst {worst:.1})"
     );
 }

@@ -1,18 +1,18 @@
 // Forward vertex stage of pruned leaves: pulls the kept leaf vertex and hands Bevy's PBR fragment
 // stage an ordinary VertexOutput, so leaves receive Bevy's lighting and shadows. With the tree
 // lighting (`TREE_LIGHTING`), the vertex also carries its leaf's light (`tree_lighting.wgsl`) in
-// the vertex colour, which `leaf_volume_fragment.wgsl` shows in place of Bevy's lighting.
+// its own outputs, which `leaf_volume_fragment.wgsl` shows in place of Bevy's lighting.
 #import bevy_pbr::forward_io::VertexOutput
 #import bevy_foliage::leaf_pulling::{SlotVertex, pull_leaf_vertex}
 #ifdef TREE_LIGHTING
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
 #import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_params}
-#import bevy_foliage::tree_lighting::{LeafOptics, TreeLights, leaf_radiance}
+#import bevy_foliage::tree_lighting::{LeafLight, LeafOptics, TreeLights, TreeLitVertexOutput, leaf_radiance}
 
-// The light leaf vertex `leaf` of instance `instance_index` sends to the eye, in the tree's
-// frame, for a leaf of the material's base colour; divided by that colour, since Bevy's
-// fragment input multiplies the vertex colour by the base colour and texture.
-fn tree_light(leaf: PulledLeafVertex, instance_index: u32) -> vec3<f32> {
+// The light leaf vertex `leaf` of instance `instance_index` sends to the eye, worked out in the
+// tree's frame for a leaf of the material's base colour, then divided by that colour (the
+// fragment stage multiplies it back in with the texture).
+fn tree_light(leaf: PulledLeafVertex, instance_index: u32) -> LeafLight {
     let world_from_local = mesh_functions::get_world_from_local(instance_index);
     // World directions into the model's frame: the transpose undoes a rotation (and, once
     // normalised, a uniform scale).
@@ -31,7 +31,7 @@ fn tree_light(leaf: PulledLeafVertex, instance_index: u32) -> vec3<f32> {
         leaf_params.transmittance_front.rgb * albedo,
         leaf_params.transmittance_back.rgb * albedo,
     );
-    let light = leaf_radiance(
+    var light = leaf_radiance(
         optics,
         normalize(leaf.local_normal),
         to_eye,
@@ -42,10 +42,49 @@ fn tree_light(leaf: PulledLeafVertex, instance_index: u32) -> vec3<f32> {
         leaf_params.bounce != 0u,
     );
     // A channel the base colour lacks sends no light either.
-    return select(light / max(albedo, vec3(1e-6)), vec3(0.0), albedo <= vec3(0.0));
+    let lacks = albedo <= vec3(0.0);
+    let inverse = 1.0 / max(albedo, vec3(1e-6));
+    light.sky = select(light.sky * inverse, vec3(0.0), lacks);
+    light.sun = select(light.sun * inverse, vec3(0.0), lacks);
+    return light;
 }
-#endif
 
+// How far the sun's light travels from the leaf vertex to enter the crown from outside: to the
+// crown's bounding sphere along the sun, in world units. Every leaf of the crown lies inside the
+// sphere, so the sun's shadow map read there sees only what stands outside the crown.
+fn sun_reach(leaf: PulledLeafVertex, instance_index: u32) -> f32 {
+    let world_from_local = mesh_functions::get_world_from_local(instance_index);
+    let local_from_world = transpose(mat3x3<f32>(
+        world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz));
+    let l = normalize(local_from_world * leaf_params.to_sun.xyz);
+    let d = leaf.local_position - leaf.crown_sphere.xyz;
+    let b = dot(d, l);
+    let c = dot(d, d) - leaf.crown_sphere.w * leaf.crown_sphere.w;
+    let t = max(-b + sqrt(max(b * b - c, 0.0)), 0.0);
+    let scale = (length(world_from_local[0].xyz) + length(world_from_local[1].xyz)
+        + length(world_from_local[2].xyz)) / 3.0;
+    return t * scale;
+}
+
+@vertex
+fn vertex(in: SlotVertex) -> TreeLitVertexOutput {
+    var out: TreeLitVertexOutput;
+    let leaf = pull_leaf_vertex(in.instance_index, in.position);
+    out.position = leaf.clip_position;
+    if !leaf.kept {
+        return out;
+    }
+    out.world_position = leaf.world_position;
+    out.world_normal = leaf.world_normal;
+    out.uv = leaf.uv;
+    let light = tree_light(leaf, in.instance_index);
+    out.sky = light.sky;
+    out.sun = light.sun;
+    out.sun_reach = sun_reach(leaf, in.instance_index);
+    out.instance_index = in.instance_index;
+    return out;
+}
+#else
 @vertex
 fn vertex(in: SlotVertex) -> VertexOutput {
     var out: VertexOutput;
@@ -59,11 +98,9 @@ fn vertex(in: SlotVertex) -> VertexOutput {
 #ifdef VERTEX_UVS_A
     out.uv = leaf.uv;
 #endif
-#ifdef TREE_LIGHTING
-    out.color = vec4(tree_light(leaf, in.instance_index), 1.0);
-#endif
 #ifdef VERTEX_OUTPUT_INSTANCE_INDEX
     out.instance_index = in.instance_index;
 #endif
     return out;
 }
+#endif

@@ -119,8 +119,8 @@ pub struct LeafExtension {
     /// Per leaf, the light its neighbours let through in eight directions (tree lighting).
     #[storage(105, read_only, visibility(vertex))]
     pub leaf_light: Handle<ShaderBuffer>,
-    /// Switches.
-    #[uniform(106, visibility(vertex))]
+    /// Switches, and the tree lighting's inputs (read by the tree-lit fragment stage too).
+    #[uniform(106, visibility(vertex, fragment))]
     pub params: LeafParams,
     /// A screen-space soft-shadow visibility texture (`bevy_soft_shadows`'
     /// `SsssTextures::visibility`) to use as the sun's shadow term. With one, the main pass's
@@ -183,15 +183,14 @@ impl MaterialExtension for LeafExtension {
             .iter()
             .any(|d| *d == ShaderDefVal::from("PREPASS_PIPELINE"));
         if key.bind_group_data.tree_lighting && !prepass {
-            // The main pass lit as a volume: the vertex stage computes each leaf's light and
-            // hands it over as the vertex colour (Bevy's `VertexOutput::color`), the fragment
-            // stage shows it. Soft shadows do not apply in this mode.
+            // The main pass lit as a volume: the vertex stage computes each leaf's light
+            // (`TreeLitVertexOutput`), the fragment stage shows it under the sun's shadow from
+            // outside the crown. Screen-space soft shadows do not apply in this mode.
             if let (Some(fragment), Some(volume)) =
                 (descriptor.fragment.as_mut(), LEAF_VOLUME_SHADER.get())
             {
                 fragment.shader = volume.clone();
-                fragment.shader_defs.push("VERTEX_COLORS".into());
-                descriptor.vertex.shader_defs.push("VERTEX_COLORS".into());
+                fragment.shader_defs.push("TREE_LIGHTING".into());
                 descriptor.vertex.shader_defs.push("TREE_LIGHTING".into());
             }
             return Ok(());

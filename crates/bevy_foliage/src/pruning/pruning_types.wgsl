@@ -22,6 +22,8 @@ struct Instance {
     extinction_bits: u32,  // the crown's extinction τ per unit of model space (f32 bits)
     pad_b: u32,
     pad_c: u32,
+    // The crown's bounding sphere in model space (centre xyz, radius; f32 bits).
+    crown_sphere_bits: vec4<u32>,
 }
 
 // A packed leaf vertex (`LEAF_VERTEX_WORDS` words, `store.rs`).

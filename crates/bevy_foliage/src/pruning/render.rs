@@ -220,6 +220,10 @@ fn prepare_pruning(
             ty.extinction_bits,
             0,
             0,
+            ty.crown_sphere_bits[0],
+            ty.crown_sphere_bits[1],
+            ty.crown_sphere_bits[2],
+            ty.crown_sphere_bits[3],
         ]);
     };
     for (entity, slot, params) in &extracted.instances {

@@ -60,6 +60,9 @@ pub struct TypeSlot {
     /// The crown's extinction τ per unit of model space ([`BakedFoliage::extinction`]), as `f32`
     /// bits: the tree lighting's s_max = −ln(a)/τ.
     pub extinction_bits: u32,
+    /// The crown's bounding sphere in model space (centre xyz, radius), as `f32` bits: where
+    /// the sun's light from outside enters the crown.
+    pub crown_sphere_bits: [u32; 4],
 }
 
 /// Set in a pruned tree's `MeshTag` when it is drawn with a quad slot mesh; the low bits are the
@@ -81,7 +84,7 @@ pub const LEAF_VERTEX_WORDS: usize = 16;
 pub const LEAF_LIGHT_WORDS: usize = 4;
 
 /// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf_pulling.wgsl`).
-pub const INSTANCE_WORDS: usize = 20;
+pub const INSTANCE_WORDS: usize = 24;
 
 /// Handles of the shared pruning buffers.
 #[derive(Clone, Debug, Default)]
@@ -195,6 +198,15 @@ pub fn update_foliage_store(
                 full_index_count: tree.indices.len() as u32,
                 quads: tree.quad_leaves() && !store_force_triangles,
                 extinction_bits: tree.extinction.to_bits(),
+                crown_sphere_bits: {
+                    let centre = tree.crown_center();
+                    let radius = tree
+                        .positions
+                        .iter()
+                        .map(|p| p.distance(centre))
+                        .fold(0.0f32, f32::max);
+                    [centre.x, centre.y, centre.z, radius].map(f32::to_bits)
+                },
             };
             // The leaves' attenuations; a bake without them (none stored) lets all light through.
             let light_base = (light.len() / LEAF_LIGHT_WORDS) as u32;

@@ -30,6 +30,13 @@ struct TreeLights {
     ground: vec3<f32>,
 }
 
+// A leaf's light split by where it comes from: the sky and the ground, and what the sun brings
+// (directly and by the bounce).
+struct LeafLight {
+    sky: vec3<f32>,
+    sun: vec3<f32>,
+}
+
 fn direction(j: u32) -> vec3<f32> {
     return vec3(
         select(-XI, XI, (j & 1u) != 0u),
@@ -58,7 +65,7 @@ fn one_minus_exp_over(g: f32, s: f32) -> f32 {
     return (1.0 - exp(-x)) / g;
 }
 
-// The whole of eq. 5.2 for one leaf of unit normal `n` seen from `to_eye`, whose eight
+// The whole of eq. 5.2 for one leaf (`sky + sun` of the result) of unit normal `n` seen from `to_eye`, whose eight
 // directions let `attenuation` through, in a crown of extinction `tau` (`model::leaf_radiance`).
 // `smooth_envelope` picks eq. 5.7's blend of envelope distances for the sun through the crown
 // (`SunThroughCrown::SmoothEnvelope`) over the blend of attenuations (`BlendedAttenuation`);
@@ -74,7 +81,7 @@ fn leaf_radiance(
     lights: TreeLights,
     smooth_envelope: bool,
     bounce: bool,
-) -> vec3<f32> {
+) -> LeafLight {
     var attenuation = attenuation_in;
     let seen_front = dot(n, to_eye) >= 0.0;
     // s_max(P, ω_j) = −ln(a_j) / τ (§5.6), a shut bin letting the least a bake stores through.
@@ -89,9 +96,11 @@ fn leaf_radiance(
         let radiance = select(lights.ground, lights.sky, d.y > 0.0);
         sky += bsdf(optics, n, seen_front, d) * attenuation[j] * radiance;
     }
-    var color = sky * (4.0 * PI / 8.0);
+    var out: LeafLight;
+    out.sky = sky * (4.0 * PI / 8.0);
+    out.sun = vec3(0.0);
     if all(lights.sun == vec3(0.0)) {
-        return color;
+        return out;
     }
     let wl = lights.to_sun;
     // Eq. 5.7's cosine lobes M(ω_l · ω_j) = max(ω_l · ω_j, 0) around the sun.
@@ -119,9 +128,9 @@ fn leaf_radiance(
         lobe_mean /= lobe_sum;
     }
     // Eq. 5.8.
-    color += bsdf(optics, n, seen_front, wl) * through * lights.sun;
+    out.sun = bsdf(optics, n, seen_front, wl) * through * lights.sun;
     if !bounce {
-        return color;
+        return out;
     }
     // Eq. 5.11 with eq. 5.24 (`model::bounce_radiance`), A·G1 with A·ρ = 2τ.
     let rho_bar = optics.reflectance_front + optics.reflectance_back
@@ -138,5 +147,22 @@ fn leaf_radiance(
         let sample = a_g1 * lights.sun * through * one_minus_exp_over(g3, s_max[j]);
         bounced += bsdf(optics, n, seen_front, d) * sample;
     }
-    return color + bounced;
+    out.sun += bounced;
+    return out;
+}
+
+// What the tree-lit leaves' vertex stage hands their fragment stage (`leaf.wgsl`,
+// `leaf_volume_fragment.wgsl`): Bevy's forward inputs the fragment rebuilds its material input
+// from, and the leaf's light divided by the material's base colour (which the fragment
+// multiplies back in with the texture).
+struct TreeLitVertexOutput {
+    @builtin(position) position: vec4<f32>,
+    @location(0) world_position: vec4<f32>,
+    @location(1) world_normal: vec3<f32>,
+    @location(2) uv: vec2<f32>,
+    @location(3) sky: vec3<f32>,
+    @location(4) sun: vec3<f32>,
+    // The distance towards the sun out of the crown's bounding sphere, in world units.
+    @location(5) sun_reach: f32,
+    @location(6) @interpolate(flat) instance_index: u32,
 }
