@@ -5,8 +5,12 @@
 //!
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
-//!     [--points P] [--directions D]
+//!     [--points P] [--directions D] [--sun-maps]
 //! ```
+//! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
+//! map at three texel sizes, the crown's extinction over its depth, eq. 5.3's foliage maps)
+//! against the tracer's shadow rays, beside the baked attenuations' blend
+//! (`lighting::sun_maps`).
 
 use bevy::math::Vec3;
 use bevy_foliage::lighting::model::{LeafMaterial, SunThroughCrown};
@@ -24,7 +28,9 @@ fn main() {
         bounces: 4,
         seed: 1,
     };
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let sun_maps = args.iter().any(|a| a == "--sun-maps");
+    args.retain(|a| a != "--sun-maps");
     let mut i = 0;
     while i < args.len() {
         let value = |i: usize| -> usize {
@@ -43,7 +49,7 @@ fn main() {
             "--directions" => settings.directions = value(i) as u32,
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--sun-maps]"
                 );
                 std::process::exit(2)
             }
@@ -58,6 +64,10 @@ fn main() {
         to_sun: Vec3::new(0.5, 0.7, 0.3).normalize(),
         sun: Vec3::new(3.2, 3.0, 2.7),
     };
+    if sun_maps {
+        sun_map_table(leaves, stride, settings.points, light.to_sun, threads);
+        return;
+    }
     println!(
         "| tree | leaves | τ | component | mean relative error per leaf | mean error / mean light | error of the mean | share of the light |"
     );
@@ -105,5 +115,39 @@ fn main() {
             );
         }
         eprintln!("{name}: {:.1} s", started.elapsed().as_secs_f32());
+    }
+}
+
+/// The `--sun-maps` table: for each procedural tree, the sun's share per leaf by each map
+/// against the tracer's shadow rays. Texel sides are in leaf sizes (the species' leaf length).
+fn sun_map_table(leaves: usize, stride: usize, points: u32, to_sun: Vec3, threads: usize) {
+    use bevy_foliage::lighting::sun_maps::sun_visibility_against_tracer;
+    println!(
+        "| tree | leaf size | estimate of the sun's share | mean relative error per leaf | mean error / mean light | error of the mean |"
+    );
+    println!("|---|---|---|---|---|---|");
+    for species in TreeSpecies::thesis_trees() {
+        let leaf = species.leaf_size;
+        let crown = generate(&species.clone().with_leaf_count(leaves)).leaves;
+        let rows = sun_visibility_against_tracer(
+            &crown,
+            to_sun,
+            stride,
+            points,
+            &[leaf * 0.25, leaf, leaf * 4.0],
+            leaf * 4.0,
+            leaf,
+            threads,
+        );
+        for r in rows {
+            println!(
+                "| {} | {leaf:.3} | {} | {:.1} % | {:.1} % | {:.1} % |",
+                species.name,
+                r.method,
+                100.0 * r.mean_relative,
+                100.0 * r.mean_absolute,
+                100.0 * r.of_the_mean
+            );
+        }
     }
 }

@@ -5,7 +5,8 @@
 //! [`model`] the light a leaf sends to the eye from it (the leaf BSDF, sky, sun and one bounce
 //! of sunlight of §5.2–5.4), the CPU reference of the leaf shaders, with [`path_trace`] the
 //! Monte Carlo ground truth it is measured against; [`settings`] switches the leaf shaders between
-//! it and Bevy's lighting.
+//! it and Bevy's lighting; [`sun_maps`] measures maps rendered from the sun (shadow map, foliage
+//! maps) as the leaves' sun against the same tracer.
 
 pub mod bins;
 pub mod envelope;
@@ -13,3 +14,4 @@ pub mod leaf_tree;
 pub mod model;
 pub mod path_trace;
 pub mod settings;
+pub mod sun_maps;
