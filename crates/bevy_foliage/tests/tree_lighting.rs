@@ -5,9 +5,13 @@
 
 use bevy::camera::Exposure;
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
+use bevy::light::CascadeShadowConfigBuilder;
 use bevy::prelude::*;
 use bevy_foliage::lighting::bins::{DARKEST_LIGHT, light_of};
-use bevy_foliage::lighting::model::{SkyLight, SunBounce, SunThroughCrown, leaf_radiance};
+use bevy_foliage::lighting::model::{
+    SkyLight, SunBounce, SunThroughCrown, bounce_radiance, sky_radiance, sun_radiance,
+    sun_through_crown,
+};
 use bevy_foliage::lighting::path_trace::LeafScene;
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::{PrunedFoliage, PruningParams};
@@ -202,9 +206,13 @@ impl Check {
 }
 
 /// Compares the pixels of the next render that lie inside one leaf (a ray through the pixel's
-/// centre and its four corners all hit it first) with the CPU model of that leaf's light;
-/// `sunlit(p)` says whether the sun reaches world point `p` from outside the crown (`None`: too
-/// near a shadow's edge to compare).
+/// centre and its four corners all hit it first) with the CPU model of that leaf's light.
+/// `outside_blocked(p)` says whether something outside the crown stands between world point `p`
+/// and the sun. With `leaf_shadows` (Bevy's shadow map resolves leaves), the sun's share at the
+/// leaf is the shadow ray's answer — leaves and what is outside — instead of the baked blend
+/// under the outside shadow. Points within `margin` of a shadow's edge (the answer changes
+/// across the sun's light within it) are not compared.
+#[allow(clippy::too_many_arguments)]
 fn compare_with_model(
     harness: &mut RenderHarness,
     baked: &BakedFoliage,
@@ -212,7 +220,9 @@ fn compare_with_model(
     instance: Transform,
     to_sun_world: Vec3,
     eye: Vec3,
-    sunlit: impl Fn(Vec3) -> Option<bool>,
+    outside_blocked: impl Fn(Vec3) -> bool,
+    leaf_shadows: bool,
+    margin: f32,
 ) -> Check {
     let image = harness.render().unwrap();
     let world = harness.world_mut();
@@ -242,31 +252,44 @@ fn compare_with_model(
     let tau = baked.extinction;
     let sky = SkyLight::uniform(Vec3::splat(SKY), lighting.ground_albedo);
     let bounce = SunBounce::new(&optics, to_sun, tau);
-    // The bounce's constants zeroed: the same light without it.
-    let no_bounce = SunBounce {
-        a_g1: [Vec3::ZERO; 8],
-        ..bounce
-    };
     let eye_local = from_world.transform_point3(eye);
-    let expected = |leaf: u32, bounce_on: bool, sun: f32| -> Vec3 {
+    let e_sun = Vec3::splat(SUN);
+    // The light of `leaf` when the sun reaches it from outside the crown by `outside` and, with
+    // leaf shadows, reaches the point by `at_leaf`.
+    let expected = |leaf: u32, bounce_on: bool, outside: f32, at_leaf: Option<f32>| -> Vec3 {
         let a = baked.leaf_light[leaf as usize].map(light_of);
         let s_max = a.map(|a| -a.max(DARKEST_LIGHT).ln() / tau);
         let first = baked.indices[baked.leaf_index_start[leaf as usize] as usize] as usize;
         let n = baked.normals[first].normalize();
         let wo = (eye_local - baked.positions[first]).normalize();
-        leaf_radiance(
-            &optics,
-            n,
-            wo,
-            &a,
-            &s_max,
-            tau,
-            &sky,
-            to_sun,
-            Vec3::splat(sun),
-            if bounce_on { &bounce } else { &no_bounce },
-            SunThroughCrown::BlendedAttenuation,
-        )
+        let baked_through =
+            sun_through_crown(SunThroughCrown::BlendedAttenuation, tau, &a, &s_max, to_sun);
+        let through = at_leaf.unwrap_or(baked_through * outside);
+        let bounced = if bounce_on {
+            bounce_radiance(&optics, n, wo, &bounce, baked_through, &s_max, e_sun) * outside
+        } else {
+            Vec3::ZERO
+        };
+        sky_radiance(&optics, n, wo, &a, &sky)
+            + sun_radiance(&optics, n, wo, to_sun, through, e_sun)
+            + bounced
+    };
+    // Whether the sun reaches world point p on `leaf`: nothing outside and, with leaf shadows,
+    // no other leaf in the way; `None` near the edge of a shadow.
+    let (across_a, across_b) = to_sun_world.any_orthonormal_pair();
+    let reaches = |leaf: u32, p: Vec3| -> bool {
+        !outside_blocked(p)
+            && (!leaf_shadows
+                || scene
+                    .hit(from_world.transform_point3(p), to_sun, leaf)
+                    .is_none())
+    };
+    let sun_at = |leaf: u32, p: Vec3| -> Option<bool> {
+        let here = reaches(leaf, p);
+        [across_a, -across_a, across_b, -across_b]
+            .iter()
+            .all(|d| reaches(leaf, p + *d * margin) == here)
+            .then_some(here)
     };
     let mut check = Check {
         compared: 0,
@@ -296,19 +319,20 @@ fn compare_with_model(
             {
                 continue;
             }
-            let Some(lit) = sunlit(point) else {
+            let Some(lit) = sun_at(leaf, point) else {
                 continue;
             };
-            let sun = if lit { SUN } else { 0.0 };
+            let outside = (!outside_blocked(point)) as u32 as f32;
+            let at_leaf = leaf_shadows.then_some(lit as u32 as f32);
             if lit {
                 check.sunlit += 1;
             } else {
                 check.shaded += 1;
             }
-            let want = expected(leaf, true, sun)
+            let want = expected(leaf, true, outside, at_leaf)
                 .to_array()
                 .map(|c| srgb(c) * 255.0);
-            let plain = expected(leaf, false, sun)
+            let plain = expected(leaf, false, outside, at_leaf)
                 .to_array()
                 .map(|c| srgb(c) * 255.0);
             let got = image.pixel(x, y);
@@ -355,7 +379,9 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         instance,
         to_sun_world,
         eye,
-        |_| Some(true),
+        |_| false,
+        false,
+        0.0,
     );
     check.save("tree");
     let Check {
@@ -481,9 +507,12 @@ fn a_pruned_crown_keeps_its_light() {
     );
 }
 
-#[test]
-fn a_wall_outside_the_crown_shades_the_leaves_behind_it() {
-    let Some(Scene {
+/// The tree with the sun's shadows on: under a plate shading half its crown, in Bevy's default
+/// shadow cascades (texels of millimetres here: the shadow map resolves leaves), or alone in one
+/// coarse cascade (texels of metres, larger than a leaf: the baked blend, under the
+/// map read where the light enters the crown, which must not see the crown's own leaves).
+fn sun_shadows(name: &str, coarse: bool) -> Option<Check> {
+    let Scene {
         mut harness,
         baked,
         lighting,
@@ -492,10 +521,23 @@ fn a_wall_outside_the_crown_shades_the_leaves_behind_it() {
         eye,
         radius,
         ..
-    }) = scene("tree_lighting_shadow", true)
-    else {
-        return;
-    };
+    } = scene(name, true)?;
+    if coarse {
+        let world = harness.world_mut();
+        let sun = world
+            .query_filtered::<Entity, With<DirectionalLight>>()
+            .single(world)
+            .unwrap();
+        world.entity_mut(sun).insert(
+            CascadeShadowConfigBuilder {
+                num_cascades: 1,
+                first_cascade_far_bound: 5000.0,
+                maximum_distance: 5000.0,
+                ..default()
+            }
+            .build(),
+        );
+    }
     // A thin plate across the sun's light above the crown, shading the half of it on one side
     // of a plane through the crown's centre.
     let centre = instance.transform_point(baked.crown_center());
@@ -508,7 +550,7 @@ fn a_wall_outside_the_crown_shades_the_leaves_behind_it() {
         &Mat3::from_cols(across, to_sun_world, along),
     ));
     let half = Vec3::new(2.0 * radius, 0.02 * radius, 3.0 * radius);
-    {
+    if !coarse {
         let world = harness.world_mut();
         let mesh = world
             .resource_mut::<Assets<Mesh>>()
@@ -521,18 +563,16 @@ fn a_wall_outside_the_crown_shades_the_leaves_behind_it() {
     for _ in 0..12 {
         harness.step();
     }
-    // Whether the ray from p towards the sun (the plate's normal) crosses the plate, and
-    // whether that holds a little to either side across the shadow's edge.
+    // Whether the ray from p towards the sun (the plate's normal) crosses the plate.
     let blocked = |p: Vec3| {
         let o = p - plate_centre;
-        o.dot(to_sun_world) < 0.0 && o.dot(across).abs() <= half.x && o.dot(along).abs() <= half.z
+        !coarse
+            && o.dot(to_sun_world) < 0.0
+            && o.dot(across).abs() <= half.x
+            && o.dot(along).abs() <= half.z
     };
-    let margin = 0.08 * radius;
-    let sunlit = |p: Vec3| {
-        let here = blocked(p);
-        (blocked(p + across * margin) == here && blocked(p - across * margin) == here)
-            .then_some(!here)
-    };
+    // Shadow edges, the leaves' and the plate's, blurred over a few millimetre texels.
+    let margin = 0.02 * radius;
     let check = compare_with_model(
         &mut harness,
         &baked,
@@ -540,26 +580,55 @@ fn a_wall_outside_the_crown_shades_the_leaves_behind_it() {
         instance,
         to_sun_world,
         eye,
-        sunlit,
+        blocked,
+        !coarse,
+        margin,
     );
-    check.save("shadow");
-    let Check {
-        compared,
-        within,
-        worst,
-        sunlit,
-        shaded,
-        ..
-    } = check;
+    check.save(name);
     println!(
-        "tree lighting under a plate: {compared} leaf pixels compared ({sunlit} sunlit, {shaded} in the plate's shadow), {within} within 3/255 of the CPU model (worst {worst:.1}/255)"
+        "{name}: {} leaf pixels compared ({} sunlit, {} shaded), {} within 3/255 of the CPU model (worst {:.1}/255)",
+        check.compared, check.sunlit, check.shaded, check.within, check.worst
+    );
+    Some(check)
+}
+
+#[test]
+fn coarse_shadow_texels_leave_the_sun_to_the_baked_blend() {
+    let Some(check) = sun_shadows("tree_lighting_coarse_cascade", true) else {
+        return;
+    };
+    assert!(
+        check.compared >= 800,
+        "too few leaf pixels: {}",
+        check.compared
     );
     assert!(
-        sunlit >= 200 && shaded >= 200,
-        "the plate should shade part of the crown: {sunlit} sunlit, {shaded} shaded pixels"
+        check.within as f32 >= 0.99 * check.compared as f32,
+        "{} of {} leaf pixels within 3/255 of the CPU model's baked blend (worst {:.1})",
+        check.within,
+        check.compared,
+        check.worst
+    );
+}
+
+#[test]
+fn a_fine_shadow_map_gives_each_leaf_the_sun_its_shadow_ray_finds() {
+    // Texels far under a leaf: the sun's share at each leaf point from the shadow map, which
+    // the CPU answers with a shadow ray through the leaves and past the plate.
+    let Some(check) = sun_shadows("tree_lighting_plate", false) else {
+        return;
+    };
+    assert!(
+        check.sunlit >= 150 && check.shaded >= 150,
+        "leaves and the plate should shade part of the crown: {} sunlit, {} shaded pixels",
+        check.sunlit,
+        check.shaded
     );
     assert!(
-        within as f32 >= 0.97 * compared as f32,
-        "{within} of {compared} leaf pixels within 3/255 of the CPU model with the plate's shadow (worst {worst:.1})"
+        check.within as f32 >= 0.95 * check.compared as f32,
+        "{} of {} leaf pixels within 3/255 of the CPU model with the leaves' and the plate's shadows (worst {:.1})",
+        check.within,
+        check.compared,
+        check.worst
     );
 }

@@ -207,6 +207,7 @@ fn errors(method: String, estimate: &[f32], traced: &[f32]) -> SunEstimateError 
 /// `foliage_texel`. The shadow map's depth bias is a texel, at most half of `leaf_size` (a
 /// leaf's own depth across a texel, without letting the leaves behind it through). Every
 /// estimate averages the same points on the leaf.
+#[allow(clippy::too_many_arguments)]
 pub fn sun_visibility_against_tracer(
     leaves: &LeafSet,
     to_sun: Vec3,

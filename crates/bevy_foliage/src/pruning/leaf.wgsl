@@ -46,21 +46,20 @@ fn tree_light(leaf: PulledLeafVertex, instance_index: u32) -> LeafLight {
     let inverse = 1.0 / max(albedo, vec3(1e-6));
     light.sky = select(light.sky * inverse, vec3(0.0), lacks);
     light.sun = select(light.sun * inverse, vec3(0.0), lacks);
+    light.bounce = select(light.bounce * inverse, vec3(0.0), lacks);
     return light;
 }
 
-// How far the sun's light travels from the leaf vertex to enter the crown from outside: to the
-// crown's bounding sphere along the sun, in world units. Every leaf of the crown lies inside the
-// sphere, so the sun's shadow map read there sees only what stands outside the crown.
+// How far the sun's light travels from the leaf vertex after entering the crown from outside:
+// from the plane that touches the crown's bounding sphere on the sun's side, in world units.
+// Every leaf of the crown lies behind that plane, so the sun's shadow map read there — even
+// filtered over texels larger than the crown — sees only what stands outside the crown.
 fn sun_reach(leaf: PulledLeafVertex, instance_index: u32) -> f32 {
     let world_from_local = mesh_functions::get_world_from_local(instance_index);
     let local_from_world = transpose(mat3x3<f32>(
         world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz));
     let l = normalize(local_from_world * leaf_params.to_sun.xyz);
-    let d = leaf.local_position - leaf.crown_sphere.xyz;
-    let b = dot(d, l);
-    let c = dot(d, d) - leaf.crown_sphere.w * leaf.crown_sphere.w;
-    let t = max(-b + sqrt(max(b * b - c, 0.0)), 0.0);
+    let t = max(dot(leaf.crown_sphere.xyz - leaf.local_position, l) + leaf.crown_sphere.w, 0.0);
     let scale = (length(world_from_local[0].xyz) + length(world_from_local[1].xyz)
         + length(world_from_local[2].xyz)) / 3.0;
     return t * scale;
@@ -80,7 +79,12 @@ fn vertex(in: SlotVertex) -> TreeLitVertexOutput {
     let light = tree_light(leaf, in.instance_index);
     out.sky = light.sky;
     out.sun = light.sun;
-    out.sun_reach = sun_reach(leaf, in.instance_index);
+    out.bounce = light.bounce;
+    let world_from_local = mesh_functions::get_world_from_local(in.instance_index);
+    let scale = (length(world_from_local[0].xyz) + length(world_from_local[1].xyz)
+        + length(world_from_local[2].xyz)) / 3.0;
+    out.through_reach_size = vec3(
+        light.through, sun_reach(leaf, in.instance_index), 2.0 * leaf.leaf_radius * scale);
     out.instance_index = in.instance_index;
     return out;
 }

@@ -30,11 +30,14 @@ struct TreeLights {
     ground: vec3<f32>,
 }
 
-// A leaf's light split by where it comes from: the sky and the ground, and what the sun brings
-// (directly and by the bounce).
+// A leaf's light split by where it comes from: the sky and the ground; the sun's direct light
+// were nothing in its way (eq. 5.8 without the crown's share), and the share the crown lets
+// through; one bounce of sunlight. The leaf's light is `sky + sun * through + bounce`.
 struct LeafLight {
     sky: vec3<f32>,
     sun: vec3<f32>,
+    through: f32,
+    bounce: vec3<f32>,
 }
 
 fn direction(j: u32) -> vec3<f32> {
@@ -65,7 +68,7 @@ fn one_minus_exp_over(g: f32, s: f32) -> f32 {
     return (1.0 - exp(-x)) / g;
 }
 
-// The whole of eq. 5.2 for one leaf (`sky + sun` of the result) of unit normal `n` seen from `to_eye`, whose eight
+// The whole of eq. 5.2 for one leaf (`sky + sun * through + bounce` of the result) of unit normal `n` seen from `to_eye`, whose eight
 // directions let `attenuation` through, in a crown of extinction `tau` (`model::leaf_radiance`).
 // `smooth_envelope` picks eq. 5.7's blend of envelope distances for the sun through the crown
 // (`SunThroughCrown::SmoothEnvelope`) over the blend of attenuations (`BlendedAttenuation`);
@@ -99,6 +102,8 @@ fn leaf_radiance(
     var out: LeafLight;
     out.sky = sky * (4.0 * PI / 8.0);
     out.sun = vec3(0.0);
+    out.through = 1.0;
+    out.bounce = vec3(0.0);
     if all(lights.sun == vec3(0.0)) {
         return out;
     }
@@ -128,7 +133,8 @@ fn leaf_radiance(
         lobe_mean /= lobe_sum;
     }
     // Eq. 5.8.
-    out.sun = bsdf(optics, n, seen_front, wl) * through * lights.sun;
+    out.sun = bsdf(optics, n, seen_front, wl) * lights.sun;
+    out.through = through;
     if !bounce {
         return out;
     }
@@ -147,7 +153,7 @@ fn leaf_radiance(
         let sample = a_g1 * lights.sun * through * one_minus_exp_over(g3, s_max[j]);
         bounced += bsdf(optics, n, seen_front, d) * sample;
     }
-    out.sun += bounced;
+    out.bounce = bounced;
     return out;
 }
 
@@ -162,7 +168,10 @@ struct TreeLitVertexOutput {
     @location(2) uv: vec2<f32>,
     @location(3) sky: vec3<f32>,
     @location(4) sun: vec3<f32>,
-    // The distance towards the sun out of the crown's bounding sphere, in world units.
-    @location(5) sun_reach: f32,
-    @location(6) @interpolate(flat) instance_index: u32,
+    @location(5) bounce: vec3<f32>,
+    // The crown's share of the sun (`LeafLight::through`); the distance towards the sun to the
+    // plane touching the crown's bounding sphere on the sun's side, and the leaf's size, in
+    // world units.
+    @location(6) through_reach_size: vec3<f32>,
+    @location(7) @interpolate(flat) instance_index: u32,
 }
