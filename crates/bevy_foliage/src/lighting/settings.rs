@@ -16,11 +16,14 @@ use bevy::prelude::*;
 /// `DirectionalLight` — through the crown (eq. 5.8); and one bounce of the sun's light off the
 /// neighbouring leaves (eq. 5.24). A leaf's reflectances and transmittances are `optics` times its
 /// material's base colour (linear), and its texture's colour multiplies the light it sends, so
-/// leaves keep their materials' colours. The crown's own leaves shade a leaf through its baked
-/// attenuations; what stands outside the crown shades it through Bevy's shadow map of the sun,
-/// read where the sun's light enters the crown (on its bounding sphere, towards the sun), so the
-/// crown's leaves are not counted twice. Screen-space soft shadows are not read in this mode,
-/// and an environment map light is not part of the sky. Prepasses and shadow maps are unchanged.
+/// leaves keep their materials' colours. The sun's direct light on a leaf goes through Bevy's
+/// shadow map of the sun read at the leaf where the map's texels are at most a quarter of the
+/// leaf (leaf-on-leaf shadows, measured closer to a path tracer than the baked attenuations:
+/// [`super::sun_maps`]); where they are a leaf or larger, through the crown's baked attenuations
+/// times the shadow map read on the plane touching the crown's bounding sphere on the sun's side
+/// (what stands outside the crown, its own leaves not counted twice); a smooth hand-over
+/// between. Screen-space soft shadows are not read in this mode, and an environment map light
+/// is not part of the sky. Prepasses and shadow maps are unchanged.
 #[derive(Resource, Clone, Debug, PartialEq, Reflect)]
 #[reflect(Resource, Default, Debug, PartialEq)]
 pub struct TreeLightingSettings {
