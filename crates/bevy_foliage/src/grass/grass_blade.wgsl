@@ -15,7 +15,10 @@
 #import bevy_pbr::forward_io::{VertexOutput, FragmentOutput}
 #import bevy_pbr::pbr_functions::{apply_pbr_lighting, main_pass_post_lighting_processing}
 #endif
-#import bevy_foliage::grass_blade::{blade, blade_kept, terrain_occlusion}
+#import bevy_foliage::grass_blade::{blade, blade_kept}
+#ifndef PREPASS_PIPELINE
+#import bevy_foliage::grass_blade::{BladeVertexOutput, blade_kept_at_density, density_here, forward_input}
+#endif
 #ifndef PREPASS_PIPELINE
 #import bevy_foliage::grass_blade_light::{shadow_mask_loss, shadow_mask_through, sun_visibility}
 #endif
@@ -50,8 +53,13 @@ fn fragment(in: VertexOutput) {
 #endif
 #else
 @fragment
-fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> FragmentOutput {
-    if !blade_kept(in.world_position.xyz, in.uv_b.x, in.position.xy) {
+fn fragment(blade_in: BladeVertexOutput, @builtin(front_facing) is_front: bool) -> FragmentOutput {
+    // The terrain's occlusion and the height the vertex stage read; the density, read once
+    // here, for the blade test and the shadow mask.
+    let terms = blade_in.terms;
+    let in = forward_input(blade_in);
+    let ld = density_here(in.world_position.xyz);
+    if !blade_kept_at_density(in.world_position.xyz, in.uv_b.x, in.position.xy, ld) {
         discard;
     }
     var pbr_input = pbr_input_from_standard_material(in, is_front);
@@ -59,12 +67,12 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
     // ao, §4.2.2) and the terrain's (§4.2.6), the direct light not.
     let h = clamp(in.uv_b.y, 0.0, 1.0);
     pbr_input.material.base_color = vec4(mix(blade.root_color.rgb, blade.tip_color.rgb, h), 1.0);
-    let ao = mix(blade.root_color.w, 1.0, h) * terrain_occlusion(in.world_position.xyz);
+    let ao = mix(blade.root_color.w, 1.0, h) * terms.x;
     pbr_input.diffuse_occlusion *= ao;
     var out: FragmentOutput;
     out.color = apply_pbr_lighting(pbr_input);
     // The neighbours' shadows (§4.2.6, eq. 4.7).
-    let through = shadow_mask_through(pbr_input);
+    let through = shadow_mask_through(terms.y, ld);
     var loss = vec3(0.0);
     if through < 1.0 {
         loss = shadow_mask_loss(pbr_input, sun_visibility(pbr_input, in.position.xy), through);

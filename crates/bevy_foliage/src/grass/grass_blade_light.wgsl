@@ -11,7 +11,7 @@
     mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
     shadows::fetch_directional_shadow,
 }
-#import bevy_foliage::grass_blade::{blade, density_map, ground_heights, shadow_mask}
+#import bevy_foliage::grass_blade::{blade, shadow_mask}
 #import bevy_foliage::grass_functions as grass
 
 // Bevy's shadow term for the sun (the first directional light) at the fragment.
@@ -32,14 +32,12 @@ fn sun_visibility(pbr_input: PbrInput, frag_xy: vec2<f32>) -> f32 {
 // holds nothing back: above the mask's slab, on the blades' upper parts, or with no sun or no
 // mask). Callers fetch the sun's shadow term (a second filtered cascade lookup after the one
 // Bevy's lighting made) only where this is below 1.
-fn shadow_mask_through(pbr_input: PbrInput) -> f32 {
+// `h`: the point's height above the ground; `ld`: the density at the blade.
+fn shadow_mask_through(h: f32, ld: f32) -> f32 {
     if view_bindings::lights.n_directional_lights == 0u || blade.mask_shape.y <= 0.0 {
         return 1.0;
     }
     let l = view_bindings::lights.directional_lights[0].direction_to_light;
-    let world = pbr_input.world_position.xyz;
-    let h = grass::height_above_ground(ground_heights, blade.ground_wind, world);
-    let ld = grass::density_at(density_map, blade.density_rect, world.xz);
     return grass::shadow_mask_light(shadow_mask, blade.mask_shape, h, l, ld);
 }
 

@@ -11,8 +11,37 @@
 #import bevy_pbr::forward_io::{Vertex, VertexOutput}
 #endif
 #import bevy_foliage::grass_blade::{blade, ground_heights, wind_map}
+#ifdef BLADE_TERMS
+#import bevy_foliage::grass_blade::{BladeVertexOutput, terrain_occlusion_map}
+#endif
 #import bevy_foliage::grass_functions as grass
 
+#ifdef BLADE_TERMS
+// The main pass: Bevy's forward outputs and what the fragments would otherwise read from
+// textures, read once per vertex (`BladeVertexOutput::terms`): the terrain's occlusion where the
+// blade stands and this point's height above the ground (the mesh's y).
+@vertex
+fn vertex(vertex: Vertex) -> BladeVertexOutput {
+    var out: BladeVertexOutput;
+    let world_from_local = mesh_functions::get_world_from_local(vertex.instance_index);
+    let flat = mesh_functions::mesh_position_local_to_world(world_from_local, vec4(vertex.position, 1.0));
+    let world = vec4(grass::on_ground(ground_heights, wind_map, blade.ground_wind, flat.xyz, vertex.position.y), 1.0);
+    out.world_position = world;
+    out.position = position_world_to_clip(world.xyz);
+    out.world_normal = mesh_functions::mesh_normal_local_to_world(vertex.normal, vertex.instance_index);
+    out.uv_b = vertex.uv_b;
+    out.terms = vec2(
+        grass::density_at(terrain_occlusion_map, blade.density_rect, flat.xz),
+        vertex.position.y,
+    );
+    out.instance_index = vertex.instance_index;
+#ifdef VISIBILITY_RANGE_DITHER
+    out.visibility_range_dither = mesh_functions::get_visibility_range_dither_level(
+        vertex.instance_index, world_from_local[3]);
+#endif
+    return out;
+}
+#else
 @vertex
 fn vertex(vertex: Vertex) -> VertexOutput {
     var out: VertexOutput;
@@ -52,3 +81,4 @@ fn vertex(vertex: Vertex) -> VertexOutput {
 #endif
     return out;
 }
+#endif

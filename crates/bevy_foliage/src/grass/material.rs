@@ -157,6 +157,21 @@ impl MaterialExtension for GrassBladeExtension {
         _layout: &bevy::mesh::MeshVertexBufferLayoutRef,
         key: bevy::pbr::MaterialExtensionKey<Self>,
     ) -> Result<(), bevy::render::render_resource::SpecializedMeshPipelineError> {
+        // The main pass's vertex stage hands the fragment stage the terrain's occlusion at the
+        // blade and the point's height above the ground (`BladeVertexOutput`), and the fragment
+        // reads the density once for the blade test and the shadow mask: four texel reads a
+        // fragment instead of twenty. The prepass and shadow pipelines keep their own.
+        let prepass = descriptor
+            .vertex
+            .shader_defs
+            .iter()
+            .any(|d| *d == bevy::shader::ShaderDefVal::from("PREPASS_PIPELINE"));
+        if !prepass {
+            descriptor.vertex.shader_defs.push("BLADE_TERMS".into());
+            if let Some(fragment) = descriptor.fragment.as_mut() {
+                fragment.shader_defs.push("BLADE_TERMS".into());
+            }
+        }
         // Only the main pass: the prepass and shadow pipelines keep the blade test of
         // `grass_blade.wgsl`.
         crate::soft_receiver::use_soft_fragment(
