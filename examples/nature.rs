@@ -45,6 +45,7 @@ fn main() -> bevy::app::AppExit {
         .inspect_resource::<FoliagePruningSettings>()
         .inspect_resource::<ClipmapSettings>()
         .inspect_resource::<bevy_nature::foliage::grass::GrassSettings>()
+        .inspect_resource::<bevy_nature::foliage::TreeLightingSettings>()
         .inspect_component::<bevy_nature::soft_shadows::ScreenSpaceSoftShadows>()
         .ready_when(bevy_nature::foliage::grass::systems::grass_ready)
         .run(move |app| build_showcase(app, options))

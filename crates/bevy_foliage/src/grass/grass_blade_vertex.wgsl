@@ -16,6 +16,12 @@
 #endif
 #import bevy_foliage::grass_functions as grass
 
+// A point of the base patch placed in its cell (`flat`, world) onto the ground and into the wind;
+// the mesh's y is its height above the ground.
+fn placed(flat: vec3<f32>, height: f32) -> vec4<f32> {
+    return vec4(grass::on_ground(ground_heights, wind_map, blade.ground_wind, flat, height), 1.0);
+}
+
 #ifdef BLADE_TERMS
 // The main pass: Bevy's forward outputs and what the fragments would otherwise read from
 // textures, read once per vertex (`BladeVertexOutput::terms`): the terrain's occlusion where the
@@ -25,7 +31,7 @@ fn vertex(vertex: Vertex) -> BladeVertexOutput {
     var out: BladeVertexOutput;
     let world_from_local = mesh_functions::get_world_from_local(vertex.instance_index);
     let flat = mesh_functions::mesh_position_local_to_world(world_from_local, vec4(vertex.position, 1.0));
-    let world = vec4(grass::on_ground(ground_heights, wind_map, blade.ground_wind, flat.xyz, vertex.position.y), 1.0);
+    let world = placed(flat.xyz, vertex.position.y);
     out.world_position = world;
     out.position = position_world_to_clip(world.xyz);
     out.world_normal = mesh_functions::mesh_normal_local_to_world(vertex.normal, vertex.instance_index);
@@ -47,8 +53,7 @@ fn vertex(vertex: Vertex) -> VertexOutput {
     var out: VertexOutput;
     let world_from_local = mesh_functions::get_world_from_local(vertex.instance_index);
     let flat = mesh_functions::mesh_position_local_to_world(world_from_local, vec4(vertex.position, 1.0));
-    // The mesh's y is the height above the ground.
-    let world = vec4(grass::on_ground(ground_heights, wind_map, blade.ground_wind, flat.xyz, vertex.position.y), 1.0);
+    let world = placed(flat.xyz, vertex.position.y);
     out.world_position = world;
     out.position = position_world_to_clip(world.xyz);
 #ifdef UNCLIPPED_DEPTH_ORTHO_EMULATION
