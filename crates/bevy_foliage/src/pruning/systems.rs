@@ -401,3 +401,59 @@ pub enum FoliageSystems {
     /// [`refresh_leaf_materials`]); before visibility checking.
     Draw,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_tree_lights_take_the_brightest_sun_and_the_global_ambient_light() {
+        let lighting = TreeLightingSettings {
+            enabled: true,
+            ground_albedo: Vec3::new(0.5, 0.25, 0.0),
+            ..default()
+        };
+        let ambient = GlobalAmbientLight {
+            color: Color::WHITE,
+            brightness: 2.0,
+            ..default()
+        };
+        let dim = DirectionalLight {
+            illuminance: 100.0,
+            ..default()
+        };
+        let bright = DirectionalLight {
+            illuminance: 1000.0,
+            color: Color::linear_rgb(1.0, 0.5, 0.25),
+            ..default()
+        };
+        let broken = DirectionalLight {
+            illuminance: f32::NAN,
+            ..default()
+        };
+        let params = tree_lights(
+            &lighting,
+            Some(&ambient),
+            [
+                (&dim, Vec3::X),
+                (&broken, Vec3::Z),
+                (&bright, Vec3::new(0.0, 2.0, 0.0)),
+            ]
+            .into_iter(),
+        );
+        assert_eq!(params.tree_lighting, 1);
+        assert_eq!(params.to_sun.truncate(), Vec3::Y);
+        assert_eq!(params.sun.truncate(), Vec3::new(1000.0, 500.0, 250.0));
+        assert_eq!(params.sky.truncate(), Vec3::splat(2.0));
+        assert_eq!(params.ground.truncate(), Vec3::new(1.0, 0.5, 0.0));
+        assert_eq!(
+            params.reflectance_front.truncate(),
+            lighting.optics.reflectance_front
+        );
+        // No sun, no ambient light: nothing lights the leaves but what the settings say.
+        let dark = tree_lights(&lighting, None, std::iter::empty());
+        assert_eq!(dark.sun, Vec4::ZERO);
+        assert_eq!(dark.sky, Vec4::ZERO);
+        assert_eq!(dark.to_sun.truncate(), Vec3::Y);
+    }
+}
