@@ -309,8 +309,8 @@ mod tests {
         let leaves = stack();
         let maps = foliage_maps(&leaves, LightFrame::around(&leaves, Vec3::Y, 0.05));
         let (top, bottom) = (Vec3::new(0.0, 1.0, 0.0), Vec3::ZERO);
-        // The upper leaf is the nearest, the lower the farthest, two triangles each… one
-        // triangle of each covers a texel centre (the quad's diagonal splits them).
+        // Over a texel both leaves cover, the upper leaf is the nearest depth and the lower the
+        // farthest, and one triangle of each covers the texel's centre.
         let (q, z_top) = maps.frame.project(top + Vec3::new(0.1, 0.0, 0.1));
         let i = (q.y as u32 * maps.frame.size + q.x as u32) as usize;
         assert!((maps.near[i] - z_top).abs() < 1e-5);

@@ -9,18 +9,33 @@
 #import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_params}
 #import bevy_foliage::tree_lighting::{LeafLight, LeafOptics, TreeLights, TreeLitVertexOutput, leaf_radiance}
 
-// The light leaf vertex `leaf` of instance `instance_index` sends to the eye, worked out in the
-// tree's frame for a leaf of the material's base colour, then divided by that colour (the
-// fragment stage multiplies it back in with the texture).
-fn tree_light(leaf: PulledLeafVertex, instance_index: u32) -> LeafLight {
+// The tree instance's frame, read once per vertex: world directions into the model's frame
+// (the transpose undoes a rotation and, once normalised, a uniform scale), the instance's scale
+// and the direction towards the sun in the model's frame.
+struct TreeFrame {
+    local_from_world: mat3x3<f32>,
+    scale: f32,
+    to_sun: vec3<f32>,
+}
+
+fn tree_frame(instance_index: u32) -> TreeFrame {
     let world_from_local = mesh_functions::get_world_from_local(instance_index);
-    // World directions into the model's frame: the transpose undoes a rotation (and, once
-    // normalised, a uniform scale).
-    let local_from_world = transpose(mat3x3<f32>(
+    var frame: TreeFrame;
+    frame.local_from_world = transpose(mat3x3<f32>(
         world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz));
-    let to_eye = normalize(local_from_world * (view.world_position - leaf.world_position.xyz));
+    frame.scale = (length(world_from_local[0].xyz) + length(world_from_local[1].xyz)
+        + length(world_from_local[2].xyz)) / 3.0;
+    frame.to_sun = normalize(frame.local_from_world * leaf_params.to_sun.xyz);
+    return frame;
+}
+
+// The light leaf vertex `leaf` sends to the eye, worked out in the tree's frame for a leaf of
+// the material's base colour, then divided by that colour (the fragment stage multiplies it
+// back in with the texture).
+fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
+    let to_eye = normalize(frame.local_from_world * (view.world_position - leaf.world_position.xyz));
     var lights: TreeLights;
-    lights.to_sun = normalize(local_from_world * leaf_params.to_sun.xyz);
+    lights.to_sun = frame.to_sun;
     lights.sun = leaf_params.sun.rgb;
     lights.sky = leaf_params.sky.rgb;
     lights.ground = leaf_params.ground.rgb;
@@ -54,15 +69,10 @@ fn tree_light(leaf: PulledLeafVertex, instance_index: u32) -> LeafLight {
 // from the plane that touches the crown's bounding sphere on the sun's side, in world units.
 // Every leaf of the crown lies behind that plane, so the sun's shadow map read there — even
 // filtered over texels larger than the crown — sees only what stands outside the crown.
-fn sun_reach(leaf: PulledLeafVertex, instance_index: u32) -> f32 {
-    let world_from_local = mesh_functions::get_world_from_local(instance_index);
-    let local_from_world = transpose(mat3x3<f32>(
-        world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz));
-    let l = normalize(local_from_world * leaf_params.to_sun.xyz);
-    let t = max(dot(leaf.crown_sphere.xyz - leaf.local_position, l) + leaf.crown_sphere.w, 0.0);
-    let scale = (length(world_from_local[0].xyz) + length(world_from_local[1].xyz)
-        + length(world_from_local[2].xyz)) / 3.0;
-    return t * scale;
+fn sun_reach(leaf: PulledLeafVertex, frame: TreeFrame) -> f32 {
+    let t = max(
+        dot(leaf.crown_sphere.xyz - leaf.local_position, frame.to_sun) + leaf.crown_sphere.w, 0.0);
+    return t * frame.scale;
 }
 
 @vertex
@@ -76,15 +86,13 @@ fn vertex(in: SlotVertex) -> TreeLitVertexOutput {
     out.world_position = leaf.world_position;
     out.world_normal = leaf.world_normal;
     out.uv = leaf.uv;
-    let light = tree_light(leaf, in.instance_index);
+    let frame = tree_frame(in.instance_index);
+    let light = tree_light(leaf, frame);
     out.sky = light.sky;
     out.sun = light.sun;
     out.bounce = light.bounce;
-    let world_from_local = mesh_functions::get_world_from_local(in.instance_index);
-    let scale = (length(world_from_local[0].xyz) + length(world_from_local[1].xyz)
-        + length(world_from_local[2].xyz)) / 3.0;
     out.through_reach_size = vec3(
-        light.through, sun_reach(leaf, in.instance_index), 2.0 * leaf.leaf_radius * scale);
+        light.through, sun_reach(leaf, frame), 2.0 * leaf.leaf_radius * frame.scale);
     out.instance_index = in.instance_index;
     return out;
 }
