@@ -108,14 +108,22 @@ pub enum TileStatus {
         /// First frame a retry may start.
         retry_at: u64,
     },
-    /// Failed [`MAX_TILE_ATTEMPTS`] times: never requested again (the terrain shows the
-    /// no-data colour there).
-    GivenUp,
+    /// Failed [`MAX_TILE_ATTEMPTS`] times: the terrain shows the no-data colour there, and
+    /// the tile is only probed again — one load every [`GIVEN_UP_PROBE_FRAMES`] — so that a
+    /// source which comes back (a server after an outage, a file rewritten) heals the terrain
+    /// without a restart, while a tile that is truly broken costs one read every few seconds.
+    GivenUp {
+        /// First frame the next probe may start.
+        retry_at: u64,
+    },
 }
 
 /// Loads of one tile that may fail before it is given up: with the doubling back-off, about
-/// 2⁶ frames of retrying — a file being written, a server's brief outage — then no more.
+/// 2⁶ frames of retrying — a file being written, a server's brief outage — then only probes.
 pub const MAX_TILE_ATTEMPTS: u32 = 6;
+
+/// Frames between probes of a given-up tile (about four seconds at 60 frames a second).
+pub const GIVEN_UP_PROBE_FRAMES: u64 = 256;
 
 /// The queue of tile loads.
 #[derive(Clone, Debug, Default)]
@@ -145,8 +153,12 @@ impl TileRequests {
                 self.merged += 1;
                 false
             }
-            Some(TileStatus::Failed { retry_at, .. }) if frame < *retry_at => false,
-            Some(TileStatus::Absent | TileStatus::GivenUp) => false,
+            Some(TileStatus::Failed { retry_at, .. } | TileStatus::GivenUp { retry_at })
+                if frame < *retry_at =>
+            {
+                false
+            }
+            Some(TileStatus::Absent) => false,
             _ => {
                 // A retry keeps its failure count (in `failed_attempts`) for the next back-off.
                 self.queue.insert(key);
@@ -179,12 +191,16 @@ impl TileRequests {
     }
 
     /// A load failed (I/O error, corrupt image) in frame `frame`: retry after a back-off, or
-    /// give the tile up after [`MAX_TILE_ATTEMPTS`] failures. Returns the failures so far.
+    /// give the tile up after [`MAX_TILE_ATTEMPTS`] failures (then probe it every
+    /// [`GIVEN_UP_PROBE_FRAMES`]). Returns the failures so far: [`MAX_TILE_ATTEMPTS`] exactly
+    /// when the tile has just been given up, more when a probe failed.
     pub fn failed(&mut self, key: TileKey, frame: u64) -> u32 {
         let attempts = self.failed_attempts.get(&key).copied().unwrap_or(0) + 1;
         self.failed_attempts.insert(key, attempts);
         let status = if attempts >= MAX_TILE_ATTEMPTS {
-            TileStatus::GivenUp
+            TileStatus::GivenUp {
+                retry_at: frame + GIVEN_UP_PROBE_FRAMES,
+            }
         } else {
             TileStatus::Failed {
                 attempts,
@@ -284,7 +300,29 @@ mod tests {
             r.next_batch(1);
             assert_eq!(r.failed(key(3, 0, 0), frame), attempt);
         }
-        assert_eq!(r.status(&key(3, 0, 0)), Some(TileStatus::GivenUp));
-        assert!(!r.request(key(3, 0, 0), frame + 100_000));
+        assert_eq!(
+            r.status(&key(3, 0, 0)),
+            Some(TileStatus::GivenUp {
+                retry_at: frame + GIVEN_UP_PROBE_FRAMES
+            })
+        );
+        // Given up, it is only probed: not before the probe interval, once after it.
+        assert!(!r.request(key(3, 0, 0), frame + GIVEN_UP_PROBE_FRAMES - 1));
+        frame += GIVEN_UP_PROBE_FRAMES;
+        assert!(r.request(key(3, 0, 0), frame));
+        assert!(!r.request(key(3, 0, 0), frame), "one probe at a time");
+        r.next_batch(1);
+        // A failed probe keeps it given up, until the next probe.
+        assert_eq!(r.failed(key(3, 0, 0), frame), MAX_TILE_ATTEMPTS + 1);
+        assert!(!r.request(key(3, 0, 0), frame + 1));
+        frame += GIVEN_UP_PROBE_FRAMES;
+        assert!(r.request(key(3, 0, 0), frame));
+        r.next_batch(1);
+        // A probe that loads heals the tile: a later failure starts the back-off afresh.
+        r.loaded(key(3, 0, 0));
+        assert_eq!(r.status(&key(3, 0, 0)), None);
+        assert!(r.request(key(3, 0, 0), frame + 1));
+        r.next_batch(1);
+        assert_eq!(r.failed(key(3, 0, 0), frame + 1), 1);
     }
 }

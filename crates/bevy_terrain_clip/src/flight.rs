@@ -220,7 +220,7 @@ pub fn simulate_flight(config: &FlightConfig) -> FlightReport {
         in_flight.retain(|&(done, key, failed)| {
             if done <= now && failed {
                 failed_reads += 1;
-                if requests.failed(key, frame) >= crate::cache::MAX_TILE_ATTEMPTS {
+                if requests.failed(key, frame) == crate::cache::MAX_TILE_ATTEMPTS {
                     given_up += 1;
                 }
                 false

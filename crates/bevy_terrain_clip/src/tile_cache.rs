@@ -197,8 +197,12 @@ impl TileCache {
                     // One warning when a tile first fails, one when it is given up.
                     if attempts == 1 {
                         warn!("terrain tile {key:?} failed (retried up to {max} times): {e}");
-                    } else if attempts >= max {
-                        warn!("terrain tile {key:?} given up after {attempts} failures: {e}");
+                    } else if attempts == max {
+                        warn!(
+                            "terrain tile {key:?} given up after {attempts} failures (probed \
+                             again every {} frames): {e}",
+                            crate::cache::GIVEN_UP_PROBE_FRAMES
+                        );
                         self.stats.given_up += 1;
                     } else {
                         bevy::log::debug!("terrain tile {key:?} failed again ({attempts}): {e}");
@@ -394,7 +398,8 @@ mod tests {
     /// (`faults::TileFaults`), against the same flight without faults: nothing panics, the cache
     /// and the loads in flight stay within their bounds, loads that never answer are abandoned
     /// after the timeout (their slots freed), coverage of the working set drops but stays
-    /// useful while the faults last, and once they stop every tile not given up arrives.
+    /// useful while the faults last, and once they stop every tile arrives (a given-up tile through
+    /// its probe).
     #[test]
     fn streaming_degrades_under_faults_and_recovers() {
         use crate::faults::{FaultyTileSource, TileFaults};
@@ -485,27 +490,25 @@ mod tests {
             faulty < clean && faulty > 0.75 * clean,
             "{faulty} vs {clean}"
         );
-        // Recovery: faults off, the last window held still.
+        // Recovery: faults off, the last window held still. Every tile arrives, those given
+        // up during the faults too (through their probes, within a probe interval).
         source.set_enabled(false);
         let keys = window(599);
         let mut recovered = false;
+        let given_up_during_faults = cache.stats.given_up;
         for _ in 0..3000 {
             for &k in &keys {
                 let _ = cache.get(k);
             }
             cache.poll();
             assert!(cache.len() <= cache.capacity());
-            let given_up = keys
-                .iter()
-                .filter(|k| cache.status(**k) == Some(crate::cache::TileStatus::GivenUp))
-                .count();
-            if resident(&cache, &keys) + given_up == keys.len() && cache.stats.in_flight == 0 {
+            if resident(&cache, &keys) == keys.len() && cache.stats.in_flight == 0 {
                 recovered = true;
                 eprintln!(
-                    "recovered: {} resident, {given_up} given up",
-                    keys.len() - given_up
+                    "recovered: {} resident ({given_up_during_faults} tiles given up during \
+                     the faults)",
+                    keys.len()
                 );
-                assert!(given_up <= 2, "{given_up} tiles given up");
                 break;
             }
             std::thread::sleep(std::time::Duration::from_millis(1));
