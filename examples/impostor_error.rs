@@ -182,12 +182,7 @@ fn main() {
             }
         };
         let world = harness.world_mut();
-        let asset = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-            world.resource_scope(|world, mut images: Mut<Assets<Image>>| {
-                let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
-                BillboardCloudAsset::from_data(&data, &mut meshes, &mut images, &mut materials)
-            })
-        });
+        let asset = BillboardCloudAsset::from_data_in(world, &data);
         let impostor = world
             .spawn((
                 Mesh3d(asset.mesh.clone()),

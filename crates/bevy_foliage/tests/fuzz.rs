@@ -347,6 +347,12 @@ fn fuzz_billboard_cloud_cache_decoder() {
         atlas_size: size,
         albedo: (0..size * size * 4).map(|i| i as u8).collect(),
         normal: (0..size * size * 4).map(|i| (i * 7) as u8).collect(),
+        light: [
+            (0..size * size * 4).map(|i| (i * 3) as u8).collect(),
+            (0..size * size * 4).map(|i| (i * 5) as u8).collect(),
+            (0..size * size * 4).map(|i| (i * 11) as u8).collect(),
+        ],
+        extinction: 0.8,
         source_hash: 0xDEAD_BEEF,
         bake_ms: 12.5,
     };
@@ -363,6 +369,7 @@ fn fuzz_billboard_cloud_cache_decoder() {
             };
             let n = (decoded.atlas_size * decoded.atlas_size * 4) as usize;
             assert_eq!((decoded.albedo.len(), decoded.normal.len()), (n, n));
+            assert!(decoded.light.iter().all(|l| l.len() == n));
             assert_eq!(
                 impostor_format::decode(&impostor_format::encode(&decoded)).unwrap(),
                 decoded

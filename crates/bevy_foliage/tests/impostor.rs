@@ -1,5 +1,6 @@
 //! Billboard-cloud impostors on the GPU: the atlas the GPU bake renders equals the CPU reference
-//! texel by texel (coverage, albedo, normals), a bake that cannot work fails with a message and no
+//! texel by texel (coverage, albedo, normals, leaf or bark, the tree lighting's attenuations), a
+//! bake that cannot work fails with a message and no
 //! panic, and a forest tree beyond the pruning's `far` is drawn by its impostor — close to the full
 //! tree rendered in the same run — instead of by nothing.
 
@@ -37,12 +38,7 @@ fn cloud_asset(
     data: &ImpostorData,
 ) -> Handle<bevy_foliage::impostor::assets::BillboardCloudAsset> {
     use bevy_foliage::impostor::assets::BillboardCloudAsset;
-    let asset = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-        world.resource_scope(|world, mut images: Mut<Assets<Image>>| {
-            let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
-            BillboardCloudAsset::from_data(data, &mut meshes, &mut images, &mut materials)
-        })
-    });
+    let asset = BillboardCloudAsset::from_data_in(world, data);
     world
         .resource_mut::<Assets<BillboardCloudAsset>>()
         .add(asset)
@@ -124,10 +120,14 @@ fn check_gpu_bake_against_reference(test: &str, source: ImpostorSource) {
         .expect("raw atlases")
         .clone();
     assert!(data.planes.len() >= 3, "{} planes", data.planes.len());
-    let (albedo, normal) = bake_reference(&source, &raw.cloud, &raw.layout);
+    let light = source.leaf_light();
+    assert_eq!(data.extinction, light.extinction);
+    let reference = bake_reference(&source, &raw.cloud, &raw.layout, &light);
+    let (albedo, normal) = (&reference.albedo, &reference.normal);
     let texels = (raw.layout.size * raw.layout.size) as usize;
     let (mut covered_cpu, mut covered_gpu, mut disagree, mut colour_off, mut normal_off, mut both) =
         (0usize, 0usize, 0usize, 0usize, 0usize, 0usize);
+    let (mut light_off, mut bark, mut dim) = (0usize, 0usize, 0usize);
     for i in 0..texels {
         let (c, g) = (albedo[i * 4 + 3] == 255, raw.albedo[i * 4 + 3] == 255);
         covered_cpu += c as usize;
@@ -146,15 +146,28 @@ fn check_gpu_bake_against_reference(test: &str, source: ImpostorSource) {
                 .max()
                 .unwrap()
         };
-        if diff(&albedo, &raw.albedo) > 2 {
+        if diff(albedo, &raw.albedo) > 2 {
             colour_off += 1;
         }
-        if diff(&normal, &raw.normal) > 4 {
+        if diff(normal, &raw.normal) > 4 {
             normal_off += 1;
         }
+        // The nine light values of the texel's leaf.
+        let light_diff = (0..3)
+            .flat_map(|k| (0..3).map(move |c| (k, c)))
+            .map(|(k, c)| {
+                (reference.light[k][i * 4 + c] as i32 - raw.light[k][i * 4 + c] as i32).abs()
+            })
+            .max()
+            .unwrap();
+        if light_diff > 2 {
+            light_off += 1;
+        }
+        bark += (reference.light[2][i * 4 + 2] == 0) as usize;
+        dim += (reference.light[0][i * 4 + 1] < 128) as usize;
     }
     eprintln!(
-        "{} planes, covered CPU {covered_cpu} GPU {covered_gpu}, disagree {disagree}, colour off {colour_off}, normal off {normal_off} of {both}",
+        "{} planes, covered CPU {covered_cpu} GPU {covered_gpu}, disagree {disagree}, colour off {colour_off}, normal off {normal_off}, light off {light_off} ({bark} bark, {dim} dim in bin 1) of {both}",
         data.planes.len()
     );
     // The atlas is not empty, and the GPU covers the same texels: edge texels whose centre lies
@@ -175,6 +188,15 @@ fn check_gpu_bake_against_reference(test: &str, source: ImpostorSource) {
         (normal_off as f64) < 0.01 * both as f64,
         "{normal_off} of {both}"
     );
+    // The same leaf's light, leaf and bark told apart: the crown's attenuations vary from leaf
+    // to leaf (many texels let less than a fifth of the light through in bin 1), so a texel
+    // showing another leaf, or values swapped, shows.
+    assert!(bark > 0, "the bark is baked as bark");
+    assert!(
+        (light_off as f64) < 0.005 * both as f64,
+        "{light_off} of {both}"
+    );
+    assert!(dim > both / 10, "{dim} of {both}");
 }
 
 #[test]

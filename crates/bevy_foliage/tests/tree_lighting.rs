@@ -632,3 +632,300 @@ fn a_fine_shadow_map_gives_each_leaf_the_sun_its_shadow_ray_finds() {
         check.worst
     );
 }
+
+/// The light values of one block of the synthetic billboard cloud's atlas.
+struct ImpostorBlock {
+    albedo: Vec3,
+    /// Tangent-space normal (x along the plane's tangent, y its bitangent, z its normal).
+    normal: Vec3,
+    attenuation: [f32; 8],
+    leaf: bool,
+}
+
+/// A billboard cloud of one 2 × 2 m plane facing +z whose 64² atlas is four uniform 32²
+/// blocks: three leaves with their own albedo, tilted normal and attenuations, and bark.
+fn block_cloud() -> (
+    bevy_foliage::impostor::format::ImpostorData,
+    Vec<ImpostorBlock>,
+) {
+    use bevy_foliage::impostor::format::{ImpostorData, ImpostorPlane};
+    use bevy_foliage::impostor::texture::{encode_light, linear_to_srgb};
+    let blocks = vec![
+        ImpostorBlock {
+            albedo: Vec3::new(0.35, 0.5, 0.2),
+            normal: Vec3::new(0.3, 0.2, 0.93).normalize(),
+            attenuation: [0.9, 0.2, 0.6, 0.05, 0.8, 0.4, 0.7, 0.3],
+            leaf: true,
+        },
+        ImpostorBlock {
+            albedo: Vec3::new(0.6, 0.45, 0.15),
+            normal: Vec3::new(-0.45, 0.1, 0.89).normalize(),
+            attenuation: [0.3, 0.7, 0.1, 0.95, 0.5, 0.02, 0.6, 0.85],
+            leaf: true,
+        },
+        ImpostorBlock {
+            albedo: Vec3::new(0.2, 0.4, 0.3),
+            normal: Vec3::Z,
+            attenuation: [0.08, 0.1, 0.12, 0.15, 0.2, 0.25, 0.3, 0.35],
+            leaf: true,
+        },
+        ImpostorBlock {
+            albedo: Vec3::new(0.3, 0.2, 0.12),
+            normal: Vec3::new(0.2, -0.3, 0.93).normalize(),
+            attenuation: [1.0; 8],
+            leaf: false,
+        },
+    ];
+    let size = 64u32;
+    let mut albedo = vec![0u8; (size * size * 4) as usize];
+    let mut normal = albedo.clone();
+    let mut light = [albedo.clone(), albedo.clone(), albedo.clone()];
+    for y in 0..size {
+        for x in 0..size {
+            let b = &blocks[((y / 32) * 2 + x / 32) as usize];
+            let o = ((y * size + x) * 4) as usize;
+            let a = b.albedo;
+            albedo[o..o + 4].copy_from_slice(&[
+                linear_to_srgb(a.x),
+                linear_to_srgb(a.y),
+                linear_to_srgb(a.z),
+                255,
+            ]);
+            let enc = |c: f32| ((c * 0.5 + 0.5) * 255.0 + 0.5) as u8;
+            normal[o..o + 4].copy_from_slice(&[
+                enc(b.normal.x),
+                enc(b.normal.y),
+                enc(b.normal.z),
+                255,
+            ]);
+            let v = b.attenuation;
+            let leaf = b.leaf as u32 as f32;
+            let values = [v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], leaf];
+            for (k, atlas) in light.iter_mut().enumerate() {
+                atlas[o..o + 4].copy_from_slice(&encode_light([
+                    values[3 * k],
+                    values[3 * k + 1],
+                    values[3 * k + 2],
+                ]));
+            }
+        }
+    }
+    let data = ImpostorData {
+        center: Vec3::new(0.0, 1.0, 0.0),
+        radius: 1.5,
+        planes: vec![ImpostorPlane {
+            corners: [
+                Vec3::new(-1.0, 0.0, 0.0),
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(1.0, 2.0, 0.0),
+                Vec3::new(-1.0, 2.0, 0.0),
+            ],
+            normal: Vec3::Z,
+            tangent: Vec3::X,
+            uv_min: Vec2::new(0.0, 1.0),
+            uv_max: Vec2::new(1.0, 0.0),
+            role: 0,
+        }],
+        atlas_size: size,
+        albedo,
+        normal,
+        light,
+        extinction: 1.3,
+        source_hash: 1,
+        bake_ms: 0.0,
+    };
+    (data, blocks)
+}
+
+/// A billboard cloud drawn with the tree lighting: every pixel well inside a leaf block shows
+/// the CPU model's light for that texel's values (attenuations, normal, albedo as the optics),
+/// seen from a turned instance; the bark block shows Bevy's PBR, pixel for pixel as the cloud's
+/// plain material draws it, while the leaf blocks do not.
+#[test]
+fn a_tree_lit_billboard_cloud_lights_each_leaf_texel_as_the_model_does() {
+    use bevy_foliage::impostor::assets::BillboardCloudAsset;
+    use bevy_foliage::impostor::texture::srgb_to_linear;
+    let Some(mut harness) = RenderHarness::for_test("tree_lit_impostor", SIZE, SIZE) else {
+        return;
+    };
+    let lighting = TreeLightingSettings {
+        enabled: true,
+        optics: bevy_foliage::lighting::model::LeafMaterial {
+            reflectance_front: Vec3::new(0.8, 0.7, 0.9),
+            reflectance_back: Vec3::new(1.0, 0.9, 0.8),
+            transmittance_front: Vec3::new(0.6, 0.7, 0.5),
+            transmittance_back: Vec3::new(0.6, 0.5, 0.7),
+        },
+        ground_albedo: Vec3::new(0.3, 0.25, 0.2),
+        sun_through_crown: SunThroughCrown::BlendedAttenuation,
+        bounce: true,
+    };
+    harness.app_mut().add_plugins(FoliagePlugin);
+    harness.app_mut().insert_resource(lighting.clone());
+    harness.app_mut().insert_resource(ClearColor(Color::BLACK));
+    harness.app_mut().insert_resource(GlobalAmbientLight {
+        color: Color::WHITE,
+        brightness: SKY,
+        ..default()
+    });
+    let (data, blocks) = block_cloud();
+    let asset = BillboardCloudAsset::from_data_in(harness.world_mut(), &data);
+    let instance = Transform::from_rotation(Quat::from_rotation_y(0.5));
+    let cloud = harness
+        .world_mut()
+        .spawn((
+            Mesh3d(asset.mesh.clone()),
+            MeshMaterial3d(asset.tree_lit.clone()),
+            instance,
+        ))
+        .id();
+    // The sun from the side and above, so the leaves' own light, the light through them and
+    // the bounce all show.
+    let to_sun_world = Vec3::new(0.6, 0.7, 0.4).normalize();
+    harness.world_mut().spawn((
+        DirectionalLight {
+            illuminance: SUN,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::default().looking_to(-to_sun_world, Vec3::Y),
+    ));
+    let eye = instance.transform_point(Vec3::new(0.5, 1.6, 2.6));
+    let target = instance.transform_point(Vec3::new(0.0, 1.0, 0.0));
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Tonemapping::None,
+        DebandDither::Disabled,
+        Exposure {
+            ev100: -(1.2f32).log2(),
+        },
+        Transform::from_translation(eye).looking_at(target, Vec3::Y),
+    ));
+    harness.wait_until_ready().unwrap();
+    for _ in 0..4 {
+        harness.step();
+    }
+    let lit = harness.render().unwrap();
+    // The same view with the cloud's plain material: Bevy's PBR everywhere.
+    harness
+        .world_mut()
+        .entity_mut(cloud)
+        .remove::<MeshMaterial3d<bevy_foliage::impostor::tree_lit::TreeLitImpostorMaterial>>()
+        .insert(MeshMaterial3d(asset.material.clone()));
+    harness.wait_until_ready().unwrap();
+    let pbr = harness.render().unwrap();
+
+    let world = harness.world_mut();
+    let (camera, camera_transform) = world
+        .query::<(&Camera, &GlobalTransform)>()
+        .single(world)
+        .unwrap();
+    let (camera, camera_transform) = (camera.clone(), *camera_transform);
+    let from_world = instance.compute_affine().inverse();
+    // The texel a pixel position sees on the plane (model space z = 0), if any.
+    let texel = |px: Vec2| -> Option<(Vec3, Vec2)> {
+        let ray = camera.viewport_to_world(&camera_transform, px).ok()?;
+        let origin = from_world.transform_point3(ray.origin);
+        let dir = from_world.transform_vector3(*ray.direction);
+        let t = -origin.z / dir.z;
+        let q = origin + dir * t;
+        let uv = Vec2::new((q.x + 1.0) * 0.5, 1.0 - q.y * 0.5) * 64.0;
+        (t > 0.0 && uv.cmpge(Vec2::ZERO).all() && uv.cmplt(Vec2::splat(64.0)).all())
+            .then_some((q, uv))
+    };
+    let to_sun = from_world.transform_vector3(to_sun_world).normalize();
+    let eye_local = from_world.transform_point3(eye);
+    let tau = data.extinction;
+    let sky = SkyLight::uniform(Vec3::splat(SKY), lighting.ground_albedo);
+    let e_sun = Vec3::splat(SUN);
+    let (mut compared, mut within, mut worst) = (0u32, 0u32, 0.0f32);
+    let (mut bark, mut bark_same, mut leaves_unlike_pbr) = (0u32, 0u32, 0u32);
+    let mut reference = RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let Some((q, uv)) = texel(centre) else {
+                continue;
+            };
+            // Only pixels whose footprint stays three texels inside one block: the filtered
+            // atlas is that block's values there.
+            let block = |uv: Vec2| ((uv.y / 32.0) as usize) * 2 + (uv.x / 32.0) as usize;
+            let b = block(uv);
+            let inside = [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)]
+                .iter()
+                .all(|&(dx, dy)| {
+                    texel(centre + Vec2::new(dx, dy)).is_some_and(|(_, c)| {
+                        let within_block = c - Vec2::new((b % 2) as f32, (b / 2) as f32) * 32.0;
+                        block(c) == b
+                            && within_block.cmpge(Vec2::splat(3.0)).all()
+                            && within_block.cmple(Vec2::splat(29.0)).all()
+                    })
+                });
+            if !inside {
+                continue;
+            }
+            let got = lit.pixel(x, y);
+            if !blocks[b].leaf {
+                bark += 1;
+                let p = pbr.pixel(x, y);
+                bark_same += (0..3).all(|c| (got[c] as i32 - p[c] as i32).abs() <= 2) as u32;
+                continue;
+            }
+            // The texel's values as the GPU reads them back from the atlases.
+            let decode_n =
+                |c: f32| (((c * 0.5 + 0.5) * 255.0 + 0.5) as u8) as f32 / 255.0 * 2.0 - 1.0;
+            let n_ts = blocks[b].normal;
+            let n = Vec3::new(decode_n(n_ts.x), decode_n(n_ts.y), decode_n(n_ts.z)).normalize();
+            let albedo = blocks[b]
+                .albedo
+                .to_array()
+                .map(|c| srgb_to_linear(bevy_foliage::impostor::texture::linear_to_srgb(c)));
+            let albedo = Vec3::from_array(albedo);
+            let a = blocks[b]
+                .attenuation
+                .map(|v| srgb_to_linear(bevy_foliage::impostor::texture::linear_to_srgb(v)));
+            let s_max = a.map(|a| -a.max(DARKEST_LIGHT).ln() / tau);
+            let optics = bevy_foliage::lighting::model::LeafMaterial {
+                reflectance_front: lighting.optics.reflectance_front * albedo,
+                reflectance_back: lighting.optics.reflectance_back * albedo,
+                transmittance_front: lighting.optics.transmittance_front * albedo,
+                transmittance_back: lighting.optics.transmittance_back * albedo,
+            };
+            let wo = (eye_local - q).normalize();
+            let through =
+                sun_through_crown(SunThroughCrown::BlendedAttenuation, tau, &a, &s_max, to_sun);
+            let bounce = SunBounce::new(&optics, to_sun, tau);
+            let radiance = sky_radiance(&optics, n, wo, &a, &sky)
+                + sun_radiance(&optics, n, wo, to_sun, through, e_sun)
+                + bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun);
+            let want = radiance.to_array().map(|c| srgb(c) * 255.0);
+            reference.set_pixel(x, y, [want[0] as u8, want[1] as u8, want[2] as u8, 255]);
+            let off = (0..3)
+                .map(|c| (got[c] as f32 - want[c]).abs())
+                .fold(0.0f32, f32::max);
+            compared += 1;
+            within += (off <= 3.0) as u32;
+            worst = worst.max(off);
+            let p = pbr.pixel(x, y);
+            leaves_unlike_pbr += (0..3).any(|c| (got[c] as i32 - p[c] as i32).abs() > 10) as u32;
+        }
+    }
+    let dir = artifacts_dir().join("tree_lighting");
+    std::fs::create_dir_all(&dir).ok();
+    lit.save_png(dir.join("impostor_gpu.png")).ok();
+    reference.save_png(dir.join("impostor_cpu.png")).ok();
+    pbr.save_png(dir.join("impostor_pbr.png")).ok();
+    eprintln!(
+        "leaf pixels: {within} of {compared} within 3/255 (worst {worst:.1}), {leaves_unlike_pbr} unlike Bevy's PBR; bark pixels: {bark_same} of {bark} as Bevy's PBR"
+    );
+    assert!(compared > 1500, "{compared} leaf pixels compared");
+    assert_eq!(within, compared, "worst {worst:.1}/255");
+    assert!(bark > 300, "{bark} bark pixels");
+    assert_eq!(bark_same, bark);
+    // The tree lighting changed the leaves: the comparison is not with Bevy's lighting.
+    assert!(
+        leaves_unlike_pbr * 10 > compared * 9,
+        "{leaves_unlike_pbr} of {compared}"
+    );
+}

@@ -1,10 +1,12 @@
 //! Billboard clouds as Bevy assets: `*.bbcloud` files load through the `AssetServer`
 //! ([`BillboardCloudLoader`]) into a [`BillboardCloudAsset`] — a mesh of textured quads and a
 //! `StandardMaterial` (albedo atlas, normal atlas, alpha mask) — so impostors are lit by Bevy's
-//! lights and cast alpha-masked shadows with no shader of their own.
+//! lights and cast alpha-masked shadows with no shader of their own; and the same material
+//! extended with the light atlases ([`TreeLitImpostorMaterial`]) for the tree lighting.
 
 use super::format::{ImpostorData, ImpostorFormatError, decode};
 use super::texture::preserve_alpha_coverage;
+use super::tree_lit::{TreeLitImpostor, TreeLitImpostorMaterial, TreeLitImpostorParams};
 use crate::pruning::spawn::box_mip_chain;
 use bevy::asset::RenderAssetUsages;
 use bevy::image::{ImageSampler, ImageSamplerDescriptor};
@@ -19,13 +21,15 @@ pub struct BillboardCloudAsset {
     pub mesh: Handle<Mesh>,
     /// Their material (albedo and normal atlases, alpha mask, two-sided).
     pub material: Handle<StandardMaterial>,
+    /// The same with the light atlases, drawn while the tree lighting is on.
+    pub tree_lit: Handle<TreeLitImpostorMaterial>,
     /// Centre of the tree's bounding sphere (model space).
     pub center: Vec3,
     /// Radius of the tree's bounding sphere.
     pub radius: f32,
     /// Number of planes.
     pub planes: u32,
-    /// GPU texture bytes of both atlases with mips.
+    /// GPU texture bytes of the atlases with mips (the light atlases included).
     pub texture_bytes: u64,
     /// The source hash the file was baked from.
     pub source_hash: u64,
@@ -107,25 +111,72 @@ pub fn impostor_material(albedo: Handle<Image>, normal: Handle<Image>) -> Standa
     }
 }
 
+/// The tree lighting's extension of a cloud's material: its light atlases (sRGB: the bake
+/// stores the values sRGB-encoded), its crown and extinction; the scene's lights are filled in
+/// by `tree_lit::refresh_tree_lit_impostors`.
+pub fn tree_lit_extension(data: &ImpostorData, light: [Handle<Image>; 3]) -> TreeLitImpostor {
+    let [light0, light1, light2] = light;
+    TreeLitImpostor {
+        params: TreeLitImpostorParams {
+            crown_sphere: data.center.extend(data.radius),
+            extinction: data.extinction,
+            ..default()
+        },
+        light0,
+        light1,
+        light2,
+    }
+}
+
 impl BillboardCloudAsset {
-    /// Adds the mesh, images and material of `data` to the asset collections.
+    /// Adds the mesh, images and materials of `data` to the asset collections.
     pub fn from_data(
         data: &ImpostorData,
         meshes: &mut Assets<Mesh>,
         images: &mut Assets<Image>,
         materials: &mut Assets<StandardMaterial>,
+        tree_lit: &mut Assets<TreeLitImpostorMaterial>,
     ) -> Self {
         let albedo = images.add(atlas_image(data.atlas_size, &data.albedo, true));
         let normal = images.add(atlas_image(data.atlas_size, &data.normal, false));
+        let light = data
+            .light
+            .clone()
+            .map(|l| images.add(atlas_image(data.atlas_size, &l, true)));
+        let base = impostor_material(albedo, normal);
         Self {
             mesh: meshes.add(impostor_mesh(data)),
-            material: materials.add(impostor_material(albedo, normal)),
+            material: materials.add(base.clone()),
+            tree_lit: tree_lit.add(TreeLitImpostorMaterial {
+                base,
+                extension: tree_lit_extension(data, light),
+            }),
             center: data.center,
             radius: data.radius,
             planes: data.planes.len() as u32,
-            texture_bytes: data.texture_bytes(),
+            texture_bytes: data.texture_bytes() + data.light_texture_bytes(),
             source_hash: data.source_hash,
         }
+    }
+
+    /// [`Self::from_data`] with the asset collections of `world`.
+    pub fn from_data_in(world: &mut World, data: &ImpostorData) -> Self {
+        world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
+            world.resource_scope(|world, mut images: Mut<Assets<Image>>| {
+                world.resource_scope(
+                    |world, mut tree_lit: Mut<Assets<TreeLitImpostorMaterial>>| {
+                        let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+                        Self::from_data(
+                            data,
+                            &mut meshes,
+                            &mut images,
+                            &mut materials,
+                            &mut tree_lit,
+                        )
+                    },
+                )
+            })
+        })
     }
 }
 
@@ -165,16 +216,30 @@ impl bevy::asset::AssetLoader for BillboardCloudLoader {
             "normal".to_string(),
             atlas_image(data.atlas_size, &data.normal, false),
         );
-        let material = load_context
-            .add_labeled_asset("material".to_string(), impostor_material(albedo, normal));
+        let light = [0, 1, 2].map(|k| {
+            load_context.add_labeled_asset(
+                format!("light{k}"),
+                atlas_image(data.atlas_size, &data.light[k], true),
+            )
+        });
+        let base = impostor_material(albedo, normal);
+        let material = load_context.add_labeled_asset("material".to_string(), base.clone());
+        let tree_lit = load_context.add_labeled_asset(
+            "tree_lit_material".to_string(),
+            TreeLitImpostorMaterial {
+                base,
+                extension: tree_lit_extension(&data, light),
+            },
+        );
         let mesh = load_context.add_labeled_asset("mesh".to_string(), impostor_mesh(&data));
         Ok(BillboardCloudAsset {
             mesh,
             material,
+            tree_lit,
             center: data.center,
             radius: data.radius,
             planes: data.planes.len() as u32,
-            texture_bytes: data.texture_bytes(),
+            texture_bytes: data.texture_bytes() + data.light_texture_bytes(),
             source_hash: data.source_hash,
         })
     }
@@ -227,6 +292,7 @@ mod tests {
         .init_asset::<Mesh>()
         .init_asset::<Image>()
         .init_asset::<StandardMaterial>()
+        .init_asset::<TreeLitImpostorMaterial>()
         .init_asset_loader::<BillboardCloudLoader>();
         let server = app.world().resource::<AssetServer>().clone();
         let good: Handle<BillboardCloudAsset> = server.load("good.bbcloud");

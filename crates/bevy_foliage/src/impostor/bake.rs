@@ -1,7 +1,8 @@
 //! The GPU bake of a billboard cloud's textures (seed 001 §4.2): every plane's member triangles
 //! rendered by an orthographic camera looking down the plane's normal into the plane's rectangle
-//! of one atlas image — albedo and coverage in the top half, tangent-space normals in the bottom
-//! half — read back, and written to a `*.bbcloud` file.
+//! of one image holding the five atlases in three columns of two — albedo and coverage, then
+//! tangent-space normals, then the three light atlases of the tree lighting — read back, and
+//! written to a `*.bbcloud` file.
 //!
 //! Spawn an [`ImpostorBakeRequest`]; a few frames later the entity gets an
 //! [`ImpostorBakeResult`]. The bake cameras and meshes live on render layers of their own
@@ -14,7 +15,8 @@ use super::atlas::{AtlasLayout, pack};
 use super::cloud::{BillboardCloud, CloudSettings, build_cloud};
 use super::format::{ImpostorData, load, save};
 use super::texture::{
-    ImpostorSource, dilate, impostor_planes, min_extent, plane_extent, srgb_to_linear,
+    ImpostorSource, LIGHT_ATLASES, dilate, impostor_planes, min_extent, plane_extent,
+    srgb_to_linear,
 };
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::camera::visibility::{NoFrustumCulling, RenderLayers};
@@ -40,6 +42,10 @@ use std::time::Instant;
 /// The first render layer the bake uses (one layer per plane and pass above it).
 pub const BAKE_LAYER_BASE: usize = 1 << 12;
 
+/// The largest atlas side a bake takes: the bake renders its five atlases three abreast into one
+/// image, which must stay within the 8,192 texels a side every wgpu adapter allows.
+pub const MAX_ATLAS_SIZE: u32 = 2688;
+
 /// Settings of a billboard-cloud bake.
 #[derive(Clone, Debug, PartialEq, Reflect)]
 #[reflect(Debug, PartialEq)]
@@ -47,7 +53,7 @@ pub struct ImpostorBakeSettings {
     /// Plane selection.
     #[reflect(ignore)]
     pub cloud: CloudSettings,
-    /// Side of each atlas in texels (a multiple of 64, 64..=4096).
+    /// Side of each atlas in texels (a multiple of 64, 64..=[`MAX_ATLAS_SIZE`]).
     pub atlas_size: u32,
     /// Gutter between rectangles, in texels.
     pub padding: u32,
@@ -71,10 +77,10 @@ impl ImpostorBakeSettings {
             cloud,
             ..self.clone()
         };
-        if !(64..=4096).contains(&s.atlas_size) || !s.atlas_size.is_multiple_of(64) {
-            let fixed = (s.atlas_size.clamp(64, 4096) / 64) * 64;
+        if !(64..=MAX_ATLAS_SIZE).contains(&s.atlas_size) || !s.atlas_size.is_multiple_of(64) {
+            let fixed = (s.atlas_size.clamp(64, MAX_ATLAS_SIZE) / 64) * 64;
             fixes.push(format!(
-                "atlas_size = {} must be a multiple of 64 in 64..=4096: using {fixed}",
+                "atlas_size = {} must be a multiple of 64 in 64..={MAX_ATLAS_SIZE}: using {fixed}",
                 s.atlas_size
             ));
             s.atlas_size = fixed;
@@ -126,6 +132,8 @@ pub struct ImpostorBakeRaw {
     pub albedo: Vec<u8>,
     /// Normal atlas, RGBA8 linear.
     pub normal: Vec<u8>,
+    /// The light atlases, as `texture::encode_light` stores them.
+    pub light: [Vec<u8>; LIGHT_ATLASES],
 }
 
 /// Marks the bake's cameras (so a game's camera controllers can leave them alone).
@@ -141,6 +149,7 @@ struct BakeJob {
     started: Instant,
     frames: u32,
     hash: u64,
+    extinction: f32,
     latest: Arc<Mutex<Option<Vec<u8>>>>,
     previous: Option<Vec<u8>>,
     parts: Vec<Entity>,
@@ -150,8 +159,8 @@ struct BakeJob {
 #[derive(Resource, Clone, Default)]
 pub struct BakePipelinesIdle(pub Arc<AtomicBool>);
 
-/// The bake's unlit material: a surface's colour (albedo pass) or its tangent-space normal
-/// (normal pass), alpha-tested.
+/// The bake's unlit material: a surface's colour (albedo pass), its tangent-space normal (normal
+/// pass) or its leaf's light values (light passes, from the vertex colours), alpha-tested.
 #[derive(Asset, TypePath, AsBindGroup, Clone, Debug)]
 pub struct ImpostorBakeMaterial {
     /// Colour, plane frame and pass.
@@ -168,12 +177,21 @@ pub struct ImpostorBakeMaterial {
 pub struct BakeParams {
     /// Linear RGBA base colour.
     pub base_color: Vec4,
-    /// The plane's tangent; w: 0 albedo pass, 1 normal pass.
+    /// The plane's tangent; w: the pass (0 albedo, 1 normal, 2 and up light).
     pub tangent: Vec4,
     /// The plane's bitangent; w: alpha cutoff.
     pub bitangent: Vec4,
     /// The plane's normal; w: 1 if the texture is used.
     pub normal: Vec4,
+}
+
+/// The bake's passes: albedo, normals, then the light atlases.
+const PASSES: u32 = 2 + LIGHT_ATLASES as u32;
+
+/// Where pass `pass` writes in the bake image (three atlases wide, two high): its atlas's
+/// top-left corner.
+fn quadrant(pass: u32, size: u32) -> UVec2 {
+    UVec2::new((pass >> 1) * size, (pass & 1) * size)
 }
 
 const BAKE_SHADER: &str = "embedded://bevy_foliage/impostor/impostor_bake.wgsl";
@@ -309,9 +327,11 @@ fn start_impostor_bakes(
             }
         };
         let size = layout.size;
+        // The tree lighting's envelope of the leaves (§5.6), for the light passes.
+        let light = request.source.leaf_light();
         let mut image = Image::new_fill(
             Extent3d {
-                width: size,
+                width: size * 3,
                 height: size * 2,
                 depth_or_array_layers: 1,
             },
@@ -368,25 +388,29 @@ fn start_impostor_bakes(
                     list.push(t);
                 }
             }
-            for pass in 0..2u32 {
-                let layer = BAKE_LAYER_BASE + 2 * k + pass as usize;
+            for pass in 0..PASSES {
+                let layer = BAKE_LAYER_BASE + PASSES as usize * k + pass as usize;
                 for (surface_index, members) in by_surface.iter().enumerate() {
                     if members.is_empty() {
                         continue;
                     }
                     let surface = &request.source.surfaces[surface_index];
-                    let (mut positions, mut normals, mut uvs) =
-                        (Vec::new(), Vec::new(), Vec::new());
+                    let (mut positions, mut normals, mut uvs, mut colors) =
+                        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
                     for &t in members {
                         let tri = &request.source.triangles[t as usize];
+                        // The light passes carry the leaf's light values as vertex colours.
+                        let v = light.texel_of_triangle(tri);
+                        let first = 3 * pass.saturating_sub(2) as usize;
                         for c in 0..3 {
                             positions.push(tri.positions[c].to_array());
                             normals.push(tri.normals[c].normalize_or(plane.normal).to_array());
                             uvs.push(tri.uvs[c].to_array());
+                            colors.push([v[first], v[first + 1], v[first + 2], 1.0]);
                         }
                     }
                     let count = positions.len() as u32;
-                    let mesh = Mesh::new(
+                    let mut mesh = Mesh::new(
                         PrimitiveTopology::TriangleList,
                         RenderAssetUsages::RENDER_WORLD,
                     )
@@ -394,6 +418,9 @@ fn start_impostor_bakes(
                     .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
                     .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uvs)
                     .with_inserted_indices(Indices::U32((0..count).collect()));
+                    if pass >= 2 {
+                        mesh.insert_attribute(Mesh::ATTRIBUTE_COLOR, colors);
+                    }
                     let texture = textures[surface_index].clone();
                     let material = materials.add(ImpostorBakeMaterial {
                         params: BakeParams {
@@ -428,12 +455,10 @@ fn start_impostor_bakes(
                             Camera3d::default(),
                             Camera {
                                 // After every game camera, and never the one pruning picks (the lowest order).
-                                order: (1 << 20) + (2 * k as isize) + pass as isize,
+                                order: (1 << 20) + (PASSES as isize * k as isize) + pass as isize,
                                 viewport: Some(Viewport {
-                                    physical_position: UVec2::new(
-                                        rect.min[0],
-                                        rect.min[1] + pass * size,
-                                    ),
+                                    physical_position: UVec2::new(rect.min[0], rect.min[1])
+                                        + quadrant(pass, size),
                                     physical_size: UVec2::new(rect.size[0], rect.size[1]),
                                     depth: 0.0..1.0,
                                 }),
@@ -489,6 +514,7 @@ fn start_impostor_bakes(
                     started,
                     frames: 0,
                     hash,
+                    extinction: light.extinction,
                     latest,
                     previous: None,
                     parts,
@@ -538,7 +564,7 @@ fn finish_impostor_bakes(
         job.frames += 1;
         let size = job.layout.size;
         let latest = job.latest.lock().unwrap().take();
-        let pixels = latest.and_then(|padded| unpad(&padded, size, size * 2));
+        let pixels = latest.and_then(|padded| unpad(&padded, size * 3, size * 2));
         let ready = pixels.and_then(|pixels| {
             let settled = idle.0.load(Ordering::Relaxed)
                 && job.frames >= 3
@@ -567,10 +593,23 @@ fn finish_impostor_bakes(
             }
             continue;
         };
-        let half = (size * size * 4) as usize;
-        let albedo_raw = pixels[..half].to_vec();
-        // The normal pass wrote `0.5 + 0.5·n` as a colour into an sRGB target: undo the encoding.
-        let normal_raw: Vec<u8> = pixels[half..]
+        // Each pass's quadrant as an atlas of its own.
+        let atlas = |pass: u32| -> Vec<u8> {
+            let at = quadrant(pass, size);
+            let row = (size * 4) as usize;
+            (0..size)
+                .flat_map(|y| {
+                    let start = (((at.y + y) * size * 3 + at.x) * 4) as usize;
+                    pixels[start..start + row].iter().copied()
+                })
+                .collect()
+        };
+        let albedo_raw = atlas(0);
+        // The normal pass wrote `0.5 + 0.5·n` as a colour into an sRGB target: undo the encoding
+        // (alpha is never encoded). The light passes' bytes are kept as the target encoded them,
+        // which is how `texture::encode_light` stores them.
+        let light_raw: [Vec<u8>; LIGHT_ATLASES] = std::array::from_fn(|k| atlas(2 + k as u32));
+        let normal_raw: Vec<u8> = atlas(1)
             .chunks_exact(4)
             .flat_map(|p| {
                 let lin = |c: u8| (srgb_to_linear(c) * 255.0 + 0.5) as u8;
@@ -578,6 +617,10 @@ fn finish_impostor_bakes(
             })
             .collect();
         let (mut albedo, mut normal) = (albedo_raw.clone(), normal_raw.clone());
+        let mut light = light_raw.clone();
+        for l in &mut light {
+            dilate(l, size, 4);
+        }
         dilate(&mut albedo, size, 4);
         dilate(&mut normal, size, 4);
         let data = ImpostorData {
@@ -587,6 +630,8 @@ fn finish_impostor_bakes(
             atlas_size: size,
             albedo,
             normal,
+            light,
+            extinction: job.extinction,
             source_hash: job.hash,
             bake_ms: job.started.elapsed().as_secs_f32() * 1e3,
         };
@@ -608,6 +653,7 @@ fn finish_impostor_bakes(
             layout: job.layout.clone(),
             albedo: albedo_raw,
             normal: normal_raw,
+            light: light_raw,
         });
         finish(&mut commands, entity, &job, &mut images, Ok(Arc::new(data)));
     }

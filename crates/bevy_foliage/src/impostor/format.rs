@@ -5,7 +5,8 @@
 //! magic    8 bytes  "BNBBCLOU"
 //! version  u32      FORMAT_VERSION
 //! length   u64      payload bytes
-//! payload           header, planes, then the two atlases (RGBA8, `size × size` each)
+//! payload           header, planes, the albedo and normal atlases (RGBA8, `size × size`
+//!                   each), the crown's extinction τ (f32) and the three light atlases
 //! checksum u64      FNV-1a 64 of the payload
 //! ```
 //!
@@ -21,7 +22,10 @@ use std::path::Path;
 /// File signature.
 pub const MAGIC: &[u8; 8] = b"BNBBCLOU";
 /// Current format version; bump on any layout change.
-pub const FORMAT_VERSION: u32 = 1;
+///
+/// Version 2 added the tree lighting's light atlases and the crown's extinction; a version-1
+/// cache is re-baked.
+pub const FORMAT_VERSION: u32 = 2;
 
 /// One textured quad of a billboard cloud, in model space.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,7 +45,7 @@ pub struct ImpostorPlane {
     pub role: u8,
 }
 
-/// A baked billboard cloud: its planes and its two atlases.
+/// A baked billboard cloud: its planes and its four atlases (see `impostor::texture`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImpostorData {
     /// Centre of the tree's bounding sphere (model space).
@@ -57,6 +61,12 @@ pub struct ImpostorData {
     /// Tangent-space normals (x along the plane's tangent, y along its bitangent, z along its
     /// normal) encoded `0.5 + 0.5·n`, linear RGBA8.
     pub normal: Vec<u8>,
+    /// The tree lighting's attenuations of each texel's leaf and whether it is a leaf, three
+    /// values an atlas ([`SourceLight::texel_of_triangle`](super::texture::SourceLight),
+    /// [`encode_light`](super::texture::encode_light)).
+    pub light: [Vec<u8>; super::texture::LIGHT_ATLASES],
+    /// The crown's extinction τ per unit of model space (Boulanger 2008, eq. 5.5).
+    pub extinction: f32,
     /// Hash of the source geometry and bake settings: a cache whose hash differs is stale.
     pub source_hash: u64,
     /// How long the bake took (ms), for the report.
@@ -64,10 +74,16 @@ pub struct ImpostorData {
 }
 
 impl ImpostorData {
-    /// Texture bytes on the GPU (both atlases with their mip chains, about 4/3 of level 0).
+    /// Texture bytes on the GPU of the atlases Bevy's lighting draws with (albedo and normals,
+    /// with their mip chains, about 4/3 of level 0).
     pub fn texture_bytes(&self) -> u64 {
         let level0 = self.atlas_size as u64 * self.atlas_size as u64 * 4;
         2 * (level0 * 4).div_ceil(3)
+    }
+
+    /// Texture bytes on the GPU of the light atlases the tree lighting adds.
+    pub fn light_texture_bytes(&self) -> u64 {
+        self.texture_bytes() / 2 * super::texture::LIGHT_ATLASES as u64
     }
 
     /// Fraction of atlas texels covered (alpha ≥ 128).
@@ -146,6 +162,10 @@ pub fn encode(data: &ImpostorData) -> Vec<u8> {
     p.extend_from_slice(&data.atlas_size.to_le_bytes());
     p.extend_from_slice(&data.albedo);
     p.extend_from_slice(&data.normal);
+    put_f32s(&mut p, &[data.extinction]);
+    for atlas in &data.light {
+        p.extend_from_slice(atlas);
+    }
 
     let mut out = Vec::with_capacity(p.len() + 28);
     out.extend_from_slice(MAGIC);
@@ -279,6 +299,17 @@ pub fn decode(bytes: &[u8]) -> Result<ImpostorData, ImpostorFormatError> {
     let bytes_per_atlas = atlas_size as usize * atlas_size as usize * 4;
     let albedo = r.take(bytes_per_atlas)?.to_vec();
     let normal = r.take(bytes_per_atlas)?.to_vec();
+    let extinction = r.f32()?;
+    if extinction < 0.0 {
+        return Err(ImpostorFormatError::Invalid(format!(
+            "negative extinction {extinction}"
+        )));
+    }
+    let light = [
+        r.take(bytes_per_atlas)?.to_vec(),
+        r.take(bytes_per_atlas)?.to_vec(),
+        r.take(bytes_per_atlas)?.to_vec(),
+    ];
     if r.at != payload.len() {
         return Err(ImpostorFormatError::Truncated);
     }
@@ -294,6 +325,8 @@ pub fn decode(bytes: &[u8]) -> Result<ImpostorData, ImpostorFormatError> {
         atlas_size,
         albedo,
         normal,
+        light,
+        extinction,
         source_hash,
         bake_ms,
     })
@@ -345,6 +378,12 @@ pub(crate) mod tests {
             atlas_size: size,
             albedo: (0..size * size * 4).map(|i| i as u8).collect(),
             normal: (0..size * size * 4).map(|i| (i * 7) as u8).collect(),
+            light: [
+                (0..size * size * 4).map(|i| (i * 3) as u8).collect(),
+                (0..size * size * 4).map(|i| (i * 5) as u8).collect(),
+                (0..size * size * 4).map(|i| (i * 11) as u8).collect(),
+            ],
+            extinction: 1.5,
             source_hash: 0xDEAD_BEEF,
             bake_ms: 12.5,
         }
@@ -392,6 +431,12 @@ pub(crate) mod tests {
         ));
         let mut bad = sample();
         bad.planes.clear();
+        assert!(matches!(
+            decode(&encode(&bad)),
+            Err(ImpostorFormatError::Invalid(_))
+        ));
+        let mut bad = sample();
+        bad.extinction = -1.0;
         assert!(matches!(
             decode(&encode(&bad)),
             Err(ImpostorFormatError::Invalid(_))

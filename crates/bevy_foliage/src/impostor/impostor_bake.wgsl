@@ -1,14 +1,15 @@
 // Billboard-cloud texture bake (seed 001 §4.2): a plane's member triangles, seen by an
 // orthographic camera down the plane's normal, written unlit into the plane's atlas rectangle —
-// albedo and coverage in one pass, tangent-space normals in the other. `impostor::texture`'s
-// `bake_reference` is the CPU reference of exactly this.
+// albedo and coverage in one pass, tangent-space normals in the second, the tree lighting's values
+// of the leaf (eight attenuations and "a leaf", from the vertex colours) in the next three. Alpha
+// is always one (coverage): an alpha below one comes back multiplied into the colour. `impostor::texture`'s `bake_reference` is the CPU reference of exactly this.
 
 #import bevy_pbr::forward_io::VertexOutput
 
 struct BakeParams {
     // Linear RGBA base colour.
     base_color: vec4<f32>,
-    // xyz: the plane's tangent; w: 0 albedo pass, 1 normal pass.
+    // xyz: the plane's tangent; w: the pass (0 albedo, 1 normal, 2 and 3 light).
     tangent: vec4<f32>,
     // xyz: the plane's bitangent; w: alpha cutoff.
     bitangent: vec4<f32>,
@@ -33,6 +34,13 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     }
     if params.tangent.w < 0.5 {
         return vec4<f32>(color.rgb, 1.0);
+    }
+    if params.tangent.w > 1.5 {
+#ifdef VERTEX_COLORS
+        return vec4<f32>(in.color.rgb, 1.0);
+#else
+        return vec4<f32>(1.0);
+#endif
     }
     // Leaves are two-sided: the baked normal faces the plane's front, where its camera stands.
     var n = normalize(in.world_normal);

@@ -9,8 +9,9 @@
 //!   versioned, checksummed `*.bbcloud` file);
 //! - main world: [`bake`] (the GPU bake: orthographic cameras into the atlas, read back),
 //!   [`assets`] (the `AssetServer` loader, the quads and their `StandardMaterial`),
-//!   [`systems`] (drawing a forest tree's impostor beyond the pruning's `far`);
-//! - render side: `impostor_bake.wgsl`, the bake's unlit material.
+//!   [`systems`] (drawing a forest tree's impostor beyond the pruning's `far`), [`tree_lit`]
+//!   (the material that lights the cloud's leaf texels by the tree lighting);
+//! - render side: `impostor_bake.wgsl`, the bake's unlit material; `tree_lit_impostor.wgsl`.
 
 pub mod assets;
 pub mod atlas;
@@ -19,6 +20,7 @@ pub mod cloud;
 pub mod format;
 pub mod systems;
 pub mod texture;
+pub mod tree_lit;
 
 use bevy::prelude::*;
 
@@ -27,5 +29,6 @@ pub(crate) fn build(app: &mut App) {
     app.init_asset::<assets::BillboardCloudAsset>()
         .init_asset_loader::<assets::BillboardCloudLoader>();
     bake::build(app);
+    tree_lit::build(app);
     systems::build(app);
 }

@@ -53,6 +53,13 @@ pub struct ImpostorChild(pub Entity);
 #[derive(Component, Clone, Copy, Debug)]
 pub struct ImpostorOf(pub Entity);
 
+/// On an impostor entity drawn with the tree lighting's material
+/// ([`TreeLitImpostorMaterial`](super::tree_lit::TreeLitImpostorMaterial)). When the tree
+/// lighting is switched, impostors are spawned again with the other material rather than
+/// having their material component swapped.
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct TreeLitImpostorDraw;
+
 /// Settings of the impostors.
 #[derive(Resource, Clone, Debug, PartialEq, Reflect)]
 #[reflect(Resource, Default, Debug, PartialEq)]
@@ -213,6 +220,7 @@ pub fn fade_ranges(distance: f32, weight: f32) -> (VisibilityRange, VisibilityRa
 pub fn place_impostors(
     mut commands: Commands,
     settings: Res<ImpostorSettings>,
+    lighting: Res<crate::lighting::settings::TreeLightingSettings>,
     pruning: Res<FoliagePruningSettings>,
     clouds: Res<Assets<BillboardCloudAsset>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
@@ -240,6 +248,7 @@ pub fn place_impostors(
             &mut Transform,
             Option<&mut MeshMaterial3d<StandardMaterial>>,
             Option<&mut VisibilityRange>,
+            Has<TreeLitImpostorDraw>,
         ),
         (With<ImpostorOf>, Without<ForestTree>),
     >,
@@ -250,6 +259,9 @@ pub fn place_impostors(
         .unwrap_or((Vec3::splat(f32::INFINITY), LodView::default()));
     let (_, far_rho) = pruning.distances.range();
     let mixed = forest.enabled && forest.mixed.enabled;
+    // Under the tree lighting the clouds' leaf texels are lit as the leaves are (the tinted
+    // representation view keeps Bevy's lighting).
+    let tree_lit = lighting.enabled && !settings.show_representation;
     for (tree, impostor, transform, local, parent, lod, child, children) in &trees {
         let Some(cloud) = clouds.get(&impostor.0) else {
             continue;
@@ -286,8 +298,16 @@ pub fn place_impostors(
         } else {
             cloud.material.clone()
         };
-        match child.and_then(|c| impostors.get_mut(c.0).ok()) {
-            Some((mut visibility, mut placed, mesh_material, range)) => {
+        let mut existing = child.and_then(|c| impostors.get_mut(c.0).ok().map(|i| (c.0, i)));
+        if let Some((entity, (.., lit))) = &existing
+            && *lit != tree_lit
+        {
+            // The other lighting: this impostor goes, one with the other material comes.
+            commands.entity(*entity).despawn();
+            existing = None;
+        }
+        match existing.map(|(_, i)| i) {
+            Some((mut visibility, mut placed, mesh_material, range, _)) => {
                 if *placed != *local {
                     *placed = *local;
                 }
@@ -316,10 +336,14 @@ pub fn place_impostors(
                     Name::new("billboard cloud"),
                     ImpostorOf(tree),
                     Mesh3d(cloud.mesh.clone()),
-                    MeshMaterial3d(material),
                     impostor_range,
                     *local,
                 ));
+                if tree_lit {
+                    spawned.insert((MeshMaterial3d(cloud.tree_lit.clone()), TreeLitImpostorDraw));
+                } else {
+                    spawned.insert(MeshMaterial3d(material));
+                }
                 if let Some(parent) = parent {
                     spawned.insert(ChildOf(parent.parent()));
                 }
@@ -367,6 +391,7 @@ pub fn adopt_baked_impostors(
     mut meshes: ResMut<Assets<Mesh>>,
     mut images: ResMut<Assets<Image>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
+    mut tree_lit: ResMut<Assets<super::tree_lit::TreeLitImpostorMaterial>>,
     finished: Query<(Entity, &ImpostorBakeRequest, &ImpostorBakeResult), Without<BakedImpostor>>,
     baked: Query<&BakedImpostor>,
     waiting: Query<(Entity, &ImpostorFromBake), Without<TreeImpostor>>,
@@ -389,6 +414,7 @@ pub fn adopt_baked_impostors(
                 &mut meshes,
                 &mut images,
                 &mut materials,
+                &mut tree_lit,
             )),
         };
         commands.entity(entity).insert(BakedImpostor(handle));

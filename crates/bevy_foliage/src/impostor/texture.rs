@@ -7,13 +7,21 @@
 //! computes the same images on the CPU — the same pixel centres, the same nearest-to-the-camera
 //! rule, the same alpha test — so a render test can compare them texel by texel.
 //!
-//! Both atlases share one layout: albedo (sRGB colour, coverage in alpha) and tangent-space
+//! All five atlases share one layout: albedo (sRGB colour, coverage in alpha); tangent-space
 //! normals (`x` along the plane's tangent, `y` along its bitangent, `z` along its normal, faced to
-//! the plane's front side, encoded `0.5 + 0.5·n`).
+//! the plane's front side, encoded `0.5 + 0.5·n`); and three light atlases holding, in their
+//! colour channels, the tree lighting's eight attenuations of the texel's leaf (Boulanger 2008,
+//! §5.6: the light its neighbours let through towards each of the eight directions of
+//! `lighting::bins`) and whether the texel shows a leaf (1) or bark (0), sRGB-encoded (finer
+//! steps where little light gets through). With those an impostor texel is lit as the leaf it
+//! shows. Only colour channels carry data: the bake's render writes colour with an alpha of one
+//! (an alpha below one came back multiplied into the colour).
 
 use super::atlas::{AtlasLayout, AtlasRect};
 use super::cloud::{BillboardCloud, CloudPlane, CloudTriangle, PlaneRole, TreePart};
 use super::format::ImpostorPlane;
+use crate::lighting::bins::{LeafProxy, proxies};
+use crate::lighting::envelope::crown_envelope;
 use crate::pruning::format::fnv1a64;
 use crate::pruning::gltf::{GltfAlpha, GltfTree};
 use crate::pruning::leaves::LeafSet;
@@ -68,6 +76,27 @@ pub struct BakeSurface {
     pub alpha_cutoff: f32,
 }
 
+impl BakeSurface {
+    /// The share of the surface that passes its alpha test: of the texture's texels, those whose
+    /// alpha times the base colour's reaches the cutoff (1 without a texture, as long as the base
+    /// colour itself passes).
+    pub fn opaque_fraction(&self) -> f32 {
+        let alpha = self.base_color.w;
+        match &self.texture {
+            Some(t) if !t.rgba.is_empty() => {
+                let texels = t.rgba.len() / 4;
+                let kept = t
+                    .rgba
+                    .chunks_exact(4)
+                    .filter(|p| alpha * p[3] as f32 / 255.0 >= self.alpha_cutoff)
+                    .count();
+                kept as f32 / texels as f32
+            }
+            _ => (alpha >= self.alpha_cutoff) as u32 as f32,
+        }
+    }
+}
+
 /// One triangle of the tree to bake, model space.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BakeTriangle {
@@ -81,7 +110,15 @@ pub struct BakeTriangle {
     pub surface: u32,
     /// Leaves or branches (clustered separately).
     pub part: TreePart,
+    /// Index of the triangle's leaf into [`ImpostorSource::leaves`] ([`NO_LEAF`] for bark).
+    pub leaf: u32,
 }
+
+/// [`BakeTriangle::leaf`] of a triangle that belongs to no leaf (bark).
+pub const NO_LEAF: u32 = u32::MAX;
+
+/// Light atlases of a billboard cloud: three, of three values a texel each.
+pub const LIGHT_ATLASES: usize = 3;
 
 /// A tree as the impostor bake sees it: triangles and the surfaces they use.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -90,6 +127,38 @@ pub struct ImpostorSource {
     pub triangles: Vec<BakeTriangle>,
     /// The surfaces the triangles index.
     pub surfaces: Vec<BakeSurface>,
+    /// The leaves as the tree lighting's envelope sees them (centre, normal, opaque area), which
+    /// leaf triangles index.
+    pub leaves: Vec<LeafProxy>,
+}
+
+/// The tree lighting's bake of an [`ImpostorSource`]'s leaves (Boulanger 2008, §5.6).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SourceLight {
+    /// Per leaf of [`ImpostorSource::leaves`], the light let through towards each of the eight
+    /// directions.
+    pub attenuation: Vec<[f32; 8]>,
+    /// The crown's extinction τ per unit of model space (0: no leaf behind another).
+    pub extinction: f32,
+}
+
+impl SourceLight {
+    /// The attenuations of the leaf of triangle `t` (all light for bark or an unknown leaf).
+    pub fn of_triangle(&self, t: &BakeTriangle) -> [f32; 8] {
+        self.attenuation
+            .get(t.leaf as usize)
+            .copied()
+            .unwrap_or([1.0; 8])
+    }
+
+    /// What the light atlases hold for triangle `t`: its leaf's eight attenuations, then 1 for a
+    /// leaf and 0 for bark (which the tree lighting leaves to Bevy's PBR, as it does the bark of
+    /// the trees near the camera).
+    pub fn texel_of_triangle(&self, t: &BakeTriangle) -> [f32; 3 * LIGHT_ATLASES] {
+        let a = self.of_triangle(t);
+        let leaf = (t.leaf != NO_LEAF) as u32 as f32;
+        [a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], leaf]
+    }
 }
 
 impl ImpostorSource {
@@ -120,7 +189,16 @@ impl ImpostorSource {
                     .for_each(|x| bytes.extend_from_slice(&x.to_le_bytes()));
             }
             bytes.extend_from_slice(&t.surface.to_le_bytes());
+            bytes.extend_from_slice(&t.leaf.to_le_bytes());
             bytes.push(t.part as u8);
+        }
+        for l in &self.leaves {
+            l.centre
+                .to_array()
+                .iter()
+                .chain(&l.normal.to_array())
+                .chain([&l.area])
+                .for_each(|x| bytes.extend_from_slice(&x.to_le_bytes()));
         }
         for s in &self.surfaces {
             s.base_color
@@ -139,10 +217,42 @@ impl ImpostorSource {
 }
 
 impl ImpostorSource {
-    /// Adds a leaf set's triangles (part [`TreePart::Leaves`]) drawn with `surface`.
+    /// Adds a leaf set's triangles (part [`TreePart::Leaves`]) drawn with `surface`, and its
+    /// leaves for the tree lighting's envelope — a textured leaf counting with its texture's
+    /// opaque share of its area, as in the pruning's bake.
     pub fn push_leaves(&mut self, leaves: &LeafSet, surface: BakeSurface) {
-        let arrays = (&leaves.positions, &leaves.normals, &leaves.uvs);
-        self.push_triangles(arrays, &leaves.indices, surface, TreePart::Leaves);
+        let opaque = surface.opaque_fraction();
+        let index = self.surfaces.len() as u32;
+        self.surfaces.push(surface);
+        let (positions, normals, uvs) = (&leaves.positions, &leaves.normals, &leaves.uvs);
+        for (leaf, mut proxy) in leaves.leaves.iter().zip(proxies(leaves)) {
+            let Some(indices) = leaves.indices.get(leaf.start as usize..leaf.end as usize) else {
+                continue;
+            };
+            proxy.area *= opaque;
+            let leaf_index = self.leaves.len() as u32;
+            self.leaves.push(proxy);
+            self.push_indexed(
+                (positions, normals, uvs),
+                indices,
+                index,
+                TreePart::Leaves,
+                leaf_index,
+            );
+        }
+    }
+
+    /// The tree lighting's envelope of the leaves (§5.6), on all available threads.
+    pub fn leaf_light(&self) -> SourceLight {
+        if self.leaves.is_empty() {
+            return SourceLight::default();
+        }
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let envelope = crown_envelope(&self.leaves, threads);
+        SourceLight {
+            attenuation: envelope.leaves.iter().map(|e| e.attenuation).collect(),
+            extinction: envelope.tau,
+        }
     }
 
     /// Adds bark triangles (part [`TreePart::Branches`]) drawn with `surface`.
@@ -151,17 +261,29 @@ impl ImpostorSource {
         self.push_triangles(arrays, &bark.indices, surface, TreePart::Branches);
     }
 
-    /// Adds an indexed triangle list; triangles with an index out of range are skipped, missing
-    /// normals and uvs get defaults.
+    /// Adds an indexed triangle list with a surface of its own.
     fn push_triangles(
         &mut self,
-        (positions, normals, uvs): (&Vec<Vec3>, &Vec<Vec3>, &Vec<Vec2>),
+        arrays: (&Vec<Vec3>, &Vec<Vec3>, &Vec<Vec2>),
         indices: &[u32],
         surface: BakeSurface,
         part: TreePart,
     ) {
         let index = self.surfaces.len() as u32;
         self.surfaces.push(surface);
+        self.push_indexed(arrays, indices, index, part, NO_LEAF);
+    }
+
+    /// Adds an indexed triangle list drawn with surface `surface`, of leaf `leaf`; triangles
+    /// with an index out of range are skipped, missing normals and uvs get defaults.
+    fn push_indexed(
+        &mut self,
+        (positions, normals, uvs): (&Vec<Vec3>, &Vec<Vec3>, &Vec<Vec2>),
+        indices: &[u32],
+        index: u32,
+        part: TreePart,
+        leaf: u32,
+    ) {
         for tri in indices.chunks_exact(3) {
             if tri.iter().any(|&i| i as usize >= positions.len()) {
                 continue;
@@ -173,6 +295,7 @@ impl ImpostorSource {
                 uvs: [0, 1, 2].map(|k| uvs.get(at(k)).copied().unwrap_or(Vec2::ZERO)),
                 surface: index,
                 part,
+                leaf,
             });
         }
     }
@@ -308,16 +431,51 @@ pub fn min_extent(cloud: &BillboardCloud) -> f32 {
     cloud.radius * 0.01
 }
 
-/// Albedo and normal atlases (RGBA8 each, `layout.size²`), as the GPU bake renders them: the
+/// A billboard cloud's four atlases (RGBA8 each, `layout.size²`, row-major from the top).
+#[derive(Clone, Debug, PartialEq)]
+pub struct BakedAtlases {
+    /// sRGB colour, coverage in alpha.
+    pub albedo: Vec<u8>,
+    /// Tangent-space normal `0.5 + 0.5·n`, coverage in alpha.
+    pub normal: Vec<u8>,
+    /// [`SourceLight::texel_of_triangle`]'s nine values, three an atlas, sRGB-encoded in the
+    /// colour channels (see [`encode_light`]), coverage in alpha.
+    pub light: [Vec<u8>; LIGHT_ATLASES],
+}
+
+/// Three light values as a covered atlas texel stores them: sRGB-encoded (the atlas is sampled
+/// as sRGB, so the GPU decodes them), alpha 255.
+pub fn encode_light(a: [f32; 3]) -> [u8; 4] {
+    [
+        linear_to_srgb(a[0]),
+        linear_to_srgb(a[1]),
+        linear_to_srgb(a[2]),
+        255,
+    ]
+}
+
+/// [`encode_light`] undone.
+pub fn decode_light(p: [u8; 4]) -> [f32; 3] {
+    [
+        srgb_to_linear(p[0]),
+        srgb_to_linear(p[1]),
+        srgb_to_linear(p[2]),
+    ]
+}
+
+/// The atlases as the GPU bake renders them, the leaves' attenuations taken from `light`: the
 /// CPU reference.
 pub fn bake_reference(
     source: &ImpostorSource,
     cloud: &BillboardCloud,
     layout: &AtlasLayout,
-) -> (Vec<u8>, Vec<u8>) {
+    light: &SourceLight,
+) -> BakedAtlases {
     let size = layout.size as usize;
     let mut albedo = vec![0u8; size * size * 4];
     let mut normal = vec![0u8; size * size * 4];
+    let mut light_atlases: [Vec<u8>; LIGHT_ATLASES] =
+        std::array::from_fn(|_| vec![0u8; size * size * 4]);
     let min_extent = min_extent(cloud);
     for (plane, rect) in cloud.planes.iter().zip(&layout.rects) {
         let extent = plane_extent(plane, min_extent);
@@ -366,10 +524,22 @@ pub fn bake_reference(
                 ]);
                 let enc = |c: f32| ((c * 0.5 + 0.5).clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
                 normal[o..o + 4].copy_from_slice(&[enc(ts.x), enc(ts.y), enc(ts.z), 255]);
+                let v = light.texel_of_triangle(tri);
+                for (k, atlas) in light_atlases.iter_mut().enumerate() {
+                    atlas[o..o + 4].copy_from_slice(&encode_light([
+                        v[3 * k],
+                        v[3 * k + 1],
+                        v[3 * k + 2],
+                    ]));
+                }
             });
         }
     }
-    (albedo, normal)
+    BakedAtlases {
+        albedo,
+        normal,
+        light: light_atlases,
+    }
 }
 
 /// Fills the empty texels of each rectangle (and its gutter) with the mean colour of covered
@@ -467,6 +637,7 @@ mod tests {
                     uvs: [Vec2::ZERO; 3],
                     surface,
                     part: TreePart::Leaves,
+                    leaf: surface,
                 },
                 BakeTriangle {
                     positions: [a, c, d],
@@ -474,6 +645,7 @@ mod tests {
                     uvs: [Vec2::ZERO; 3],
                     surface,
                     part: TreePart::Leaves,
+                    leaf: surface,
                 },
             ]
         };
@@ -508,6 +680,18 @@ mod tests {
                     alpha_cutoff: 0.5,
                 },
             ],
+            leaves: vec![
+                LeafProxy {
+                    centre: Vec3::new(0.0, 1.0, 0.0),
+                    normal: Vec3::Z,
+                    area: 4.0,
+                },
+                LeafProxy {
+                    centre: Vec3::new(0.0, 1.0, 0.0),
+                    normal: Vec3::X,
+                    area: 4.0,
+                },
+            ],
         }
     }
 
@@ -518,9 +702,19 @@ mod tests {
         assert_eq!(cloud.planes.len(), 2);
         let sizes: Vec<Vec2> = cloud.planes.iter().map(|p| p.max - p.min).collect();
         let layout = pack(&sizes, 64, 1).unwrap();
-        let (albedo, normal) = bake_reference(&source, &cloud, &layout);
+        // Each leaf its own attenuations, distinct per bin.
+        let light = SourceLight {
+            attenuation: vec![
+                std::array::from_fn(|j| 0.1 * (j + 1) as f32),
+                std::array::from_fn(|j| 0.05 * (j + 2) as f32),
+            ],
+            extinction: 1.0,
+        };
+        let atlases = bake_reference(&source, &cloud, &layout, &light);
+        let (albedo, normal) = (&atlases.albedo, &atlases.normal);
         for (plane, rect) in cloud.planes.iter().zip(&layout.rects) {
             let red = source.triangles[plane.triangles[0] as usize].surface == 0;
+            let a = light.attenuation[if red { 0 } else { 1 }];
             let (mut covered, mut total) = (0, 0);
             for y in rect.min[1]..rect.min[1] + rect.size[1] {
                 for x in rect.min[0]..rect.min[0] + rect.size[0] {
@@ -533,6 +727,16 @@ mod tests {
                         // The quad faces the plane: tangent-space normal (0, 0, 1).
                         assert_eq!(normal[o + 2], 255);
                         assert!((normal[o] as i32 - 128).abs() <= 1);
+                        // The texel's leaf's eight attenuations, bin by bin, and "a leaf".
+                        let mut values = Vec::new();
+                        for atlas in &atlases.light {
+                            assert_eq!(atlas[o + 3], 255);
+                            let p = [atlas[o], atlas[o + 1], atlas[o + 2], atlas[o + 3]];
+                            values.extend(decode_light(p));
+                        }
+                        for (j, (v, a)) in values.iter().zip(a.iter().chain([&1.0])).enumerate() {
+                            assert!((v - a).abs() < 0.004, "value {j}: {v} vs {a}");
+                        }
                     }
                 }
             }
@@ -596,6 +800,61 @@ mod tests {
                 passing(level)
             );
         }
+    }
+
+    #[test]
+    fn light_texels_round_trip_finer_where_little_light_gets_through() {
+        for a in [0.0f32, 0.003, 0.02, 0.2, 0.5, 0.999, 1.0] {
+            let d = decode_light(encode_light([a; 3]));
+            // sRGB steps near 0 are finer than linear ones (1/255): a dim bin keeps its light.
+            assert!((d[0] - a).abs() <= 0.0006 + 0.02 * a, "{a}: {d:?}");
+        }
+    }
+
+    #[test]
+    fn leaves_count_with_their_opaque_share_and_bark_has_no_leaf() {
+        let tree = crate::pruning::procedural::generate(
+            &crate::pruning::procedural::TreeSpecies::olea().with_leaf_count(30),
+        );
+        let mut rgba = vec![255u8; 4 * 4 * 4];
+        // A quarter of the texels transparent.
+        for p in rgba.chunks_exact_mut(4).take(4) {
+            p[3] = 0;
+        }
+        let textured = BakeSurface {
+            base_color: Vec4::ONE,
+            texture: Some(SurfaceTexture {
+                width: 4,
+                height: 4,
+                rgba,
+            }),
+            alpha_cutoff: 0.5,
+        };
+        assert_eq!(textured.opaque_fraction(), 0.75);
+        let mut source = ImpostorSource::default();
+        source.push_leaves(&tree.leaves, textured);
+        source.push_bark(
+            &tree.bark,
+            BakeSurface {
+                base_color: Vec4::ONE,
+                texture: None,
+                alpha_cutoff: 0.0,
+            },
+        );
+        assert_eq!(source.leaves.len(), tree.leaves.len());
+        let full = proxies(&tree.leaves);
+        assert!((source.leaves[3].area - 0.75 * full[3].area).abs() < 1e-6);
+        for t in &source.triangles {
+            match t.part {
+                TreePart::Leaves => assert!((t.leaf as usize) < source.leaves.len()),
+                TreePart::Branches => assert_eq!(t.leaf, NO_LEAF),
+            }
+        }
+        let light = source.leaf_light();
+        assert_eq!(light.attenuation.len(), source.leaves.len());
+        assert!(light.extinction > 0.0);
+        let bark = source.triangles.last().unwrap();
+        assert_eq!(light.of_triangle(bark), [1.0; 8]);
     }
 
     #[test]

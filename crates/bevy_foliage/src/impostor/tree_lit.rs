@@ -1,0 +1,162 @@
+//! Billboard clouds lit as volumes of leaves: while [`TreeLightingSettings::enabled`] the
+//! impostors of the forest draw with [`TreeLitImpostorMaterial`], which lights every atlas texel
+//! showing a leaf as that leaf is lit by the tree lighting near the camera (Boulanger 2008,
+//! §5.2–5.4: sky and ground through the crown, the sun through it, one bounce), from the eight
+//! attenuations the bake stored for it (`impostor::texture`'s light atlases), and leaves texels
+//! showing bark to Bevy's PBR — so a tree keeps its light when its impostor takes over.
+//!
+//! The per-fragment lighting is `tree_lit_impostor.wgsl`, which calls the same
+//! `bevy_foliage::tree_lighting::leaf_radiance` as the leaves' vertex stage; its CPU reference
+//! is `lighting::model::leaf_radiance` on the texel's values (see the render test
+//! `tree_lit_impostor` in `tests/tree_lighting.rs`).
+
+use crate::lighting::settings::TreeLightingSettings;
+use crate::pruning::material::LeafParams;
+use bevy::asset::embedded_asset;
+use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
+use bevy::prelude::*;
+use bevy::render::render_resource::{AsBindGroup, ShaderType};
+use bevy::shader::ShaderRef;
+
+/// A billboard cloud's material under the tree lighting: the cloud's own `StandardMaterial`
+/// (albedo, normals, alpha mask) extended with its light atlases.
+pub type TreeLitImpostorMaterial = ExtendedMaterial<StandardMaterial, TreeLitImpostor>;
+
+/// The tree lighting's part of a billboard cloud's material.
+#[derive(Asset, AsBindGroup, Reflect, Debug, Clone)]
+pub struct TreeLitImpostor {
+    /// Lights, optics and the crown.
+    #[uniform(100)]
+    pub params: TreeLitImpostorParams,
+    /// Attenuations of bins 0–2.
+    #[texture(101)]
+    #[sampler(102)]
+    pub light0: Handle<Image>,
+    /// Attenuations of bins 3–5.
+    #[texture(103)]
+    pub light1: Handle<Image>,
+    /// Attenuations of bins 6–7, then 1 for a leaf texel and 0 for bark.
+    #[texture(104)]
+    pub light2: Handle<Image>,
+}
+
+/// Uniforms of [`TreeLitImpostor`] (see `tree_lit_impostor.wgsl`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, ShaderType, Reflect)]
+pub struct TreeLitImpostorParams {
+    /// The leaves' optics as multiples of the texel's albedo (rgb).
+    pub reflectance_front: Vec4,
+    /// ρ_rb over albedo.
+    pub reflectance_back: Vec4,
+    /// ρ_tf over albedo.
+    pub transmittance_front: Vec4,
+    /// ρ_tb over albedo.
+    pub transmittance_back: Vec4,
+    /// World direction towards the sun (xyz).
+    pub to_sun: Vec4,
+    /// The sun's irradiance (rgb; zero: no sun).
+    pub sun: Vec4,
+    /// The sky's radiance (rgb).
+    pub sky: Vec4,
+    /// The ground's radiance (rgb).
+    pub ground: Vec4,
+    /// The crown's bounding sphere in model space (centre, radius).
+    pub crown_sphere: Vec4,
+    /// The crown's extinction τ per unit of model space.
+    pub extinction: f32,
+    /// 1: the sun through the crown by eq. 5.7's envelope blend (else the attenuations' blend).
+    pub smooth_envelope: u32,
+    /// 1: one bounce of sunlight.
+    pub bounce: u32,
+    /// Padding.
+    pub pad: u32,
+}
+
+impl TreeLitImpostorParams {
+    /// The cloud's own values (its crown and extinction) with the scene's lights and the
+    /// settings' switches and optics from `lights` (what the leaf materials get:
+    /// `pruning::systems::tree_lights`).
+    pub fn new(lights: &LeafParams, crown_sphere: Vec4, extinction: f32) -> Self {
+        Self {
+            reflectance_front: lights.reflectance_front,
+            reflectance_back: lights.reflectance_back,
+            transmittance_front: lights.transmittance_front,
+            transmittance_back: lights.transmittance_back,
+            to_sun: lights.to_sun,
+            sun: lights.sun,
+            sky: lights.sky,
+            ground: lights.ground,
+            crown_sphere,
+            extinction,
+            smooth_envelope: lights.smooth_envelope,
+            bounce: lights.bounce,
+            pad: 0,
+        }
+    }
+}
+
+const TREE_LIT_IMPOSTOR_SHADER: &str = "embedded://bevy_foliage/impostor/tree_lit_impostor.wgsl";
+
+impl MaterialExtension for TreeLitImpostor {
+    fn fragment_shader() -> ShaderRef {
+        ShaderRef::Path(TREE_LIT_IMPOSTOR_SHADER.into())
+    }
+
+    fn specialize(
+        _pipeline: &bevy::pbr::MaterialExtensionPipeline,
+        descriptor: &mut bevy::render::render_resource::RenderPipelineDescriptor,
+        _layout: &bevy::mesh::MeshVertexBufferLayoutRef,
+        _key: bevy::pbr::MaterialExtensionKey<Self>,
+    ) -> Result<(), bevy::render::render_resource::SpecializedMeshPipelineError> {
+        // The fragment stage turns world directions into the tree's frame through the
+        // instance's transform.
+        descriptor
+            .vertex
+            .shader_defs
+            .push("VERTEX_OUTPUT_INSTANCE_INDEX".into());
+        if let Some(fragment) = descriptor.fragment.as_mut() {
+            fragment
+                .shader_defs
+                .push("VERTEX_OUTPUT_INSTANCE_INDEX".into());
+        }
+        Ok(())
+    }
+}
+
+/// Keeps every [`TreeLitImpostorMaterial`]'s lights those of the scene (the sun, the sky and
+/// the ground the leaf materials get), its switches and optics those of the settings.
+pub fn refresh_tree_lit_impostors(
+    lighting: Res<TreeLightingSettings>,
+    ambient: Option<Res<GlobalAmbientLight>>,
+    suns: Query<(&DirectionalLight, &GlobalTransform)>,
+    mut materials: ResMut<Assets<TreeLitImpostorMaterial>>,
+) {
+    if materials.is_empty() {
+        return;
+    }
+    let (lighting, _) = lighting.sanitized();
+    let lights = crate::pruning::systems::tree_lights(
+        &lighting,
+        ambient.as_deref(),
+        suns.iter().map(|(l, t)| (l, t.back().as_vec3())),
+    );
+    let ids: Vec<_> = materials.ids().collect();
+    for id in ids {
+        let Some(material) = materials.get(id) else {
+            continue;
+        };
+        let own = &material.extension.params;
+        let params = TreeLitImpostorParams::new(&lights, own.crown_sphere, own.extinction);
+        if params != *own
+            && let Some(mut material) = materials.get_mut(id)
+        {
+            material.extension.params = params;
+        }
+    }
+}
+
+/// Registers the tree-lit impostor material and keeps its lights current.
+pub(crate) fn build(app: &mut App) {
+    embedded_asset!(app, "tree_lit_impostor.wgsl");
+    app.add_plugins(MaterialPlugin::<TreeLitImpostorMaterial>::default())
+        .add_systems(PostUpdate, refresh_tree_lit_impostors);
+}

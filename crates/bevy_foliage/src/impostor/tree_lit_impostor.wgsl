@@ -1,0 +1,131 @@
+// A billboard cloud lit as a volume of leaves (Boulanger 2008, §5.2–5.4), per fragment: a texel
+// showing a leaf gets the light the tree lighting gives that leaf — its eight baked attenuations
+// (the light atlases), its normal (the normal atlas) and its albedo as the leaf's optics — from
+// `bevy_foliage::tree_lighting::leaf_radiance`, the function the leaves' vertex stage calls; a
+// texel showing bark gets Bevy's PBR, as the bark near the camera does. `impostor::tree_lit` is
+// the Rust side; `lighting::model::leaf_radiance` on the texel's values the CPU reference.
+//
+// The sun's share: the baked blend times Bevy's shadow map read where the sun's light enters the
+// crown (on the plane touching the crown's bounding sphere on the sun's side, so the cloud's own
+// planes, which cast into the map, are not counted twice). Impostors are drawn beyond the
+// distance where the shadow map's texels still resolve leaves, where the leaves do the same.
+#import bevy_pbr::{
+    pbr_fragment::pbr_input_from_standard_material,
+    pbr_functions::{alpha_discard, apply_pbr_lighting, main_pass_post_lighting_processing},
+    forward_io::{VertexOutput, FragmentOutput},
+    mesh_functions,
+    mesh_view_bindings as view_bindings,
+    mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
+    mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
+    shadows::fetch_directional_shadow,
+}
+#import bevy_foliage::tree_lighting::{LeafOptics, TreeLights, leaf_radiance}
+
+struct TreeLitImpostorParams {
+    reflectance_front: vec4<f32>,
+    reflectance_back: vec4<f32>,
+    transmittance_front: vec4<f32>,
+    transmittance_back: vec4<f32>,
+    to_sun: vec4<f32>,
+    sun: vec4<f32>,
+    sky: vec4<f32>,
+    ground: vec4<f32>,
+    // The crown's bounding sphere in model space (centre, radius).
+    crown_sphere: vec4<f32>,
+    extinction: f32,
+    smooth_envelope: u32,
+    bounce: u32,
+    pad: u32,
+}
+
+@group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> params: TreeLitImpostorParams;
+@group(#{MATERIAL_BIND_GROUP}) @binding(101) var light0: texture_2d<f32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(102) var light_sampler: sampler;
+@group(#{MATERIAL_BIND_GROUP}) @binding(103) var light1: texture_2d<f32>;
+@group(#{MATERIAL_BIND_GROUP}) @binding(104) var light2: texture_2d<f32>;
+
+fn view_depth(p: vec3<f32>) -> f32 {
+    let view = view_bindings::view.view_from_world;
+    return dot(vec4(view[0].z, view[1].z, view[2].z, view[3].z), vec4(p, 1.0));
+}
+
+// Bevy's shadow map of the sun (the light the CPU chose) read at `p`; 1 with no shadow map.
+fn sun_shadow_at(p: vec3<f32>, frag_xy: vec2<f32>, flags: u32) -> f32 {
+    if (flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u {
+        return 1.0;
+    }
+    for (var i = 0u; i < view_bindings::lights.n_directional_lights; i += 1u) {
+        let light = &view_bindings::lights.directional_lights[i];
+        if dot((*light).direction_to_light, params.to_sun.xyz) < 0.9999 {
+            continue;
+        }
+        if ((*light).flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
+            return 1.0;
+        }
+        return fetch_directional_shadow(
+            i, vec4(p, 1.0), (*light).direction_to_light, view_depth(p), frag_xy);
+    }
+    return 1.0;
+}
+
+@fragment
+fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> FragmentOutput {
+    var pbr_input = pbr_input_from_standard_material(in, is_front);
+    pbr_input.material.base_color = alpha_discard(pbr_input.material, pbr_input.material.base_color);
+    let base = pbr_input.material.base_color;
+
+    let l0 = textureSample(light0, light_sampler, in.uv).rgb;
+    let l1 = textureSample(light1, light_sampler, in.uv).rgb;
+    let l2 = textureSample(light2, light_sampler, in.uv).rgb;
+    let leaf = clamp(l2.z, 0.0, 1.0);
+
+    var color = vec3(0.0);
+    if leaf < 1.0 {
+        color = apply_pbr_lighting(pbr_input).rgb * (1.0 - leaf);
+    }
+    if leaf > 0.0 {
+        // The tree's frame: the transpose undoes the instance's rotation and, normalised, its
+        // uniform scale.
+        let world_from_local = mesh_functions::get_world_from_local(in.instance_index);
+        let local_from_world = transpose(mat3x3<f32>(
+            world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz));
+        let scale = (length(world_from_local[0].xyz) + length(world_from_local[1].xyz)
+            + length(world_from_local[2].xyz)) / 3.0;
+        let p = in.world_position.xyz;
+        let to_eye = normalize(local_from_world * (view_bindings::view.world_position - p));
+        var lights: TreeLights;
+        lights.to_sun = normalize(local_from_world * params.to_sun.xyz);
+        lights.sun = params.sun.rgb;
+        lights.sky = params.sky.rgb;
+        lights.ground = params.ground.rgb;
+        let albedo = base.rgb;
+        let optics = LeafOptics(
+            params.reflectance_front.rgb * albedo,
+            params.reflectance_back.rgb * albedo,
+            params.transmittance_front.rgb * albedo,
+            params.transmittance_back.rgb * albedo,
+        );
+        let attenuation = array<f32, 8>(l0.x, l0.y, l0.z, l1.x, l1.y, l1.z, l2.x, l2.y);
+        let light = leaf_radiance(
+            optics,
+            normalize(local_from_world * pbr_input.N),
+            to_eye,
+            attenuation,
+            params.extinction,
+            lights,
+            params.smooth_envelope != 0u,
+            params.bounce != 0u,
+        );
+        // The shadow of what stands outside the crown, read where the sun's light enters it.
+        let p_local = local_from_world * (p - world_from_local[3].xyz) / (scale * scale);
+        let reach = max(dot(params.crown_sphere.xyz - p_local, lights.to_sun)
+            + params.crown_sphere.w, 0.0) * scale;
+        let outside = sun_shadow_at(p + params.to_sun.xyz * reach, in.position.xy, pbr_input.flags);
+        let tree_lit = (light.sky + light.sun * light.through * outside + light.bounce * outside)
+            * view_bindings::view.exposure;
+        color += tree_lit * leaf;
+    }
+    var out: FragmentOutput;
+    out.color = main_pass_post_lighting_processing(pbr_input, vec4(color, base.a));
+    return out;
+}
