@@ -929,3 +929,214 @@ fn a_tree_lit_billboard_cloud_lights_each_leaf_texel_as_the_model_does() {
         "{leaves_unlike_pbr} of {compared}"
     );
 }
+
+/// Steps until the bake requested by `entity` has its result.
+fn impostor_bake_result(
+    harness: &mut RenderHarness,
+    entity: Entity,
+) -> std::sync::Arc<bevy_foliage::impostor::format::ImpostorData> {
+    use bevy_foliage::impostor::bake::ImpostorBakeResult;
+    for _ in 0..300 {
+        harness.step();
+        if let Some(result) = harness.world_mut().get::<ImpostorBakeResult>(entity) {
+            return result.0.clone().expect("bake");
+        }
+    }
+    panic!("the bake never finished");
+}
+
+/// The mean linear luminance of the pixels the tree covers (not the black background): how
+/// bright the crown looks, whatever its coverage.
+fn crown_brightness(image: &RgbaImage) -> f64 {
+    let covered = (0..image.height)
+        .flat_map(|y| (0..image.width).map(move |x| (x, y)))
+        .filter(|&(x, y)| image.pixel(x, y)[..3].iter().any(|&c| c > 0))
+        .count();
+    crown_light(image) * (image.width * image.height) as f64 / covered.max(1) as f64
+}
+
+/// A forest tree lit as a volume, seen from 40 m: drawn by its pruned leaves (`far` beyond it)
+/// and then by its billboard cloud (`far` before it), the crown looks about as bright — the
+/// cloud's leaf texels are lit by the same model — where the cloud drawn with Bevy's lighting is
+/// far brighter (the pop the hand-over had). Switching the lighting respawns the impostor with
+/// the other material.
+#[test]
+fn a_tree_lit_crown_keeps_its_light_when_its_billboard_cloud_takes_over() {
+    use bevy_foliage::ForestTree;
+    use bevy_foliage::impostor::assets::BillboardCloudAsset;
+    use bevy_foliage::impostor::bake::{ImpostorBakeRequest, ImpostorBakeSettings};
+    use bevy_foliage::impostor::systems::{
+        ImpostorOf, ImpostorSettings, TreeBark, TreeImpostor, TreeLitImpostorDraw,
+    };
+    use bevy_foliage::impostor::texture::{BakeSurface, ImpostorSource};
+    use bevy_foliage::meshes::bark_mesh;
+    let Some(mut harness) = RenderHarness::for_test("tree_lit_handover", SIZE, SIZE) else {
+        return;
+    };
+    let lighting = TreeLightingSettings {
+        enabled: true,
+        ..default()
+    };
+    harness
+        .app_mut()
+        .add_plugins(FoliagePlugin)
+        .insert_resource(lighting)
+        .insert_resource(ClearColor(Color::BLACK))
+        .insert_resource(GlobalAmbientLight {
+            color: Color::WHITE,
+            brightness: SKY,
+            ..default()
+        })
+        .insert_resource(FoliagePruningSettings {
+            distances: LodDistances::World {
+                near: 5.0,
+                far: 1000.0,
+            },
+            ..default()
+        })
+        .insert_resource(ImpostorSettings {
+            // No cross-fade: at 40 m the tree is all leaves or all cloud.
+            fade_band: 0.0,
+            ..default()
+        });
+    let distance = 40.0;
+    harness.world_mut().spawn((
+        Camera3d::default(),
+        Msaa::Off,
+        Tonemapping::None,
+        DebandDither::Disabled,
+        Exposure {
+            ev100: -(1.2f32).log2(),
+        },
+        Projection::Perspective(PerspectiveProjection {
+            fov: 0.25,
+            ..default()
+        }),
+        Transform::from_xyz(0.0, 3.5, distance).looking_at(Vec3::new(0.0, 3.5, 0.0), Vec3::Y),
+    ));
+    harness.world_mut().spawn((
+        DirectionalLight {
+            illuminance: SUN,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::default().looking_to(Vec3::new(-0.3, -1.0, -0.5), Vec3::Y),
+    ));
+    let tree = generate(&TreeSpecies::olea().with_leaf_count(600));
+    let bark_colour = Vec3::new(0.3, 0.2, 0.12);
+    let solid = |c: Vec3, cutoff: f32| BakeSurface {
+        base_color: c.extend(1.0),
+        texture: None,
+        alpha_cutoff: cutoff,
+    };
+    let mut source = ImpostorSource::default();
+    source.push_leaves(&tree.leaves, solid(BASE, 0.5));
+    source.push_bark(&tree.bark, solid(bark_colour, 0.0));
+    let request = harness
+        .world_mut()
+        .spawn(ImpostorBakeRequest {
+            label: "handover olive".into(),
+            source: std::sync::Arc::new(source),
+            settings: ImpostorBakeSettings {
+                atlas_size: 512,
+                ..default()
+            },
+            save_to: None,
+        })
+        .id();
+    let data = impostor_bake_result(&mut harness, request);
+    let world = harness.world_mut();
+    let cloud = BillboardCloudAsset::from_data_in(world, &data);
+    let cloud = world
+        .resource_mut::<Assets<BillboardCloudAsset>>()
+        .add(cloud);
+    let (baked, _) = bake(&tree.leaves, &BakeSettings::default(), &|_| {}).unwrap();
+    let baked = world.resource_mut::<Assets<BakedFoliage>>().add(baked);
+    let leaves = world
+        .resource_mut::<Assets<LeafMaterial>>()
+        .add(leaf_material(StandardMaterial {
+            base_color: Color::linear_rgb(BASE.x, BASE.y, BASE.z),
+            double_sided: true,
+            cull_mode: None,
+            ..default()
+        }));
+    let bark_material = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::linear_rgb(bark_colour.x, bark_colour.y, bark_colour.z),
+            ..default()
+        });
+    let bark = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(bark_mesh(&tree.bark));
+    world
+        .spawn((
+            ForestTree {
+                baked,
+                material: leaves,
+            },
+            TreeImpostor(cloud),
+            Transform::IDENTITY,
+        ))
+        .with_child((Mesh3d(bark), MeshMaterial3d(bark_material), TreeBark));
+    let mut render_with = |harness: &mut RenderHarness, far: f32, tree_lit: bool| {
+        harness
+            .world_mut()
+            .resource_mut::<FoliagePruningSettings>()
+            .distances = LodDistances::World { near: 5.0, far };
+        harness
+            .world_mut()
+            .resource_mut::<TreeLightingSettings>()
+            .enabled = tree_lit;
+        for _ in 0..10 {
+            harness.step();
+        }
+        harness.wait_until_ready().unwrap();
+        let image = harness.render().unwrap();
+        let world = harness.world_mut();
+        let impostors = world
+            .query_filtered::<Has<TreeLitImpostorDraw>, With<ImpostorOf>>()
+            .iter(world)
+            .collect::<Vec<_>>();
+        (image, impostors)
+    };
+    let (leaves_lit, _) = render_with(&mut harness, 1000.0, true);
+    let (cloud_lit, impostors_lit) = render_with(&mut harness, 20.0, true);
+    let (cloud_pbr, impostors_pbr) = render_with(&mut harness, 20.0, false);
+    let (leaves_pbr, _) = render_with(&mut harness, 1000.0, false);
+    let dir = artifacts_dir().join("tree_lighting");
+    std::fs::create_dir_all(&dir).ok();
+    for (name, image) in [
+        ("handover_leaves_lit", &leaves_lit),
+        ("handover_cloud_lit", &cloud_lit),
+        ("handover_cloud_pbr", &cloud_pbr),
+        ("handover_leaves_pbr", &leaves_pbr),
+    ] {
+        image.save_png(dir.join(format!("{name}.png"))).ok();
+    }
+    let light = [&leaves_lit, &cloud_lit, &cloud_pbr, &leaves_pbr].map(crown_brightness);
+    let off = |a: f64, b: f64| (a - b).abs() / b;
+    eprintln!(
+        "crown brightness: tree-lit leaves {:.4}, tree-lit cloud {:.4} ({:+.1} %), Bevy-lit cloud {:.4} ({:+.1} %), Bevy-lit leaves {:.4}",
+        light[0],
+        light[1],
+        100.0 * (light[1] / light[0] - 1.0),
+        light[2],
+        100.0 * (light[2] / light[0] - 1.0),
+        light[3]
+    );
+    assert_eq!(impostors_lit, vec![true], "one impostor, drawn tree-lit");
+    assert_eq!(impostors_pbr, vec![false], "respawned with Bevy's lighting");
+    assert!(light[0] > 1e-3, "the crown is in view and lit");
+    assert!(
+        off(light[1], light[0]) < HANDOVER_TOLERANCE,
+        "the tree-lit cloud's brightness is off the leaves' by {:.1} %",
+        100.0 * off(light[1], light[0])
+    );
+    // What the hand-over was before: Bevy's lighting on the cloud is far from the tree-lit
+    // crown (the measure sees a pop).
+    assert!(off(light[2], light[0]) > 2.0 * HANDOVER_TOLERANCE);
+}
+
+/// How far a tree-lit crown's brightness may move when its billboard cloud takes over.
+const HANDOVER_TOLERANCE: f64 = 0.08;
