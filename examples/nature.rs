@@ -10,6 +10,8 @@
 //! memory every 500 frames.
 //! `--leaf-scale F` sets the backdrop forest's leaf counts as a fraction of the species' full
 //! counts (default 0.15; fewer leaves are larger, so the crowns stay as full).
+//! `--bevy-lighting` lights the leaves with Bevy's PBR instead of the tree lighting (the panel
+//! switches it too: `TreeLightingSettings::enabled`).
 
 use bevy_nature::foliage::FoliagePruningSettings;
 use bevy_nature::showcase::{ShowcaseOptions, build_showcase};
@@ -31,12 +33,14 @@ fn main() -> bevy::app::AppExit {
                     eprintln!("--leaf-scale takes a number in (0, 1], not '{v}'");
                     std::process::exit(2)
                 });
+        } else if arg == "--bevy-lighting" {
+            options.tree_lighting = false;
         } else {
             rest.push(arg);
         }
     }
     let args = ExampleArgs::parse_from(rest).unwrap_or_else(|e| {
-        eprintln!("{e} [--leaf-scale F]");
+        eprintln!("{e} [--leaf-scale F] [--bevy-lighting]");
         std::process::exit(2)
     });
     // A soak run flies the camera, so streaming, LoD and shadows keep changing.

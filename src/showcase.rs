@@ -91,6 +91,10 @@ pub struct ShowcaseOptions {
     /// [`FLIGHT_FRAMES`] frames, so streaming, LoD and shadows change all the time (the
     /// `nature` example's `--soak` run turns it on).
     pub fly: bool,
+    /// The trees' leaves lit as volumes ([`bevy_foliage::TreeLightingSettings`]): sky and sun
+    /// through the crown, one bounce — the near trees' leaves and the backdrop's billboard
+    /// clouds alike. Off: Bevy's PBR lighting.
+    pub tree_lighting: bool,
 }
 
 /// Frames of one lap of the camera's flight ([`ShowcaseOptions::fly`]).
@@ -109,6 +113,7 @@ impl Default for ShowcaseOptions {
             soft_shadows: true,
             grass: true,
             fly: false,
+            tree_lighting: true,
         }
     }
 }
@@ -119,6 +124,10 @@ pub fn build_showcase(app: &mut App, options: ShowcaseOptions) {
     app.add_plugins(crate::NaturePlugins)
         .insert_resource(bevy_foliage::grass::GrassSettings {
             slice_cache: Some("assets/grass".into()),
+            ..default()
+        })
+        .insert_resource(bevy_foliage::TreeLightingSettings {
+            enabled: options.tree_lighting,
             ..default()
         })
         .insert_resource(options)

@@ -1079,7 +1079,7 @@ fn a_tree_lit_crown_keeps_its_light_when_its_billboard_cloud_takes_over() {
             Transform::IDENTITY,
         ))
         .with_child((Mesh3d(bark), MeshMaterial3d(bark_material), TreeBark));
-    let mut render_with = |harness: &mut RenderHarness, far: f32, tree_lit: bool| {
+    let render_with = |harness: &mut RenderHarness, far: f32, tree_lit: bool| {
         harness
             .world_mut()
             .resource_mut::<FoliagePruningSettings>()

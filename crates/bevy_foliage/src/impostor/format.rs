@@ -27,6 +27,10 @@ pub const MAGIC: &[u8; 8] = b"BNBBCLOU";
 /// cache is re-baked.
 pub const FORMAT_VERSION: u32 = 2;
 
+/// Light atlases of a billboard cloud: three, of three values a texel each (see
+/// `impostor::texture`).
+pub const LIGHT_ATLASES: usize = 3;
+
 /// One textured quad of a billboard cloud, in model space.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ImpostorPlane {
@@ -62,9 +66,9 @@ pub struct ImpostorData {
     /// normal) encoded `0.5 + 0.5·n`, linear RGBA8.
     pub normal: Vec<u8>,
     /// The tree lighting's attenuations of each texel's leaf and whether it is a leaf, three
-    /// values an atlas ([`SourceLight::texel_of_triangle`](super::texture::SourceLight),
-    /// [`encode_light`](super::texture::encode_light)).
-    pub light: [Vec<u8>; super::texture::LIGHT_ATLASES],
+    /// values an atlas (`texture::SourceLight::texel_of_triangle`, stored as
+    /// `texture::encode_light` writes them).
+    pub light: [Vec<u8>; LIGHT_ATLASES],
     /// The crown's extinction τ per unit of model space (Boulanger 2008, eq. 5.5).
     pub extinction: f32,
     /// Hash of the source geometry and bake settings: a cache whose hash differs is stale.
@@ -83,7 +87,7 @@ impl ImpostorData {
 
     /// Texture bytes on the GPU of the light atlases the tree lighting adds.
     pub fn light_texture_bytes(&self) -> u64 {
-        self.texture_bytes() / 2 * super::texture::LIGHT_ATLASES as u64
+        self.texture_bytes() / 2 * LIGHT_ATLASES as u64
     }
 
     /// Fraction of atlas texels covered (alpha ≥ 128).

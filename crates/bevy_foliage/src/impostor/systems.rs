@@ -1,7 +1,8 @@
 //! Forest trees drawn by their billboard cloud where pruning has thinned their crown to nothing.
 //!
 //! A [`ForestTree`] with a [`TreeImpostor`] gets an impostor (the cloud's quads and
-//! `StandardMaterial`): an entity beside the tree — a child of the tree's parent with the tree's
+//! `StandardMaterial`, or its `TreeLitImpostorMaterial` while the tree lighting is on): an entity
+//! beside the tree — a child of the tree's parent with the tree's
 //! transform — so that it stays drawn while the manager hides the tree itself, bark and leaves,
 //! where its leaves are gone. The handover is a cross-fade over a distance band ending at the pruning's
 //! `far` (where the desired LoD reaches 0): inside the band the impostor dithers in through Bevy's

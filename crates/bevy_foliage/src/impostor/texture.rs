@@ -20,6 +20,7 @@
 use super::atlas::{AtlasLayout, AtlasRect};
 use super::cloud::{BillboardCloud, CloudPlane, CloudTriangle, PlaneRole, TreePart};
 use super::format::ImpostorPlane;
+pub use super::format::LIGHT_ATLASES;
 use crate::lighting::bins::{LeafProxy, proxies};
 use crate::lighting::envelope::crown_envelope;
 use crate::pruning::format::fnv1a64;
@@ -116,9 +117,6 @@ pub struct BakeTriangle {
 
 /// [`BakeTriangle::leaf`] of a triangle that belongs to no leaf (bark).
 pub const NO_LEAF: u32 = u32::MAX;
-
-/// Light atlases of a billboard cloud: three, of three values a texel each.
-pub const LIGHT_ATLASES: usize = 3;
 
 /// A tree as the impostor bake sees it: triangles and the surfaces they use.
 #[derive(Clone, Debug, Default, PartialEq)]

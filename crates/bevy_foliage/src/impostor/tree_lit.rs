@@ -11,7 +11,7 @@
 //! `tree_lit_impostor` in `tests/tree_lighting.rs`).
 
 use crate::lighting::settings::TreeLightingSettings;
-use crate::pruning::material::LeafParams;
+use crate::pruning::material::{LeafParams, TreeLightUniform};
 use bevy::asset::embedded_asset;
 use bevy::pbr::{ExtendedMaterial, MaterialExtension, MaterialPlugin};
 use bevy::prelude::*;
@@ -43,22 +43,8 @@ pub struct TreeLitImpostor {
 /// Uniforms of [`TreeLitImpostor`] (see `tree_lit_impostor.wgsl`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, ShaderType, Reflect)]
 pub struct TreeLitImpostorParams {
-    /// The leaves' optics as multiples of the texel's albedo (rgb).
-    pub reflectance_front: Vec4,
-    /// ρ_rb over albedo.
-    pub reflectance_back: Vec4,
-    /// ρ_tf over albedo.
-    pub transmittance_front: Vec4,
-    /// ρ_tb over albedo.
-    pub transmittance_back: Vec4,
-    /// World direction towards the sun (xyz).
-    pub to_sun: Vec4,
-    /// The sun's irradiance (rgb; zero: no sun).
-    pub sun: Vec4,
-    /// The sky's radiance (rgb).
-    pub sky: Vec4,
-    /// The ground's radiance (rgb).
-    pub ground: Vec4,
+    /// The optics (multiples of the texel's albedo) and the scene's lights.
+    pub lights: TreeLightUniform,
     /// The crown's bounding sphere in model space (centre, radius).
     pub crown_sphere: Vec4,
     /// The crown's extinction τ per unit of model space.
@@ -73,22 +59,15 @@ pub struct TreeLitImpostorParams {
 
 impl TreeLitImpostorParams {
     /// The cloud's own values (its crown and extinction) with the scene's lights and the
-    /// settings' switches and optics from `lights` (what the leaf materials get:
+    /// settings' switches and optics from `leaves` (what the leaf materials get:
     /// `pruning::systems::tree_lights`).
-    pub fn new(lights: &LeafParams, crown_sphere: Vec4, extinction: f32) -> Self {
+    pub fn new(leaves: &LeafParams, crown_sphere: Vec4, extinction: f32) -> Self {
         Self {
-            reflectance_front: lights.reflectance_front,
-            reflectance_back: lights.reflectance_back,
-            transmittance_front: lights.transmittance_front,
-            transmittance_back: lights.transmittance_back,
-            to_sun: lights.to_sun,
-            sun: lights.sun,
-            sky: lights.sky,
-            ground: lights.ground,
+            lights: leaves.lights,
             crown_sphere,
             extinction,
-            smooth_envelope: lights.smooth_envelope,
-            bounce: lights.bounce,
+            smooth_envelope: leaves.smooth_envelope,
+            bounce: leaves.bounce,
             pad: 0,
         }
     }

@@ -19,17 +19,10 @@
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
     shadows::fetch_directional_shadow,
 }
-#import bevy_foliage::tree_lighting::{LeafOptics, TreeLights, leaf_radiance}
+#import bevy_foliage::tree_lighting::{TreeLightUniform, leaf_radiance, lights_of, optics_of}
 
 struct TreeLitImpostorParams {
-    reflectance_front: vec4<f32>,
-    reflectance_back: vec4<f32>,
-    transmittance_front: vec4<f32>,
-    transmittance_back: vec4<f32>,
-    to_sun: vec4<f32>,
-    sun: vec4<f32>,
-    sky: vec4<f32>,
-    ground: vec4<f32>,
+    lights: TreeLightUniform,
     // The crown's bounding sphere in model space (centre, radius).
     crown_sphere: vec4<f32>,
     extinction: f32,
@@ -56,7 +49,7 @@ fn sun_shadow_at(p: vec3<f32>, frag_xy: vec2<f32>, flags: u32) -> f32 {
     }
     for (var i = 0u; i < view_bindings::lights.n_directional_lights; i += 1u) {
         let light = &view_bindings::lights.directional_lights[i];
-        if dot((*light).direction_to_light, params.to_sun.xyz) < 0.9999 {
+        if dot((*light).direction_to_light, params.lights.to_sun.xyz) < 0.9999 {
             continue;
         }
         if ((*light).flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
@@ -93,21 +86,11 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
             + length(world_from_local[2].xyz)) / 3.0;
         let p = in.world_position.xyz;
         let to_eye = normalize(local_from_world * (view_bindings::view.world_position - p));
-        var lights: TreeLights;
-        lights.to_sun = normalize(local_from_world * params.to_sun.xyz);
-        lights.sun = params.sun.rgb;
-        lights.sky = params.sky.rgb;
-        lights.ground = params.ground.rgb;
-        let albedo = base.rgb;
-        let optics = LeafOptics(
-            params.reflectance_front.rgb * albedo,
-            params.reflectance_back.rgb * albedo,
-            params.transmittance_front.rgb * albedo,
-            params.transmittance_back.rgb * albedo,
-        );
+        let lights = lights_of(
+            params.lights, normalize(local_from_world * params.lights.to_sun.xyz));
         let attenuation = array<f32, 8>(l0.x, l0.y, l0.z, l1.x, l1.y, l1.z, l2.x, l2.y);
         let light = leaf_radiance(
-            optics,
+            optics_of(params.lights, base.rgb),
             normalize(local_from_world * pbr_input.N),
             to_eye,
             attenuation,
@@ -120,7 +103,7 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
         let p_local = local_from_world * (p - world_from_local[3].xyz) / (scale * scale);
         let reach = max(dot(params.crown_sphere.xyz - p_local, lights.to_sun)
             + params.crown_sphere.w, 0.0) * scale;
-        let outside = sun_shadow_at(p + params.to_sun.xyz * reach, in.position.xy, pbr_input.flags);
+        let outside = sun_shadow_at(p + params.lights.to_sun.xyz * reach, in.position.xy, pbr_input.flags);
         let tree_lit = (light.sky + light.sun * light.through * outside + light.bounce * outside)
             * view_bindings::view.exposure;
         color += tree_lit * leaf;

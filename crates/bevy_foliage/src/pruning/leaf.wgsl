@@ -7,7 +7,7 @@
 #ifdef TREE_LIGHTING
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
 #import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_params}
-#import bevy_foliage::tree_lighting::{LeafLight, LeafOptics, TreeLights, TreeLitVertexOutput, leaf_radiance}
+#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, leaf_radiance, lights_of, optics_of}
 
 // The tree instance's frame, read once per vertex: world directions into the model's frame
 // (the transpose undoes a rotation and, once normalised, a uniform scale), the instance's scale
@@ -25,7 +25,7 @@ fn tree_frame(instance_index: u32) -> TreeFrame {
         world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz));
     frame.scale = (length(world_from_local[0].xyz) + length(world_from_local[1].xyz)
         + length(world_from_local[2].xyz)) / 3.0;
-    frame.to_sun = normalize(frame.local_from_world * leaf_params.to_sun.xyz);
+    frame.to_sun = normalize(frame.local_from_world * leaf_params.lights.to_sun.xyz);
     return frame;
 }
 
@@ -34,25 +34,14 @@ fn tree_frame(instance_index: u32) -> TreeFrame {
 // back in with the texture).
 fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
     let to_eye = normalize(frame.local_from_world * (view.world_position - leaf.world_position.xyz));
-    var lights: TreeLights;
-    lights.to_sun = frame.to_sun;
-    lights.sun = leaf_params.sun.rgb;
-    lights.sky = leaf_params.sky.rgb;
-    lights.ground = leaf_params.ground.rgb;
     let albedo = leaf_params.albedo.rgb;
-    let optics = LeafOptics(
-        leaf_params.reflectance_front.rgb * albedo,
-        leaf_params.reflectance_back.rgb * albedo,
-        leaf_params.transmittance_front.rgb * albedo,
-        leaf_params.transmittance_back.rgb * albedo,
-    );
     var light = leaf_radiance(
-        optics,
+        optics_of(leaf_params.lights, albedo),
         normalize(leaf.local_normal),
         to_eye,
         leaf_attenuation(leaf.leaf),
         leaf.extinction,
-        lights,
+        lights_of(leaf_params.lights, frame.to_sun),
         leaf_params.smooth_envelope != 0u,
         leaf_params.bounce != 0u,
     );

@@ -19,6 +19,7 @@
 
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view, view_transformations::position_world_to_clip}
 #import bevy_foliage::pruning_types::{Instance, LeafVertex}
+#import bevy_foliage::tree_lighting::TreeLightUniform
 
 // The slot mesh's vertex: only its index (in position.x) and the instance are used.
 struct SlotVertex {
@@ -47,17 +48,8 @@ struct LeafParams {
     smooth_envelope: u32,
     bounce: u32,
     pad_z: u32,
-    // The leaves' optics (rgb).
-    reflectance_front: vec4<f32>,
-    reflectance_back: vec4<f32>,
-    transmittance_front: vec4<f32>,
-    transmittance_back: vec4<f32>,
-    // World direction towards the sun, the sun's irradiance (zero: no sun), the sky's radiance
-    // and the ground's (rgb), as the CPU found them in the scene.
-    to_sun: vec4<f32>,
-    sun: vec4<f32>,
-    sky: vec4<f32>,
-    ground: vec4<f32>,
+    // The leaves' optics and the scene's lights.
+    lights: TreeLightUniform,
     // The material's base colour (linear rgb): the optics are multiples of it.
     albedo: vec4<f32>,
 }

@@ -47,7 +47,7 @@ fn sun_shadow(p: vec3<f32>, reach: f32, leaf_size: f32, frag_xy: vec2<f32>, flag
         return out;
     }
     // Bevy's light of the sun the CPU chose (the brightest directional light).
-    let to_sun = leaf_params.to_sun.xyz;
+    let to_sun = leaf_params.lights.to_sun.xyz;
     for (var i = 0u; i < view_bindings::lights.n_directional_lights; i += 1u) {
         let light = &view_bindings::lights.directional_lights[i];
         if dot((*light).direction_to_light, to_sun) < 0.9999 {

@@ -47,7 +47,18 @@ pub struct LeafParams {
     pub bounce: u32,
     /// Padding.
     pub pad_z: u32,
-    /// The leaves' ρ_rf (rgb).
+    /// The tree lighting's optics and the scene's lights.
+    pub lights: TreeLightUniform,
+    /// The material's base colour (linear rgb): the optics are multiples of it.
+    pub albedo: Vec4,
+}
+
+/// What the tree lighting's shaders take from the CPU (`tree_lighting.wgsl`'s
+/// `TreeLightUniform`): the leaves' optics as multiples of their colour, and the scene's sun,
+/// sky and ground. Shared by the leaves' and the billboard clouds' materials.
+#[derive(Clone, Copy, Debug, PartialEq, ShaderType, Reflect)]
+pub struct TreeLightUniform {
+    /// The leaves' ρ_rf over their colour (rgb).
     pub reflectance_front: Vec4,
     /// ρ_rb (rgb).
     pub reflectance_back: Vec4,
@@ -64,8 +75,22 @@ pub struct LeafParams {
     pub sky: Vec4,
     /// The ground's radiance (rgb).
     pub ground: Vec4,
-    /// The material's base colour (linear rgb): the optics are multiples of it.
-    pub albedo: Vec4,
+}
+
+impl Default for TreeLightUniform {
+    /// No light at all, the sun straight above.
+    fn default() -> Self {
+        Self {
+            reflectance_front: Vec4::ZERO,
+            reflectance_back: Vec4::ZERO,
+            transmittance_front: Vec4::ZERO,
+            transmittance_back: Vec4::ZERO,
+            to_sun: Vec4::Y,
+            sun: Vec4::ZERO,
+            sky: Vec4::ZERO,
+            ground: Vec4::ZERO,
+        }
+    }
 }
 
 impl Default for LeafParams {
@@ -84,14 +109,7 @@ impl Default for LeafParams {
             smooth_envelope: 0,
             bounce: 1,
             pad_z: 0,
-            reflectance_front: Vec4::ZERO,
-            reflectance_back: Vec4::ZERO,
-            transmittance_front: Vec4::ZERO,
-            transmittance_back: Vec4::ZERO,
-            to_sun: Vec4::Y,
-            sun: Vec4::ZERO,
-            sky: Vec4::ZERO,
-            ground: Vec4::ZERO,
+            lights: TreeLightUniform::default(),
             albedo: Vec4::ONE,
         }
     }

@@ -8,7 +8,7 @@ use super::components::{
     FoliageCamera, FoliageLight, FoliageShadowLight, ManagedPruning, PrunedFoliage, PruningParams,
 };
 use super::extract::kept_index_total;
-use super::material::{LeafExtension, LeafMaterial, LeafParams};
+use super::material::{LeafExtension, LeafMaterial, LeafParams, TreeLightUniform};
 use super::selection::{ShadowLight, TreeView, select};
 use super::slot_mesh::SlotMeshes;
 use super::store::{FoliageSlot, FoliageStore};
@@ -343,14 +343,16 @@ pub fn tree_lights<'a>(
         tree_lighting: lighting.enabled as u32,
         smooth_envelope: (lighting.sun_through_crown == SunThroughCrown::SmoothEnvelope) as u32,
         bounce: lighting.bounce as u32,
-        reflectance_front: optics.reflectance_front.extend(0.0),
-        reflectance_back: optics.reflectance_back.extend(0.0),
-        transmittance_front: optics.transmittance_front.extend(0.0),
-        transmittance_back: optics.transmittance_back.extend(0.0),
-        to_sun: to_sun.extend(0.0),
-        sun: sun.extend(0.0),
-        sky: sky.extend(0.0),
-        ground: (sky * lighting.ground_albedo).extend(0.0),
+        lights: TreeLightUniform {
+            reflectance_front: optics.reflectance_front.extend(0.0),
+            reflectance_back: optics.reflectance_back.extend(0.0),
+            transmittance_front: optics.transmittance_front.extend(0.0),
+            transmittance_back: optics.transmittance_back.extend(0.0),
+            to_sun: to_sun.extend(0.0),
+            sun: sun.extend(0.0),
+            sky: sky.extend(0.0),
+            ground: (sky * lighting.ground_albedo).extend(0.0),
+        },
         ..default()
     }
 }
@@ -442,18 +444,21 @@ mod tests {
             .into_iter(),
         );
         assert_eq!(params.tree_lighting, 1);
-        assert_eq!(params.to_sun.truncate(), Vec3::Y);
-        assert_eq!(params.sun.truncate(), Vec3::new(1000.0, 500.0, 250.0));
-        assert_eq!(params.sky.truncate(), Vec3::splat(2.0));
-        assert_eq!(params.ground.truncate(), Vec3::new(1.0, 0.5, 0.0));
+        assert_eq!(params.lights.to_sun.truncate(), Vec3::Y);
         assert_eq!(
-            params.reflectance_front.truncate(),
+            params.lights.sun.truncate(),
+            Vec3::new(1000.0, 500.0, 250.0)
+        );
+        assert_eq!(params.lights.sky.truncate(), Vec3::splat(2.0));
+        assert_eq!(params.lights.ground.truncate(), Vec3::new(1.0, 0.5, 0.0));
+        assert_eq!(
+            params.lights.reflectance_front.truncate(),
             lighting.optics.reflectance_front
         );
         // No sun, no ambient light: nothing lights the leaves but what the settings say.
         let dark = tree_lights(&lighting, None, std::iter::empty());
-        assert_eq!(dark.sun, Vec4::ZERO);
-        assert_eq!(dark.sky, Vec4::ZERO);
-        assert_eq!(dark.to_sun.truncate(), Vec3::Y);
+        assert_eq!(dark.lights.sun, Vec4::ZERO);
+        assert_eq!(dark.lights.sky, Vec4::ZERO);
+        assert_eq!(dark.lights.to_sun.truncate(), Vec3::Y);
     }
 }

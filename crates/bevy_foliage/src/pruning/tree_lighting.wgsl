@@ -30,6 +30,35 @@ struct TreeLights {
     ground: vec3<f32>,
 }
 
+// What the CPU hands the tree lighting (`pruning::material::TreeLightUniform`): the leaves'
+// optics as multiples of their colour, the world direction towards the sun, the sun's
+// irradiance, the sky's and the ground's radiance (rgb).
+struct TreeLightUniform {
+    reflectance_front: vec4<f32>,
+    reflectance_back: vec4<f32>,
+    transmittance_front: vec4<f32>,
+    transmittance_back: vec4<f32>,
+    to_sun: vec4<f32>,
+    sun: vec4<f32>,
+    sky: vec4<f32>,
+    ground: vec4<f32>,
+}
+
+// The optics of a leaf of colour `albedo`.
+fn optics_of(u: TreeLightUniform, albedo: vec3<f32>) -> LeafOptics {
+    return LeafOptics(
+        u.reflectance_front.rgb * albedo,
+        u.reflectance_back.rgb * albedo,
+        u.transmittance_front.rgb * albedo,
+        u.transmittance_back.rgb * albedo,
+    );
+}
+
+// The scene's lights with the direction towards the sun given in the tree's frame.
+fn lights_of(u: TreeLightUniform, to_sun: vec3<f32>) -> TreeLights {
+    return TreeLights(to_sun, u.sun.rgb, u.sky.rgb, u.ground.rgb);
+}
+
 // A leaf's light split by where it comes from: the sky and the ground; the sun's direct light
 // were nothing in its way (eq. 5.8 without the crown's share), and the share the crown lets
 // through; one bounce of sunlight. The leaf's light is `sky + sun * through + bounce`.
