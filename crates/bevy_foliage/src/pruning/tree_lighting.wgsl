@@ -88,6 +88,45 @@ fn bsdf(optics: LeafOptics, n: vec3<f32>, seen_front: bool, w: vec3<f32>) -> vec
     return (optics.transmittance_front * lit_front + optics.reflectance_back * lit_back) / PI;
 }
 
+// `model::octant_cosine`: ∫ max(m · ω, 0) dω over bin j's octant — its spherical triangle
+// clipped to m's side of the plane, by Lambert's polygon formula.
+fn octant_cosine(m: vec3<f32>, j: u32) -> f32 {
+    let d = direction(j);
+    var corners = array<vec3<f32>, 3>(
+        vec3(sign(d.x), 0.0, 0.0), vec3(0.0, sign(d.y), 0.0), vec3(0.0, 0.0, sign(d.z)));
+    var clipped: array<vec3<f32>, 4>;
+    var count = 0u;
+    for (var k = 0u; k < 3u; k += 1u) {
+        let a = corners[k];
+        let b = corners[(k + 1u) % 3u];
+        let da = dot(m, a);
+        let db = dot(m, b);
+        if da >= 0.0 {
+            clipped[count] = a;
+            count += 1u;
+        }
+        if (da >= 0.0) != (db >= 0.0) {
+            let c = a + (b - a) * (da / (da - db));
+            clipped[count] = select(vec3(0.0), normalize(c), length(c) > 0.0);
+            count += 1u;
+        }
+    }
+    if count < 3u {
+        return 0.0;
+    }
+    var sum = 0.0;
+    for (var k = 0u; k < count; k += 1u) {
+        let a = clipped[k];
+        let b = clipped[(k + 1u) % count];
+        let normal = cross(a, b);
+        let len = length(normal);
+        if len > 1e-9 {
+            sum += acos(clamp(dot(a, b), -1.0, 1.0)) * dot(m, normal / len);
+        }
+    }
+    return abs(0.5 * sum);
+}
+
 // `model::one_minus_exp_over`: (1 − e^(−g·s)) / g, and its limit s as g goes to 0.
 fn one_minus_exp_over(g: f32, s: f32) -> f32 {
     let x = g * s;
@@ -121,15 +160,24 @@ fn leaf_radiance(
     for (var j = 0u; j < 8u; j += 1u) {
         s_max[j] = select(0.0, -log(max(attenuation[j], DARKEST_LIGHT)) / tau, tau > 0.0);
     }
-    // Eq. 5.6: the sky and the ground through each bin.
+    // Eq. 5.6: the sky and the ground through each bin, the BSDF integrated over the bin.
+    var cosines: array<f32, 8>;
+    for (var j = 0u; j < 8u; j += 1u) {
+        cosines[j] = octant_cosine(n, j);
+    }
+    var lit_side = optics.reflectance_front;
+    var far_side = optics.transmittance_back;
+    if !seen_front {
+        lit_side = optics.transmittance_front;
+        far_side = optics.reflectance_back;
+    }
     var sky = vec3(0.0);
     for (var j = 0u; j < 8u; j += 1u) {
-        let d = direction(j);
-        let radiance = select(lights.ground, lights.sky, d.y > 0.0);
-        sky += bsdf(optics, n, seen_front, d) * attenuation[j] * radiance;
+        let radiance = select(lights.ground, lights.sky, direction(j).y > 0.0);
+        sky += (lit_side * cosines[j] + far_side * cosines[7u - j]) * (attenuation[j] * radiance);
     }
     var out: LeafLight;
-    out.sky = sky * (4.0 * PI / 8.0);
+    out.sky = sky / PI;
     out.sun = vec3(0.0);
     out.through = 1.0;
     out.bounce = vec3(0.0);
