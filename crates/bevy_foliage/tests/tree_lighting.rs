@@ -72,6 +72,36 @@ struct Scene {
     radius: f32,
 }
 
+/// Adds the foliage plugin to `harness` with `lighting`, a black background and a sky of
+/// radiance [`SKY`].
+fn lit_app(harness: &mut RenderHarness, lighting: &TreeLightingSettings) {
+    harness
+        .app_mut()
+        .add_plugins(FoliagePlugin)
+        .insert_resource(lighting.clone())
+        .insert_resource(ClearColor(Color::BLACK))
+        .insert_resource(GlobalAmbientLight {
+            color: Color::WHITE,
+            brightness: SKY,
+            ..default()
+        });
+}
+
+/// A camera at exposure 1 (ev100 = log2(1 / 1.2)) with no tone mapping, dithering or MSAA: a
+/// pixel is the sRGB encoding of the radiance the shader wrote.
+fn unit_exposure_camera(transform: Transform) -> impl Bundle {
+    (
+        Camera3d::default(),
+        Msaa::Off,
+        Tonemapping::None,
+        DebandDither::Disabled,
+        Exposure {
+            ev100: -(1.2f32).log2(),
+        },
+        transform,
+    )
+}
+
 fn scene(name: &str, sun_shadows: bool) -> Option<Scene> {
     let mut harness = RenderHarness::for_test(name, SIZE, SIZE)?;
     let lighting = TreeLightingSettings {
@@ -88,18 +118,11 @@ fn scene(name: &str, sun_shadows: bool) -> Option<Scene> {
         sun_through_crown: SunThroughCrown::BlendedAttenuation,
         bounce: true,
     };
-    harness.app_mut().add_plugins(FoliagePlugin);
+    lit_app(&mut harness, &lighting);
     harness.app_mut().insert_resource(FoliagePruningSettings {
         enabled: false,
         subpixel_fade: false,
         area_compensation: false,
-        ..default()
-    });
-    harness.app_mut().insert_resource(lighting.clone());
-    harness.app_mut().insert_resource(ClearColor(Color::BLACK));
-    harness.app_mut().insert_resource(GlobalAmbientLight {
-        color: Color::WHITE,
-        brightness: SKY,
         ..default()
     });
     let tree = generate(&TreeSpecies::olea().with_leaf_count(400));
@@ -154,15 +177,7 @@ fn scene(name: &str, sun_shadows: bool) -> Option<Scene> {
     ));
     let centre_world = instance.transform_point(crown);
     let eye = centre_world + Vec3::new(-0.6, 0.25, 0.75).normalize() * radius * 3.2;
-    harness.world_mut().spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Tonemapping::None,
-        DebandDither::Disabled,
-        // Exposure 1: ev100 = log2(1 / 1.2).
-        Exposure {
-            ev100: -(1.2f32).log2(),
-        },
+    harness.world_mut().spawn(unit_exposure_camera(
         Transform::from_translation(eye).looking_at(centre_world, Vec3::Y),
     ));
     harness.wait_until_ready().unwrap();
@@ -773,14 +788,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
         sun_through_crown: SunThroughCrown::BlendedAttenuation,
         bounce: true,
     };
-    harness.app_mut().add_plugins(FoliagePlugin);
-    harness.app_mut().insert_resource(lighting.clone());
-    harness.app_mut().insert_resource(ClearColor(Color::BLACK));
-    harness.app_mut().insert_resource(GlobalAmbientLight {
-        color: Color::WHITE,
-        brightness: SKY,
-        ..default()
-    });
+    lit_app(&mut harness, &lighting);
     let (data, blocks) = block_cloud();
     let asset = BillboardCloudAsset::from_data_in(harness.world_mut(), &data);
     let instance = Transform::from_rotation(Quat::from_rotation_y(0.5));
@@ -874,14 +882,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
         }
         t0 <= t1
     };
-    harness.world_mut().spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Tonemapping::None,
-        DebandDither::Disabled,
-        Exposure {
-            ev100: -(1.2f32).log2(),
-        },
+    harness.world_mut().spawn(unit_exposure_camera(
         Transform::from_translation(eye).looking_at(target, Vec3::Y),
     ));
     harness.wait_until_ready().unwrap();
@@ -1131,16 +1132,9 @@ fn a_tree_lit_crown_keeps_its_light_when_its_billboard_cloud_takes_over() {
         enabled: true,
         ..default()
     };
+    lit_app(&mut harness, &lighting);
     harness
         .app_mut()
-        .add_plugins(FoliagePlugin)
-        .insert_resource(lighting)
-        .insert_resource(ClearColor(Color::BLACK))
-        .insert_resource(GlobalAmbientLight {
-            color: Color::WHITE,
-            brightness: SKY,
-            ..default()
-        })
         .insert_resource(FoliagePruningSettings {
             distances: LodDistances::World {
                 near: 5.0,
@@ -1155,18 +1149,13 @@ fn a_tree_lit_crown_keeps_its_light_when_its_billboard_cloud_takes_over() {
         });
     let distance = 40.0;
     harness.world_mut().spawn((
-        Camera3d::default(),
-        Msaa::Off,
-        Tonemapping::None,
-        DebandDither::Disabled,
-        Exposure {
-            ev100: -(1.2f32).log2(),
-        },
+        unit_exposure_camera(
+            Transform::from_xyz(0.0, 3.5, distance).looking_at(Vec3::new(0.0, 3.5, 0.0), Vec3::Y),
+        ),
         Projection::Perspective(PerspectiveProjection {
             fov: 0.25,
             ..default()
         }),
-        Transform::from_xyz(0.0, 3.5, distance).looking_at(Vec3::new(0.0, 3.5, 0.0), Vec3::Y),
     ));
     harness.world_mut().spawn((
         DirectionalLight {
