@@ -139,10 +139,8 @@ impl BillboardCloudAsset {
     ) -> Self {
         let albedo = images.add(atlas_image(data.atlas_size, &data.albedo, true));
         let normal = images.add(atlas_image(data.atlas_size, &data.normal, false));
-        let light = data
-            .light
-            .clone()
-            .map(|l| images.add(atlas_image(data.atlas_size, &l, true)));
+        let light: [Handle<Image>; 3] =
+            std::array::from_fn(|k| images.add(atlas_image(data.atlas_size, &data.light[k], true)));
         let base = impostor_material(albedo, normal);
         Self {
             mesh: meshes.add(impostor_mesh(data)),
@@ -216,7 +214,7 @@ impl bevy::asset::AssetLoader for BillboardCloudLoader {
             "normal".to_string(),
             atlas_image(data.atlas_size, &data.normal, false),
         );
-        let light = [0, 1, 2].map(|k| {
+        let light: [Handle<Image>; 3] = std::array::from_fn(|k| {
             load_context.add_labeled_asset(
                 format!("light{k}"),
                 atlas_image(data.atlas_size, &data.light[k], true),

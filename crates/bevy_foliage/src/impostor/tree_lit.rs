@@ -7,8 +7,8 @@
 //!
 //! The per-fragment lighting is `tree_lit_impostor.wgsl`, which calls the same
 //! `bevy_foliage::tree_lighting::leaf_radiance` as the leaves' vertex stage; its CPU reference
-//! is `lighting::model::leaf_radiance` on the texel's values (see the render test
-//! `tree_lit_impostor` in `tests/tree_lighting.rs`).
+//! is `lighting::model::leaf_radiance` on the texel's values (see the render tests
+//! `a_tree_lit_billboard_cloud_*` in `tests/tree_lighting.rs`).
 
 use crate::lighting::settings::TreeLightingSettings;
 use crate::pruning::material::{LeafParams, TreeLightUniform};
@@ -112,7 +112,7 @@ pub fn refresh_tree_lit_impostors(
     if materials.is_empty() {
         return;
     }
-    let (lighting, _) = lighting.sanitized();
+    // The settings are sanitised in place by `lighting::settings` (as the leaves read them).
     let lights = crate::pruning::systems::tree_lights(
         &lighting,
         ambient.as_deref(),
