@@ -44,6 +44,7 @@ use bevy::prelude::*;
 pub mod corpus;
 pub mod distance;
 pub mod forest;
+mod gpu_bake;
 pub mod grass;
 pub mod impostor;
 pub mod lighting;

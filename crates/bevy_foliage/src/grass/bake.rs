@@ -7,15 +7,19 @@
 //!
 //! Spawn a [`GrassSliceBakeRequest`]; a few frames later the entity gets a
 //! [`GrassSliceBakeResult`]. The cameras and meshes live on render layers of their own
-//! ([`SLICE_BAKE_LAYER_BASE`] and up). A bake is accepted once no pipeline is compiling and two
-//! consecutive readbacks agree.
+//! ([`SLICE_BAKE_LAYER_BASE`] and up). A bake is accepted as [`crate::gpu_bake`] says:
+//! pipelines idle long enough, two readbacks alike, every part marked changed once and the image
+//! settled again.
 
 use super::field::GrassSpecies;
 use super::mesh::patch_mesh;
 use super::patch::BasePatch;
 use super::slice_format::{FORMAT_VERSION, SliceBake, load, save};
 use super::slices::{LAYER_THRESHOLD, LAYER_UNLIT, LAYERS, SliceLayout, SliceTextures, lit_layer};
-use crate::impostor::bake::{BakePipelinesIdle, track_pipelines_idle, unpad_rows};
+use crate::gpu_bake::{
+    BakePipelinesIdle, MAX_BAKE_FRAMES, ReadbackSettling, SettleStep, touch_parts,
+    track_pipelines_idle, unpad_rows,
+};
 use crate::pruning::format::fnv1a64;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::camera::Hdr;
@@ -33,7 +37,6 @@ use bevy::render::render_resource::{
 use bevy::shader::ShaderRef;
 use half::f16;
 use std::path::PathBuf;
-use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -126,10 +129,9 @@ struct SliceBakeJob {
     layout: SliceLayout,
     target: Handle<Image>,
     started: Instant,
-    frames: u32,
+    settling: ReadbackSettling,
     hash: u64,
     latest: Arc<Mutex<Option<Vec<u8>>>>,
-    previous: Option<Vec<u8>>,
     parts: Vec<Entity>,
 }
 
@@ -350,10 +352,9 @@ fn start_slice_bakes(
                     layout,
                     target: target.clone(),
                     started,
-                    frames: 0,
+                    settling: ReadbackSettling::default(),
                     hash,
                     latest,
-                    previous: None,
                     parts,
                 },
                 Readback::texture(target),
@@ -363,9 +364,6 @@ fn start_slice_bakes(
             });
     }
 }
-
-/// Frames after which a bake that never settles is given up.
-const MAX_BAKE_FRAMES: u32 = 600;
 
 /// The atlas (slices across, layers down, `Rgba16Float`) as slice textures.
 fn textures_from_atlas(layout: SliceLayout, pixels: &[u8]) -> SliceTextures {
@@ -394,42 +392,33 @@ fn finish_slice_bakes(
     mut jobs: Query<(Entity, &GrassSliceBakeRequest, &mut SliceBakeJob)>,
     idle: Res<BakePipelinesIdle>,
     mut images: ResMut<Assets<Image>>,
+    mut part_meshes: Query<&mut Mesh3d>,
 ) {
     for (entity, request, mut job) in &mut jobs {
-        job.frames += 1;
         let (width, height) = (
             job.layout.slices() * job.layout.resolution,
             LAYERS * job.layout.resolution,
         );
         let latest = job.latest.lock().unwrap().take();
         let pixels = latest.and_then(|padded| unpad_rows(&padded, width, height, 8));
-        let ready = pixels.and_then(|pixels| {
-            // Any texel with coverage: half-float alpha 1.0 is 0x3C00.
-            let settled = idle.0.load(Ordering::Relaxed)
-                && job.frames >= 3
-                && job.previous.as_ref() == Some(&pixels)
-                && pixels.chunks_exact(8).any(|p| p[6] != 0 || p[7] != 0);
-            if settled {
-                Some(pixels)
-            } else {
-                job.previous = Some(pixels);
-                None
-            }
+        // Any texel with coverage: half-float alpha 1.0 is 0x3C00.
+        let step = job.settling.step(idle.get(), pixels, |p| {
+            p.chunks_exact(8).any(|p| p[6] != 0 || p[7] != 0)
         });
-        let Some(pixels) = ready else {
-            if job.frames > MAX_BAKE_FRAMES {
-                let why = format!(
-                    "{} in {MAX_BAKE_FRAMES} frames",
-                    if job.previous.is_some() {
-                        "the bake never settled"
-                    } else {
-                        "no readback arrived"
-                    }
-                );
-                warn!("grass slice bake of {} failed: {why}", request.label);
-                finish(&mut commands, entity, &job, &mut images, Err(why));
+        let pixels = match step {
+            SettleStep::Done(pixels) => pixels,
+            SettleStep::Touch => {
+                touch_parts(&job.parts, &mut part_meshes);
+                continue;
             }
-            continue;
+            SettleStep::Wait => {
+                if job.settling.frames() > MAX_BAKE_FRAMES {
+                    let why = format!("{} in {MAX_BAKE_FRAMES} frames", job.settling.failure());
+                    warn!("grass slice bake of {} failed: {why}", request.label);
+                    finish(&mut commands, entity, &job, &mut images, Err(why));
+                }
+                continue;
+            }
         };
         let bake = SliceBake {
             textures: textures_from_atlas(job.layout, &pixels),

@@ -6,9 +6,9 @@
 //!
 //! Spawn an [`ImpostorBakeRequest`]; a few frames later the entity gets an
 //! [`ImpostorBakeResult`]. The bake cameras and meshes live on render layers of their own
-//! ([`BAKE_LAYER_BASE`] and up), so no game camera sees them. A bake is accepted once no render
-//! pipeline is still compiling and two consecutive readbacks agree, so an image read while the
-//! bake shader was still compiling is never taken. [`super::texture::bake_reference`] is the CPU
+//! ([`BAKE_LAYER_BASE`] and up), so no game camera sees them. A bake is accepted as
+//! [`crate::gpu_bake`] says: pipelines idle long enough, two readbacks alike, every part marked
+//! changed once and the image settled again — an image missing a part is never taken. [`super::texture::bake_reference`] is the CPU
 //! reference of what this renders.
 
 use super::atlas::{AtlasLayout, pack};
@@ -18,6 +18,8 @@ use super::texture::{
     ImpostorSource, LIGHT_ATLASES, dilate, impostor_planes, min_extent, plane_extent,
     srgb_to_linear,
 };
+pub use crate::gpu_bake::BakePipelinesIdle;
+use crate::gpu_bake::{MAX_BAKE_FRAMES, ReadbackSettling, SettleStep, touch_parts, unpad_rows};
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::camera::visibility::{NoFrustumCulling, RenderLayers};
 use bevy::camera::{CameraOutputMode, ClearColorConfig, RenderTarget, ScalingMode, Viewport};
@@ -29,13 +31,11 @@ use bevy::pbr::{MaterialPipeline, MaterialPipelineKey, MaterialPlugin};
 use bevy::prelude::*;
 use bevy::render::gpu_readback::{Readback, ReadbackComplete};
 use bevy::render::render_resource::{
-    AsBindGroup, Extent3d, PipelineCache, RenderPipelineDescriptor, ShaderType,
-    SpecializedMeshPipelineError, TextureDimension, TextureFormat, TextureUsages,
+    AsBindGroup, Extent3d, RenderPipelineDescriptor, ShaderType, SpecializedMeshPipelineError,
+    TextureDimension, TextureFormat, TextureUsages,
 };
-use bevy::render::{Render, RenderApp, RenderSystems};
 use bevy::shader::ShaderRef;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -147,17 +147,12 @@ struct BakeJob {
     layout: AtlasLayout,
     target: Handle<Image>,
     started: Instant,
-    frames: u32,
+    settling: ReadbackSettling,
     hash: u64,
     extinction: f32,
     latest: Arc<Mutex<Option<Vec<u8>>>>,
-    previous: Option<Vec<u8>>,
     parts: Vec<Entity>,
 }
-
-/// Whether the render world had no pipeline compiling in its last frame.
-#[derive(Resource, Clone, Default)]
-pub struct BakePipelinesIdle(pub Arc<AtomicBool>);
 
 /// The bake's unlit material: a surface's colour (albedo pass), its tangent-space normal (normal
 /// pass) or its leaf's light values (light passes, from the vertex colours), alpha-tested.
@@ -225,33 +220,12 @@ pub struct BakeSystems;
 /// Registers the bake.
 pub(crate) fn build(app: &mut App) {
     embedded_asset!(app, "impostor_bake.wgsl");
-    track_pipelines_idle(app);
+    crate::gpu_bake::track_pipelines_idle(app);
     app.add_plugins(MaterialPlugin::<ImpostorBakeMaterial>::default())
         .add_systems(
             Update,
             (start_impostor_bakes, finish_impostor_bakes).chain(),
         );
-}
-
-/// Keeps [`BakePipelinesIdle`] up to date (once, whichever bake registers it first).
-pub(crate) fn track_pipelines_idle(app: &mut App) {
-    if app.world().contains_resource::<BakePipelinesIdle>() {
-        return;
-    }
-    let idle = BakePipelinesIdle::default();
-    app.insert_resource(idle.clone());
-    if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
-        render_app
-            .insert_resource(idle)
-            .add_systems(Render, note_pipelines_idle.in_set(RenderSystems::Cleanup));
-    }
-}
-
-fn note_pipelines_idle(cache: Res<PipelineCache>, idle: Res<BakePipelinesIdle>) {
-    idle.0.store(
-        cache.waiting_pipelines().next().is_none(),
-        Ordering::Relaxed,
-    );
 }
 
 /// The plane selection and atlas layout of a source, or why there is none.
@@ -512,11 +486,10 @@ fn start_impostor_bakes(
                     layout,
                     target: target.clone(),
                     started,
-                    frames: 0,
+                    settling: ReadbackSettling::default(),
                     hash,
                     extinction: light.extinction,
                     latest,
-                    previous: None,
                     parts,
                 },
                 Readback::texture(target),
@@ -527,71 +500,37 @@ fn start_impostor_bakes(
     }
 }
 
-/// Removes the 256-byte row padding of an RGBA8 texture readback.
-fn unpad(padded: &[u8], width: u32, height: u32) -> Option<Vec<u8>> {
-    unpad_rows(padded, width, height, 4)
-}
-
-/// Removes the 256-byte row padding of a texture readback of `bytes_per_texel`.
-pub(crate) fn unpad_rows(
-    padded: &[u8],
-    width: u32,
-    height: u32,
-    bytes_per_texel: usize,
-) -> Option<Vec<u8>> {
-    let row = width as usize * bytes_per_texel;
-    let stride = row.div_ceil(256) * 256;
-    if padded.len() < stride * (height as usize - 1) + row {
-        return None;
-    }
-    Some(
-        (0..height as usize)
-            .flat_map(|y| padded[y * stride..y * stride + row].iter().copied())
-            .collect(),
-    )
-}
-
-/// Frames after which a bake that never settles is given up.
-const MAX_BAKE_FRAMES: u32 = 600;
-
 fn finish_impostor_bakes(
     mut commands: Commands,
     mut jobs: Query<(Entity, &ImpostorBakeRequest, &mut BakeJob)>,
     idle: Res<BakePipelinesIdle>,
     mut images: ResMut<Assets<Image>>,
+    mut part_meshes: Query<&mut Mesh3d>,
 ) {
     for (entity, request, mut job) in &mut jobs {
-        job.frames += 1;
         let size = job.layout.size;
         let latest = job.latest.lock().unwrap().take();
-        let pixels = latest.and_then(|padded| unpad(&padded, size * 3, size * 2));
-        let ready = pixels.and_then(|pixels| {
-            let settled = idle.0.load(Ordering::Relaxed)
-                && job.frames >= 3
-                && job.previous.as_ref() == Some(&pixels)
-                && pixels.chunks_exact(4).any(|p| p[3] > 0);
-            if settled {
-                Some(pixels)
-            } else {
-                job.previous = Some(pixels);
-                None
+        let pixels = latest.and_then(|padded| unpad_rows(&padded, size * 3, size * 2, 4));
+        let step = job
+            .settling
+            .step(idle.get(), pixels, |p| p.chunks_exact(4).any(|p| p[3] > 0));
+        let pixels = match step {
+            SettleStep::Done(pixels) => pixels,
+            SettleStep::Touch => {
+                touch_parts(&job.parts, &mut part_meshes);
+                continue;
             }
-        });
-        let Some(pixels) = ready else {
-            if job.frames > MAX_BAKE_FRAMES {
-                let why = if job.previous.is_some() {
-                    "the bake never settled"
-                } else {
-                    "no readback arrived"
-                };
-                let why = format!("{why} in {MAX_BAKE_FRAMES} frames");
-                warn!(
-                    "impostor bake of {} failed: {why}; the tree keeps its pruned geometry",
-                    request.label
-                );
-                finish(&mut commands, entity, &job, &mut images, Err(why));
+            SettleStep::Wait => {
+                if job.settling.frames() > MAX_BAKE_FRAMES {
+                    let why = format!("{} in {MAX_BAKE_FRAMES} frames", job.settling.failure());
+                    warn!(
+                        "impostor bake of {} failed: {why}; the tree keeps its pruned geometry",
+                        request.label
+                    );
+                    finish(&mut commands, entity, &job, &mut images, Err(why));
+                }
+                continue;
             }
-            continue;
         };
         // Each pass's quadrant as an atlas of its own.
         let atlas = |pass: u32| -> Vec<u8> {
