@@ -105,6 +105,7 @@ pub(crate) struct ReadbackSettling {
 
 impl ReadbackSettling {
     /// Frames stepped so far.
+    #[cfg(test)]
     pub fn frames(&self) -> u32 {
         self.frames
     }
@@ -156,8 +157,32 @@ impl ReadbackSettling {
     }
 }
 
+impl ReadbackSettling {
+    /// One frame of a bake whose parts are `parts`: [`Self::step`], marking the parts changed
+    /// when it says so. `None` while the bake goes on; the finished pixels, or why the bake was
+    /// given up after [`MAX_BAKE_FRAMES`] frames.
+    pub fn advance(
+        &mut self,
+        idle: bool,
+        pixels: Option<Vec<u8>>,
+        has_content: impl Fn(&[u8]) -> bool,
+        parts: &[Entity],
+        meshes: &mut Query<&mut Mesh3d>,
+    ) -> Option<Result<Vec<u8>, String>> {
+        match self.step(idle, pixels, has_content) {
+            SettleStep::Done(pixels) => Some(Ok(pixels)),
+            SettleStep::Touch => {
+                touch_parts(parts, meshes);
+                None
+            }
+            SettleStep::Wait => (self.frames > MAX_BAKE_FRAMES)
+                .then(|| Err(format!("{} in {MAX_BAKE_FRAMES} frames", self.failure()))),
+        }
+    }
+}
+
 /// Marks every part's `Mesh3d` changed, so that Bevy specialises each again for its camera.
-pub(crate) fn touch_parts(parts: &[Entity], meshes: &mut Query<&mut Mesh3d>) {
+fn touch_parts(parts: &[Entity], meshes: &mut Query<&mut Mesh3d>) {
     for &part in parts {
         if let Ok(mut mesh) = meshes.get_mut(part) {
             mesh.set_changed();

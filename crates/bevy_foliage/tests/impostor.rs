@@ -120,7 +120,7 @@ fn check_gpu_bake_against_reference(test: &str, source: ImpostorSource) {
         .expect("raw atlases")
         .clone();
     assert!(data.planes.len() >= 3, "{} planes", data.planes.len());
-    let light = source.leaf_light();
+    let light = source.leaf_light(ImpostorBakeSettings::default().bins);
     assert_eq!(data.extinction, light.extinction);
     let reference = bake_reference(&source, &raw.cloud, &raw.layout, &light);
     let (albedo, normal) = (&reference.albedo, &reference.normal);

@@ -2,13 +2,16 @@
 //!
 //! ```text
 //! cargo run -p bevy_foliage --bin foliage_bake -- [--out DIR] [--resolution N] [--depth D]
-//!     [--leaf-material NAME ...] [TREE | FILE.gltf | FILE.glb ...]
+//!     [--leaf-material NAME ...] [--rays-per-bin R | --neighbour-bins] [TREE | FILE.gltf | FILE.glb ...]
 //! ```
 //! TREE is one of `olea`, `fraxinus`, `quercus`, `cedrus` (the thesis' test trees; default: all);
 //! a glTF file is split into leaves as `bevy_foliage::pruning::gltf` documents.
+//! `--rays-per-bin`: rays per bin of the tree lighting's traced bins (default 32);
+//! `--neighbour-bins`: §5.6's estimate from the neighbours instead.
 //! Prints progress on stderr and one JSON object per tree on stdout (bake time per stage, leaf
 //! count, GPU bytes).
 
+use bevy_foliage::lighting::traced_bins::BinEstimate;
 use bevy_foliage::pruning::bake::{BakeProgress, BakeSettings, BakeStage, CellCount, bake_masked};
 use bevy_foliage::pruning::format::save;
 use bevy_foliage::pruning::gltf::{GltfLeafSettings, load_gltf_tree};
@@ -47,9 +50,15 @@ fn main() {
                 )
             }
             "--leaf-material" => gltf_settings.leaf_materials.push(value("--leaf-material")),
+            "--rays-per-bin" => {
+                settings.bins = BinEstimate::Traced {
+                    rays_per_bin: value("--rays-per-bin").parse().expect("--rays-per-bin R"),
+                }
+            }
+            "--neighbour-bins" => settings.bins = BinEstimate::Neighbours,
             "--help" | "-h" => {
                 eprintln!(
-                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [olea|fraxinus|quercus|cedrus ...]"
+                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [olea|fraxinus|quercus|cedrus ...]"
                 );
                 return;
             }

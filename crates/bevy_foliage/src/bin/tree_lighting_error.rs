@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
-//!     [--points P] [--directions D] [--sun-maps]
+//!     [--points P] [--directions D] [--rays-per-bin R] [--sun-maps]
 //! ```
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
 //! map at three texel sizes, the crown's extinction over its depth, eq. 5.3's foliage maps)
@@ -17,11 +17,13 @@ use bevy_foliage::lighting::model::{LeafMaterial, SunThroughCrown};
 use bevy_foliage::lighting::path_trace::{
     TraceLight, TraceSettings, model_against_tracer, uniform_ball,
 };
+use bevy_foliage::lighting::traced_bins::{BinEstimate, DEFAULT_RAYS_PER_BIN};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 
 fn main() {
     let mut leaves = 2000usize;
     let mut stride = 10usize;
+    let mut rays_per_bin = DEFAULT_RAYS_PER_BIN;
     let mut settings = TraceSettings {
         points: 8,
         directions: 256,
@@ -47,9 +49,10 @@ fn main() {
             "--stride" => stride = value(i),
             "--points" => settings.points = value(i) as u32,
             "--directions" => settings.directions = value(i) as u32,
+            "--rays-per-bin" => rays_per_bin = value(i) as u32,
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--sun-maps]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R] [--sun-maps]"
                 );
                 std::process::exit(2)
             }
@@ -89,20 +92,39 @@ fn main() {
             crown.positions.iter().copied().sum::<Vec3>() / crown.positions.len().max(1) as f32;
         let started = std::time::Instant::now();
         let eye = centre + Vec3::new(0.0, 0.3, 1.0).normalize() * 30.0;
-        let run = |blend| {
+        let run = |blend, bins| {
             model_against_tracer(
-                &crown, &material, &light, eye, stride, &settings, threads, blend,
+                &crown, &material, &light, eye, stride, &settings, threads, blend, bins,
             )
         };
-        let thesis = run(SunThroughCrown::SmoothEnvelope);
-        let e = run(SunThroughCrown::BlendedAttenuation);
+        let neighbours = BinEstimate::Neighbours;
+        let traced = BinEstimate::Traced { rays_per_bin };
+        let thesis = run(SunThroughCrown::SmoothEnvelope, neighbours);
+        let e = run(SunThroughCrown::BlendedAttenuation, neighbours);
+        let t = run(SunThroughCrown::BlendedAttenuation, traced);
         for (label, c) in [
-            ("sky direct", e.sky),
+            ("sky direct, §5.6 bins", e.sky),
+            ("sky direct, traced bins", t.sky),
             ("sun direct, eq. 5.7 envelope blend", thesis.sun),
-            ("sun direct, attenuation blend", e.sun),
+            ("sun direct, attenuation blend, §5.6 bins", e.sun),
+            ("sun direct, attenuation blend, traced bins", t.sun),
             ("sun indirect (1 bounce), eq. 5.7", thesis.bounce),
-            ("sun indirect (1 bounce), attenuation blend", e.bounce),
-            ("sun indirect, attenuation blend vs 1–4 bounces", e.bounces),
+            (
+                "sun indirect (1 bounce), attenuation blend, §5.6 bins",
+                e.bounce,
+            ),
+            (
+                "sun indirect (1 bounce), attenuation blend, traced bins",
+                t.bounce,
+            ),
+            (
+                "sun indirect, attenuation blend vs 1–4 bounces, §5.6 bins",
+                e.bounces,
+            ),
+            (
+                "sun indirect, attenuation blend vs 1–4 bounces, traced bins",
+                t.bounces,
+            ),
         ] {
             println!(
                 "| {name} | {} | {:.3} | {label} | {:.1} % | {:.1} % | {:.1} % | {:.0} % |",

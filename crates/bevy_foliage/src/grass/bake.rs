@@ -7,19 +7,16 @@
 //!
 //! Spawn a [`GrassSliceBakeRequest`]; a few frames later the entity gets a
 //! [`GrassSliceBakeResult`]. The cameras and meshes live on render layers of their own
-//! ([`SLICE_BAKE_LAYER_BASE`] and up). A bake is accepted as [`crate::gpu_bake`] says:
-//! pipelines idle long enough, two readbacks alike, every part marked changed once and the image
-//! settled again.
+//! ([`SLICE_BAKE_LAYER_BASE`] and up). A bake is accepted as `gpu_bake.rs` decides:
+//! every part marked changed once it has drawn, then two alike readbacks with pipelines idle for
+//! long enough.
 
 use super::field::GrassSpecies;
 use super::mesh::patch_mesh;
 use super::patch::BasePatch;
 use super::slice_format::{FORMAT_VERSION, SliceBake, load, save};
 use super::slices::{LAYER_THRESHOLD, LAYER_UNLIT, LAYERS, SliceLayout, SliceTextures, lit_layer};
-use crate::gpu_bake::{
-    BakePipelinesIdle, MAX_BAKE_FRAMES, ReadbackSettling, SettleStep, touch_parts,
-    track_pipelines_idle, unpad_rows,
-};
+use crate::gpu_bake::{BakePipelinesIdle, ReadbackSettling, track_pipelines_idle, unpad_rows};
 use crate::pruning::format::fnv1a64;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::camera::Hdr;
@@ -402,21 +399,21 @@ fn finish_slice_bakes(
         let latest = job.latest.lock().unwrap().take();
         let pixels = latest.and_then(|padded| unpad_rows(&padded, width, height, 8));
         // Any texel with coverage: half-float alpha 1.0 is 0x3C00.
-        let step = job.settling.step(idle.get(), pixels, |p| {
-            p.chunks_exact(8).any(|p| p[6] != 0 || p[7] != 0)
-        });
-        let pixels = match step {
-            SettleStep::Done(pixels) => pixels,
-            SettleStep::Touch => {
-                touch_parts(&job.parts, &mut part_meshes);
-                continue;
-            }
-            SettleStep::Wait => {
-                if job.settling.frames() > MAX_BAKE_FRAMES {
-                    let why = format!("{} in {MAX_BAKE_FRAMES} frames", job.settling.failure());
-                    warn!("grass slice bake of {} failed: {why}", request.label);
-                    finish(&mut commands, entity, &job, &mut images, Err(why));
-                }
+        let job = &mut *job;
+        let has_content = |p: &[u8]| p.chunks_exact(8).any(|p| p[6] != 0 || p[7] != 0);
+        let outcome = job.settling.advance(
+            idle.get(),
+            pixels,
+            has_content,
+            &job.parts,
+            &mut part_meshes,
+        );
+        let pixels = match outcome {
+            None => continue,
+            Some(Ok(pixels)) => pixels,
+            Some(Err(why)) => {
+                warn!("grass slice bake of {} failed: {why}", request.label);
+                finish(&mut commands, entity, job, &mut images, Err(why));
                 continue;
             }
         };
@@ -439,7 +436,7 @@ fn finish_slice_bakes(
             bake.bake_ms,
             bytes as f64 / (1 << 20) as f64
         );
-        finish(&mut commands, entity, &job, &mut images, Ok(Arc::new(bake)));
+        finish(&mut commands, entity, job, &mut images, Ok(Arc::new(bake)));
     }
 }
 

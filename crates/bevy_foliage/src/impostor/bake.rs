@@ -7,9 +7,9 @@
 //! Spawn an [`ImpostorBakeRequest`]; a few frames later the entity gets an
 //! [`ImpostorBakeResult`]. The bake cameras and meshes live on render layers of their own
 //! ([`BAKE_LAYER_BASE`] and up), so no game camera sees them. A bake is accepted as
-//! [`crate::gpu_bake`] says: pipelines idle long enough, two readbacks alike, every part marked
-//! changed once and the image settled again — an image missing a part is never taken. [`super::texture::bake_reference`] is the CPU
-//! reference of what this renders.
+//! `gpu_bake.rs` decides: every part marked changed once it has drawn, then two alike readbacks
+//! with pipelines idle for long enough — an image missing a part is never taken.
+//! [`super::texture::bake_reference`] is the CPU reference of what this renders.
 
 use super::atlas::{AtlasLayout, pack};
 use super::cloud::{BillboardCloud, CloudSettings, build_cloud};
@@ -19,7 +19,8 @@ use super::texture::{
     srgb_to_linear,
 };
 pub use crate::gpu_bake::BakePipelinesIdle;
-use crate::gpu_bake::{MAX_BAKE_FRAMES, ReadbackSettling, SettleStep, touch_parts, unpad_rows};
+use crate::gpu_bake::{ReadbackSettling, unpad_rows};
+use crate::lighting::traced_bins::BinEstimate;
 use bevy::asset::{RenderAssetUsages, embedded_asset};
 use bevy::camera::visibility::{NoFrustumCulling, RenderLayers};
 use bevy::camera::{CameraOutputMode, ClearColorConfig, RenderTarget, ScalingMode, Viewport};
@@ -57,6 +58,9 @@ pub struct ImpostorBakeSettings {
     pub atlas_size: u32,
     /// Gutter between rectangles, in texels.
     pub padding: u32,
+    /// How the light atlases' bins are estimated (the tree lighting, §5.6): as the leaves' own
+    /// bake does, so that a crown keeps its light when its cloud takes over.
+    pub bins: BinEstimate,
 }
 
 impl Default for ImpostorBakeSettings {
@@ -65,6 +69,7 @@ impl Default for ImpostorBakeSettings {
             cloud: CloudSettings::default(),
             atlas_size: 512,
             padding: 2,
+            bins: BinEstimate::default(),
         }
     }
 }
@@ -84,6 +89,10 @@ impl ImpostorBakeSettings {
                 s.atlas_size
             ));
             s.atlas_size = fixed;
+        }
+        if let Err(why) = s.bins.checked() {
+            fixes.push(format!("{why}: using the default"));
+            s.bins = BinEstimate::default();
         }
         if s.padding > 16 {
             fixes.push(format!(
@@ -302,7 +311,7 @@ fn start_impostor_bakes(
         };
         let size = layout.size;
         // The tree lighting's envelope of the leaves (§5.6), for the light passes.
-        let light = request.source.leaf_light();
+        let light = request.source.leaf_light(settings.bins);
         let mut image = Image::new_fill(
             Extent3d {
                 width: size * 3,
@@ -511,24 +520,24 @@ fn finish_impostor_bakes(
         let size = job.layout.size;
         let latest = job.latest.lock().unwrap().take();
         let pixels = latest.and_then(|padded| unpad_rows(&padded, size * 3, size * 2, 4));
-        let step = job
-            .settling
-            .step(idle.get(), pixels, |p| p.chunks_exact(4).any(|p| p[3] > 0));
-        let pixels = match step {
-            SettleStep::Done(pixels) => pixels,
-            SettleStep::Touch => {
-                touch_parts(&job.parts, &mut part_meshes);
-                continue;
-            }
-            SettleStep::Wait => {
-                if job.settling.frames() > MAX_BAKE_FRAMES {
-                    let why = format!("{} in {MAX_BAKE_FRAMES} frames", job.settling.failure());
-                    warn!(
-                        "impostor bake of {} failed: {why}; the tree keeps its pruned geometry",
-                        request.label
-                    );
-                    finish(&mut commands, entity, &job, &mut images, Err(why));
-                }
+        let job = &mut *job;
+        let has_content = |p: &[u8]| p.chunks_exact(4).any(|p| p[3] > 0);
+        let outcome = job.settling.advance(
+            idle.get(),
+            pixels,
+            has_content,
+            &job.parts,
+            &mut part_meshes,
+        );
+        let pixels = match outcome {
+            None => continue,
+            Some(Ok(pixels)) => pixels,
+            Some(Err(why)) => {
+                warn!(
+                    "impostor bake of {} failed: {why}; the tree keeps its pruned geometry",
+                    request.label
+                );
+                finish(&mut commands, entity, job, &mut images, Err(why));
                 continue;
             }
         };
@@ -594,7 +603,7 @@ fn finish_impostor_bakes(
             normal: normal_raw,
             light: light_raw,
         });
-        finish(&mut commands, entity, &job, &mut images, Ok(Arc::new(data)));
+        finish(&mut commands, entity, job, &mut images, Ok(Arc::new(data)));
     }
 }
 

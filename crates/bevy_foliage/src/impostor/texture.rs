@@ -23,6 +23,8 @@ use super::format::ImpostorPlane;
 pub use super::format::LIGHT_ATLASES;
 use crate::lighting::bins::{LeafProxy, proxies};
 use crate::lighting::envelope::crown_envelope;
+use crate::lighting::leaf_scene::LeafScene;
+use crate::lighting::traced_bins::{BinEstimate, crown_envelope_traced};
 use crate::pruning::format::fnv1a64;
 use crate::pruning::gltf::{GltfAlpha, GltfTree};
 use crate::pruning::leaves::LeafSet;
@@ -240,17 +242,67 @@ impl ImpostorSource {
         }
     }
 
-    /// The tree lighting's envelope of the leaves (§5.6), on all available threads.
-    pub fn leaf_light(&self) -> SourceLight {
+    /// The tree lighting's envelope of the leaves (§5.6), its bins estimated by `bins`, on all
+    /// available threads.
+    pub fn leaf_light(&self, bins: BinEstimate) -> SourceLight {
         if self.leaves.is_empty() {
             return SourceLight::default();
         }
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let envelope = crown_envelope(&self.leaves, threads);
+        let envelope = match bins {
+            BinEstimate::Neighbours => crown_envelope(&self.leaves, threads),
+            BinEstimate::Traced { rays_per_bin } => {
+                let (scene, opacity) = self.leaf_scene();
+                let order: Vec<u32> = (0..self.leaves.len() as u32).collect();
+                let opacity = |l: u32| opacity.get(l as usize).copied().unwrap_or(1.0);
+                crown_envelope_traced(
+                    &self.leaves,
+                    &scene,
+                    &order,
+                    &opacity,
+                    rays_per_bin,
+                    threads,
+                    &|_| {},
+                )
+            }
+        };
         SourceLight {
             attenuation: envelope.leaves.iter().map(|e| e.attenuation).collect(),
             extinction: envelope.tau,
         }
+    }
+
+    /// The leaf triangles as a scene for rays, and each leaf's opaque share (its proxy's area
+    /// over its triangles' area: a textured card lets the rest through).
+    fn leaf_scene(&self) -> (LeafScene, Vec<f32>) {
+        let mut triangles = Vec::new();
+        let mut leaf_of = Vec::new();
+        let mut area = vec![0.0f32; self.leaves.len()];
+        for t in &self.triangles {
+            if (t.leaf as usize) < self.leaves.len() {
+                let [a, b, c] = t.positions;
+                area[t.leaf as usize] += 0.5 * (b - a).cross(c - a).length();
+                triangles.push(t.positions);
+                leaf_of.push(t.leaf);
+            }
+        }
+        let normals = self.leaves.iter().map(|l| l.normal).collect();
+        let opacity = self
+            .leaves
+            .iter()
+            .zip(&area)
+            .map(|(l, &a)| {
+                if a > 0.0 {
+                    (l.area / a).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        (
+            LeafScene::from_triangles(triangles, leaf_of, normals),
+            opacity,
+        )
     }
 
     /// Adds bark triangles (part [`TreePart::Branches`]) drawn with `surface`.
@@ -848,7 +900,7 @@ mod tests {
                 TreePart::Branches => assert_eq!(t.leaf, NO_LEAF),
             }
         }
-        let light = source.leaf_light();
+        let light = source.leaf_light(BinEstimate::default());
         assert_eq!(light.attenuation.len(), source.leaves.len());
         assert!(light.extinction > 0.0);
         let bark = source.triangles.last().unwrap();

@@ -16,7 +16,11 @@
 //! **τ and s_max** (§5.6): per leaf and bin, a first estimate of the envelope's distance `s`
 //! gives `τ_{P,j} = −ln(a_j) / s`; their mean over every (leaf, bin) with neighbours is the
 //! tree's τ, from which `s_max(P, ω_j) = −ln(a_j) / τ` — so `e^(−τ·s_max)` is the attenuation
-//! exactly, and the lighting's products of τ and s_max do not depend on the fit. The thesis
+//! exactly, and the lighting's products of τ and s_max do not depend on the fit.
+//!
+//! A bake traces the attenuations through the leaves by default ([`super::traced_bins`], far
+//! closer leaf by leaf); the neighbours' distances per bin computed here still fit τ then
+//! ([`envelope_from_attenuations`]). The thesis
 //! takes the bin's farthest leaf for `s`; the attenuation, though, integrates the bin's *mean*
 //! path, so in a uniform ball of leaves that fit comes out a third below eq. 5.5's τ = A·ρ/2
 //! (0.233 against 0.358 in the test below). Here `s` is 4/3 of the mean distance of the bin's
@@ -62,17 +66,16 @@ fn exact_bins_of(leaves: &[LeafProxy], index: usize) -> BinSums {
     sums
 }
 
-/// Per bin: the attenuation, and the envelope's distance for the fit — leaves spread uniformly in
-/// a cone up to distance s lie at 3s/4 on average (see the module docs).
-fn attenuation_and_envelope(sums: &BinSums) -> ([f32; 8], [f32; 8]) {
-    let envelope = std::array::from_fn(|j| {
+/// Per bin, the envelope's distance for the fit: leaves spread uniformly in a cone up to
+/// distance s lie at 3s/4 on average (see the module docs).
+fn envelope_distances(sums: &BinSums) -> [f32; 8] {
+    std::array::from_fn(|j| {
         if sums.count[j] > 0 {
             (4.0 / 3.0 * sums.distance_sum[j] / sums.count[j] as f32).min(sums.farthest[j])
         } else {
             0.0
         }
-    });
-    (sums.attenuation, envelope)
+    })
 }
 
 /// Crowns of up to this many leaves are computed leaf by leaf; larger ones through the
@@ -87,39 +90,31 @@ pub fn crown_envelope(leaves: &[LeafProxy], threads: usize) -> CrownEnvelope {
 
 /// [`crown_envelope`], through the octree or leaf by leaf as `clustered` says.
 pub fn crown_envelope_with(leaves: &[LeafProxy], threads: usize, clustered: bool) -> CrownEnvelope {
-    let n = leaves.len();
+    let sums = neighbour_sums_with(leaves, threads, clustered);
+    let attenuation: Vec<[f32; 8]> = sums.iter().map(|s| s.attenuation).collect();
+    envelope_from_attenuations(&sums, &attenuation)
+}
+
+/// What every leaf sees of its neighbours per bin (§5.6), as [`crown_envelope`] computes it.
+pub fn neighbour_sums(leaves: &[LeafProxy], threads: usize) -> Vec<BinSums> {
+    neighbour_sums_with(leaves, threads, leaves.len() > EXACT_UP_TO)
+}
+
+fn neighbour_sums_with(leaves: &[LeafProxy], threads: usize, clustered: bool) -> Vec<BinSums> {
     let tree = clustered.then(|| LeafTree::new(leaves));
-    let bins_of = |i: usize| {
-        let sums = match &tree {
-            Some(tree) => tree.bins_of(i),
-            None => exact_bins_of(leaves, i),
-        };
-        attenuation_and_envelope(&sums)
-    };
-    let per_leaf: Vec<([f32; 8], [f32; 8])> = {
-        let next = std::sync::atomic::AtomicUsize::new(0);
-        let results = std::sync::Mutex::new(vec![([1.0; 8], [0.0; 8]); n]);
-        const CHUNK: usize = 64;
-        std::thread::scope(|scope| {
-            for _ in 0..threads.clamp(1, n.div_ceil(CHUNK).max(1)) {
-                scope.spawn(|| {
-                    loop {
-                        let start = next.fetch_add(CHUNK, std::sync::atomic::Ordering::Relaxed);
-                        if start >= n {
-                            break;
-                        }
-                        let chunk: Vec<_> = (start..(start + CHUNK).min(n)).map(bins_of).collect();
-                        let mut results = results.lock().unwrap();
-                        results[start..start + chunk.len()].copy_from_slice(&chunk);
-                    }
-                });
-            }
-        });
-        results.into_inner().unwrap()
-    };
-    // τ_{P,j} = −ln(a) / s_far over every (leaf, bin) with a leaf in it, averaged.
+    parallel_map(leaves.len(), threads, |i| match &tree {
+        Some(tree) => tree.bins_of(i),
+        None => exact_bins_of(leaves, i),
+    })
+}
+
+/// The envelope from every leaf's attenuations per bin (§5.6's or traced ones) and the
+/// neighbours' distances per bin: τ_{P,j} = −ln(a_j) / s_j over every (leaf, bin) with a leaf
+/// in it, averaged, and `s_max = −ln(a_j) / τ`.
+pub fn envelope_from_attenuations(sums: &[BinSums], attenuation: &[[f32; 8]]) -> CrownEnvelope {
     let (mut sum, mut count) = (0.0f64, 0usize);
-    for (attenuation, envelope) in &per_leaf {
+    for (s, attenuation) in sums.iter().zip(attenuation) {
+        let envelope = envelope_distances(s);
         for j in 0..8 {
             if attenuation[j] < 1.0 && attenuation[j] > 0.0 && envelope[j] > 0.0 {
                 sum += (-(attenuation[j] as f64).ln()) / envelope[j] as f64;
@@ -132,9 +127,9 @@ pub fn crown_envelope_with(leaves: &[LeafProxy], threads: usize, clustered: bool
     } else {
         0.0
     };
-    let leaves = per_leaf
+    let leaves = attenuation
         .iter()
-        .map(|(attenuation, _)| LeafEnvelope {
+        .map(|attenuation| LeafEnvelope {
             attenuation: *attenuation,
             // A bin shut by a leaf lets through the least a bake stores (its distance stays
             // finite, as the lighting's sums need).
@@ -148,6 +143,46 @@ pub fn crown_envelope_with(leaves: &[LeafProxy], threads: usize, clustered: bool
         })
         .collect();
     CrownEnvelope { leaves, tau }
+}
+
+/// `f(0..n)` on up to `threads` threads, in order.
+pub(crate) fn parallel_map<T: Send + Clone + Default>(
+    n: usize,
+    threads: usize,
+    f: impl Fn(usize) -> T + Sync,
+) -> Vec<T> {
+    parallel_map_with_progress(n, threads, f, &|_| {})
+}
+
+/// [`parallel_map`], calling `progress(done)` after every chunk.
+pub(crate) fn parallel_map_with_progress<T: Send + Clone + Default>(
+    n: usize,
+    threads: usize,
+    f: impl Fn(usize) -> T + Sync,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Vec<T> {
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results = std::sync::Mutex::new(vec![T::default(); n]);
+    const CHUNK: usize = 32;
+    std::thread::scope(|scope| {
+        for _ in 0..threads.clamp(1, n.div_ceil(CHUNK).max(1)) {
+            scope.spawn(|| {
+                loop {
+                    let start = next.fetch_add(CHUNK, std::sync::atomic::Ordering::Relaxed);
+                    if start >= n {
+                        break;
+                    }
+                    let chunk: Vec<T> = (start..(start + CHUNK).min(n)).map(&f).collect();
+                    results.lock().unwrap()[start..start + chunk.len()].clone_from_slice(&chunk);
+                    let so_far = done.fetch_add(chunk.len(), std::sync::atomic::Ordering::Relaxed)
+                        + chunk.len();
+                    progress(so_far);
+                }
+            });
+        }
+    });
+    results.into_inner().unwrap()
 }
 
 #[cfg(test)]

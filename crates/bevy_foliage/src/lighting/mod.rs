@@ -10,8 +10,10 @@
 
 pub mod bins;
 pub mod envelope;
+pub mod leaf_scene;
 pub mod leaf_tree;
 pub mod model;
 pub mod path_trace;
 pub mod settings;
 pub mod sun_maps;
+pub mod traced_bins;

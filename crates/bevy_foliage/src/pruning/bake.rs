@@ -16,6 +16,7 @@ use super::extract::quantize_visibility;
 use super::leaves::{LeafSet, SkippedLeaves};
 use super::mask::AlphaMask;
 use super::visibility::{LeafTriangle, VisibilityInput, cell_visibility, fibonacci_directions};
+use crate::lighting::traced_bins::BinEstimate;
 use crate::rng::SplitMix64;
 use bevy::asset::Asset;
 use bevy::math::{Vec2, Vec3};
@@ -87,6 +88,8 @@ pub struct BakeSettings {
     pub seed: u64,
     /// Worker threads for the visibility pass (0 = all cores).
     pub threads: usize,
+    /// How the tree lighting's bins are estimated (§5.6): traced through the leaves by default.
+    pub bins: BinEstimate,
 }
 
 impl Default for BakeSettings {
@@ -97,6 +100,7 @@ impl Default for BakeSettings {
             resolution: 256,
             seed: 0x5EED,
             threads: 0,
+            bins: BinEstimate::default(),
         }
     }
 }
@@ -338,6 +342,7 @@ pub fn bake_masked(
             settings.resolution
         )));
     }
+    settings.bins.checked().map_err(BakeError::Settings)?;
     let (leaves, skipped) = leaves.sanitized();
     if leaves.is_empty() {
         return Err(BakeError::NoLeaves { skipped });
@@ -495,7 +500,7 @@ pub fn bake_masked(
     progress(BakeProgress {
         stage: BakeStage::Envelope,
         done: 0,
-        total: 1,
+        total: stored_leaves.len(),
     });
     let opaque = mask
         .and_then(|m| m.opaque_fraction_of(&leaves))
@@ -509,7 +514,27 @@ pub fn bake_masked(
             proxy
         })
         .collect();
-    let envelope = crate::lighting::envelope::crown_envelope(&stored, threads);
+    let envelope = match settings.bins {
+        BinEstimate::Neighbours => crate::lighting::envelope::crown_envelope(&stored, threads),
+        BinEstimate::Traced { rays_per_bin } => {
+            let scene = crate::lighting::leaf_scene::LeafScene::new(&leaves);
+            crate::lighting::traced_bins::crown_envelope_traced(
+                &stored,
+                &scene,
+                &stored_leaves,
+                &|_| opaque,
+                rays_per_bin,
+                threads,
+                &|done| {
+                    progress(BakeProgress {
+                        stage: BakeStage::Envelope,
+                        done,
+                        total: stored.len(),
+                    })
+                },
+            )
+        }
+    };
     baked.leaf_light = envelope
         .leaves
         .iter()
@@ -518,8 +543,8 @@ pub fn bake_masked(
     baked.extinction = envelope.tau;
     progress(BakeProgress {
         stage: BakeStage::Envelope,
-        done: 1,
-        total: 1,
+        done: stored_leaves.len(),
+        total: stored_leaves.len(),
     });
     timings.envelope = t.elapsed();
     Ok((baked, timings))
@@ -542,11 +567,15 @@ mod tests {
 
     use bevy::prelude::default;
 
-    /// The bake's leaf light is the crown envelope of its leaves in stored order: each stored
-    /// leaf's eight values are those of the leaf at that place.
+    /// The bake's leaf light is the crown envelope of its leaves in stored order (the bins
+    /// traced through them): each stored leaf's eight values are those of the leaf at that place.
     #[test]
     fn the_leaf_light_follows_the_stored_order() {
-        use crate::lighting::envelope::{LeafProxy, crown_envelope, quantize_light};
+        use crate::lighting::envelope::{LeafProxy, quantize_light};
+        use crate::lighting::leaf_scene::LeafScene;
+        use crate::lighting::traced_bins::{DEFAULT_RAYS_PER_BIN, crown_envelope_traced};
+        let mut triangles = Vec::new();
+        let mut leaf_of = Vec::new();
         let b = small_bake();
         assert_eq!(b.leaf_light.len(), b.leaf_count());
         assert!(b.extinction > 0.0);
@@ -562,6 +591,10 @@ mod tests {
                     })
                     .map(|v| [v[0], v[1], v[2]])
                     .collect();
+                for t in &tris {
+                    triangles.push(*t);
+                    leaf_of.push(l as u32);
+                }
                 let mut unique: Vec<u32> = b.indices
                     [b.leaf_index_start[l] as usize..b.leaf_index_start[l + 1] as usize]
                     .to_vec();
@@ -583,7 +616,18 @@ mod tests {
                 }
             })
             .collect();
-        let envelope = crown_envelope(&proxies, 2);
+        let normals = proxies.iter().map(|p| p.normal).collect();
+        let scene = LeafScene::from_triangles(triangles, leaf_of, normals);
+        let order: Vec<u32> = (0..proxies.len() as u32).collect();
+        let envelope = crown_envelope_traced(
+            &proxies,
+            &scene,
+            &order,
+            &|_| 1.0,
+            DEFAULT_RAYS_PER_BIN,
+            2,
+            &|_| {},
+        );
         let mut off = 0;
         for (stored, e) in b.leaf_light.iter().zip(&envelope.leaves) {
             for (&q, &a) in stored.iter().zip(&e.attenuation) {
