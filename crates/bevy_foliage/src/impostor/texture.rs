@@ -861,6 +861,44 @@ mod tests {
         }
     }
 
+    /// The cloud's light atlases trace the bins through the source's leaves as the leaves' own
+    /// bake does: a small leaf under a textured card roof with half its texels transparent
+    /// gets half the light in the bins the roof covers, all of it elsewhere.
+    #[test]
+    fn the_source_light_traces_through_its_cards_with_their_opaque_share() {
+        use crate::lighting::path_trace::push_square_leaf;
+        let mut small = LeafSet::default();
+        push_square_leaf(&mut small, Vec3::ZERO, 0.001, Vec3::new(0.2, 1.0, -0.4).normalize());
+        let mut roof = LeafSet::default();
+        push_square_leaf(&mut roof, Vec3::new(200.0, 1.0, 0.0), 200.0, Vec3::Y);
+        let plain = BakeSurface {
+            base_color: Vec4::ONE,
+            texture: None,
+            alpha_cutoff: 0.5,
+        };
+        let mut rgba = vec![255u8; 4 * 4 * 4];
+        for p in rgba.chunks_exact_mut(4).take(8) {
+            p[3] = 0;
+        }
+        let card = BakeSurface {
+            texture: Some(SurfaceTexture {
+                width: 4,
+                height: 4,
+                rgba,
+            }),
+            ..plain.clone()
+        };
+        let mut source = ImpostorSource::default();
+        source.push_leaves(&small, plain);
+        source.push_leaves(&roof, card);
+        let light = source.leaf_light(BinEstimate::Traced { rays_per_bin: 256 });
+        for (j, a) in light.attenuation[0].iter().enumerate() {
+            let under_roof = j & 1 != 0 && j & 2 != 0;
+            let expected = if under_roof { 0.5 } else { 1.0 };
+            assert!((a - expected).abs() < 0.02, "bin {j}: {a}");
+        }
+    }
+
     #[test]
     fn leaves_count_with_their_opaque_share_and_bark_has_no_leaf() {
         let tree = crate::pruning::procedural::generate(
