@@ -19,6 +19,8 @@ fn test_options() -> ShowcaseOptions {
         impostors: false,
         // And when the grass slice bake finishes.
         grass: false,
+        // Nothing here looks at the tree lighting's precision: the cheaper bake of its bins.
+        tree_light_bins: bevy_foliage::lighting::traced_bins::BinEstimate::Neighbours,
         ..default()
     }
 }

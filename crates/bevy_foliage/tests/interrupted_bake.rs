@@ -12,7 +12,17 @@ use std::process::Command;
 fn bake_into(out: &Path) -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_foliage_bake"));
     command
-        .args(["--resolution", "64", "--depth", "7", "--out"])
+        // Two rays a bin: the traced bins' determinism is checked too, at a fraction of the
+        // default bake's cost.
+        .args([
+            "--resolution",
+            "64",
+            "--depth",
+            "7",
+            "--rays-per-bin",
+            "2",
+            "--out",
+        ])
         .arg(out)
         .args(["olea", "fraxinus"]);
     command

@@ -868,7 +868,12 @@ mod tests {
     fn the_source_light_traces_through_its_cards_with_their_opaque_share() {
         use crate::lighting::path_trace::push_square_leaf;
         let mut small = LeafSet::default();
-        push_square_leaf(&mut small, Vec3::ZERO, 0.001, Vec3::new(0.2, 1.0, -0.4).normalize());
+        push_square_leaf(
+            &mut small,
+            Vec3::ZERO,
+            0.001,
+            Vec3::new(0.2, 1.0, -0.4).normalize(),
+        );
         let mut roof = LeafSet::default();
         push_square_leaf(&mut roof, Vec3::new(200.0, 1.0, 0.0), 200.0, Vec3::Y);
         let plain = BakeSurface {
