@@ -21,8 +21,10 @@
 //!   baked light directions, far as the horizontal slice on macro-cells, with seamless
 //!   transitions and density maps ([`grass`], [`grass::GrassPlugin`]).
 //! - **tree lighting** (Boulanger, ch. 5), in progress: the per-leaf envelope of §5.6 — the
-//!   light each leaf gets through its neighbours in eight directions, the crown's extinction —
-//!   is baked with every tree ([`lighting`]); the shaders that use it are still to come.
+//!   light the crown lets through to each leaf in eight directions (traced through the leaves),
+//!   the crown's extinction — is baked with every tree and billboard cloud ([`lighting`]); the
+//!   leaf and cloud shaders light each leaf by sky, sun and one bounce through its crown behind
+//!   [`TreeLightingSettings`].
 //!
 //! Add [`FoliagePlugin`]; tune [`FoliagePruningSettings`] (a reflected resource, so inspectors can
 //! edit it live).

@@ -1,7 +1,9 @@
 //! Trees lit as volumes of leaves (Boulanger 2008, ch. 5; in progress): [`envelope`] holds the
 //! per-leaf precomputation of §5.6 — the light each leaf receives through its neighbours in
 //! eight directions, the distances to the crown's envelope and the crown's fitted extinction τ —
-//! as plain Rust, with [`leaf_tree`] taking far groups of leaves as one for large crowns; and
+//! as plain Rust, with [`leaf_tree`] taking far groups of leaves as one for large crowns, and
+//! [`traced_bins`] the same eight values traced through the leaves ([`leaf_scene`]), which bakes
+//! use by default; and
 //! [`model`] the light a leaf sends to the eye from it (the leaf BSDF, sky, sun and one bounce
 //! of sunlight of §5.2–5.4), the CPU reference of the leaf shaders, with [`path_trace`] the
 //! Monte Carlo ground truth it is measured against; [`settings`] switches the leaf shaders between
