@@ -62,8 +62,9 @@ impl BinEstimate {
 /// The most rays per bin a bake takes (a bake of 40,000 leaves then traces 1.3 billion rays).
 pub const MAX_RAYS_PER_BIN: u32 = 4096;
 
-/// Rays per bin a bake traces by default: the bins' noise is then about a tenth of a bin's
-/// light at half visibility, below what §5.6's estimate is off by (see `tree_lighting_error`).
+/// Rays per bin a bake traces by default: a bin half open is then known to ±0.09 (one standard
+/// deviation), and leaf by leaf the sky is closer to the path tracer than with §5.6's estimate
+/// on every tree `tree_lighting_error` measures (more rays are closer still, at a linear cost).
 pub const DEFAULT_RAYS_PER_BIN: u32 = 32;
 
 /// The eight bins' attenuations for leaf `leaf` of `scene` (see the module docs); `opacity(l)`
