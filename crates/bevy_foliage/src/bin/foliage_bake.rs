@@ -6,12 +6,13 @@
 //! ```
 //! TREE is one of `olea`, `fraxinus`, `quercus`, `cedrus` (the thesis' test trees; default: all);
 //! a glTF file is split into leaves as `bevy_foliage::pruning::gltf` documents.
-//! `--rays-per-bin`: rays per bin of the tree lighting's traced bins (default 32);
+//! `--rays-per-bin`: rays per bin of the tree lighting's traced bins (default 128, four times
+//! what a bake made at load time takes: see `lighting::traced_bins::OFFLINE_RAYS_PER_BIN`);
 //! `--neighbour-bins`: §5.6's estimate from the neighbours instead.
 //! Prints progress on stderr and one JSON object per tree on stdout (bake time per stage, leaf
 //! count, GPU bytes).
 
-use bevy_foliage::lighting::traced_bins::BinEstimate;
+use bevy_foliage::lighting::traced_bins::{BinEstimate, OFFLINE_RAYS_PER_BIN};
 use bevy_foliage::pruning::bake::{BakeProgress, BakeSettings, BakeStage, CellCount, bake_masked};
 use bevy_foliage::pruning::format::save;
 use bevy_foliage::pruning::gltf::{GltfLeafSettings, load_gltf_tree};
@@ -23,7 +24,13 @@ use std::path::PathBuf;
 
 fn main() {
     let mut out = PathBuf::from("assets/trees");
-    let mut settings = BakeSettings::default();
+    // A bake kept on disk can afford the sky traced closer than one made at load time.
+    let mut settings = BakeSettings {
+        bins: BinEstimate::Traced {
+            rays_per_bin: OFFLINE_RAYS_PER_BIN,
+        },
+        ..BakeSettings::default()
+    };
     let mut names: Vec<String> = Vec::new();
     let mut gltf_settings = GltfLeafSettings::default();
     let mut args = std::env::args().skip(1);

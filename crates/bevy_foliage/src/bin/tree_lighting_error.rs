@@ -1,11 +1,13 @@
 //! The tree lighting model (Boulanger 2008, ch. 5) against a Monte Carlo path tracer over the
 //! same leaves, BSDF, sky and sun: per component, the mean relative error per leaf and the
 //! error of the crown's mean (the thesis reports 5 % sky direct, 7.5 % sun direct, 6 % sun
-//! indirect against renders with 256 rays per point).
+//! indirect against renders with 256 rays per point). Each crown is also traced twice with
+//! different seeds: those rows are the reference's own noise, below which no model can be shown
+//! closer to it leaf by leaf.
 //!
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
-//!     [--points P] [--directions D] [--rays-per-bin R] [--sun-maps]
+//!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
 //! ```
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
 //! map at three texel sizes, the crown's extinction over its depth, eq. 5.3's foliage maps)
@@ -15,7 +17,8 @@
 use bevy::math::Vec3;
 use bevy_foliage::lighting::model::{LeafMaterial, SunThroughCrown};
 use bevy_foliage::lighting::path_trace::{
-    TraceLight, TraceSettings, model_against_tracer, uniform_ball,
+    ComponentError, LightingError, TraceLight, TraceSettings, models_against_tracer,
+    tracer_against_itself, uniform_ball,
 };
 use bevy_foliage::lighting::traced_bins::{BinEstimate, DEFAULT_RAYS_PER_BIN};
 use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
@@ -23,7 +26,7 @@ use bevy_foliage::pruning::procedural::{TreeSpecies, generate};
 fn main() {
     let mut leaves = 2000usize;
     let mut stride = 10usize;
-    let mut rays_per_bin = DEFAULT_RAYS_PER_BIN;
+    let mut rays_per_bin = vec![DEFAULT_RAYS_PER_BIN];
     let mut settings = TraceSettings {
         points: 8,
         directions: 256,
@@ -49,10 +52,20 @@ fn main() {
             "--stride" => stride = value(i),
             "--points" => settings.points = value(i) as u32,
             "--directions" => settings.directions = value(i) as u32,
-            "--rays-per-bin" => rays_per_bin = value(i) as u32,
+            "--rays-per-bin" => {
+                rays_per_bin = args
+                    .get(i + 1)
+                    .map(|v| v.split(',').map(|r| r.trim().parse::<u32>()).collect())
+                    .and_then(|r: Result<Vec<u32>, _>| r.ok())
+                    .filter(|r| !r.is_empty() && r.iter().all(|r| (1..=4096).contains(r)))
+                    .unwrap_or_else(|| {
+                        eprintln!("--rays-per-bin takes R or R,R,… with each R in 1..=4096");
+                        std::process::exit(2)
+                    })
+            }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R] [--sun-maps]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]"
                 );
                 std::process::exit(2)
             }
@@ -92,44 +105,84 @@ fn main() {
             crown.positions.iter().copied().sum::<Vec3>() / crown.positions.len().max(1) as f32;
         let started = std::time::Instant::now();
         let eye = centre + Vec3::new(0.0, 0.3, 1.0).normalize() * 30.0;
-        let run = |blend, bins| {
-            model_against_tracer(
-                &crown, &material, &light, eye, stride, &settings, threads, blend, bins,
-            )
-        };
         let neighbours = BinEstimate::Neighbours;
-        let traced = BinEstimate::Traced { rays_per_bin };
-        let thesis = run(SunThroughCrown::SmoothEnvelope, neighbours);
-        let e = run(SunThroughCrown::BlendedAttenuation, neighbours);
-        let t = run(SunThroughCrown::BlendedAttenuation, traced);
+        let mut models = vec![
+            (SunThroughCrown::SmoothEnvelope, neighbours),
+            (SunThroughCrown::BlendedAttenuation, neighbours),
+        ];
+        models.extend(rays_per_bin.iter().map(|&rays_per_bin| {
+            (
+                SunThroughCrown::BlendedAttenuation,
+                BinEstimate::Traced { rays_per_bin },
+            )
+        }));
+        let runs = models_against_tracer(
+            &crown, &material, &light, eye, stride, &settings, threads, &models,
+        );
+        let floor =
+            tracer_against_itself(&crown, &material, &light, eye, stride, &settings, threads);
+        let bins_label = |k: usize| match models[k].1 {
+            BinEstimate::Neighbours => "§5.6 bins".to_string(),
+            BinEstimate::Traced { rays_per_bin } => format!("traced bins, {rays_per_bin} rays"),
+        };
+        let mut rows: Vec<(String, LightingError, ComponentError)> = Vec::new();
+        // Each model's run but the eq. 5.7 one, with the name of its bins.
+        let blended: Vec<(String, LightingError)> = runs
+            .iter()
+            .enumerate()
+            .skip(1)
+            .map(|(k, run)| (bins_label(k), *run))
+            .collect();
+        for (bins, run) in &blended {
+            rows.push((format!("sky direct, {bins}"), *run, run.sky));
+        }
+        rows.push((
+            "sun direct, eq. 5.7 envelope blend".into(),
+            runs[0],
+            runs[0].sun,
+        ));
+        for (bins, run) in &blended {
+            rows.push((
+                format!("sun direct, attenuation blend, {bins}"),
+                *run,
+                run.sun,
+            ));
+        }
+        rows.push((
+            "sun indirect (1 bounce), eq. 5.7".into(),
+            runs[0],
+            runs[0].bounce,
+        ));
+        for (bins, run) in &blended {
+            rows.push((
+                format!("sun indirect (1 bounce), attenuation blend, {bins}"),
+                *run,
+                run.bounce,
+            ));
+        }
+        for (bins, run) in &blended {
+            rows.push((
+                format!("sun indirect, attenuation blend vs 1–4 bounces, {bins}"),
+                *run,
+                run.bounces,
+            ));
+        }
         for (label, c) in [
-            ("sky direct, §5.6 bins", e.sky),
-            ("sky direct, traced bins", t.sky),
-            ("sun direct, eq. 5.7 envelope blend", thesis.sun),
-            ("sun direct, attenuation blend, §5.6 bins", e.sun),
-            ("sun direct, attenuation blend, traced bins", t.sun),
-            ("sun indirect (1 bounce), eq. 5.7", thesis.bounce),
-            (
-                "sun indirect (1 bounce), attenuation blend, §5.6 bins",
-                e.bounce,
-            ),
-            (
-                "sun indirect (1 bounce), attenuation blend, traced bins",
-                t.bounce,
-            ),
-            (
-                "sun indirect, attenuation blend vs 1–4 bounces, §5.6 bins",
-                e.bounces,
-            ),
-            (
-                "sun indirect, attenuation blend vs 1–4 bounces, traced bins",
-                t.bounces,
-            ),
+            ("sky direct", floor.sky),
+            ("sun direct", floor.sun),
+            ("sun indirect (1 bounce)", floor.bounce),
         ] {
+            rows.push((
+                format!("{label}, the tracer against itself (its noise)"),
+                floor,
+                c,
+            ));
+        }
+        for (label, run, c) in rows {
             println!(
                 "| {name} | {} | {:.3} | {label} | {:.1} % | {:.1} % | {:.1} % | {:.0} % |",
-                e.leaves,
-                e.tau,
+                run.leaves,
+                run.tau,
                 100.0 * c.mean_relative,
                 100.0 * c.mean_absolute,
                 100.0 * c.of_the_mean,
