@@ -39,6 +39,9 @@ const NODE_TRIANGLES: usize = 4;
 /// Triangles a leaf node may hold when splitting it would cost more (surface-area heuristic).
 const MAX_NODE_TRIANGLES: usize = 12;
 
+/// Depth from which nodes are split at the median only (see [`LeafScene::build`]).
+const MEDIAN_DEPTH: u32 = 32;
+
 /// What entering an inner node costs, in triangle tests.
 const TRAVERSAL_COST: f32 = 1.0;
 
@@ -92,7 +95,7 @@ impl LeafScene {
         };
         if !scene.triangles.is_empty() {
             let n = scene.order.len();
-            scene.build(0, n);
+            scene.build(0, n, 0);
         }
         scene
     }
@@ -152,7 +155,7 @@ impl LeafScene {
     /// least surface-area cost over 16 bins of the triangles' centres on each axis (MacDonald
     /// and Booth's heuristic: a ray's chance to enter a box goes with its surface area), the
     /// median on the longest axis where the centres cannot be told apart.
-    fn build(&mut self, start: usize, end: usize) -> u32 {
+    fn build(&mut self, start: usize, end: usize, depth: u32) -> u32 {
         let (min, max) = self.bounds(&self.order[start..end]);
         let index = self.nodes.len() as u32;
         self.nodes.push(Node {
@@ -165,9 +168,16 @@ impl LeafScene {
         if end - start <= NODE_TRIANGLES {
             return index;
         }
-        let mid = match self.surface_area_split(start, end, min, max) {
+        // From `MEDIAN_DEPTH` down only medians: they halve the triangles, so however the
+        // surface areas fall the hierarchy stays shallower than the traversal's stack of 64.
+        let split = if depth < MEDIAN_DEPTH {
+            self.surface_area_split(start, end, min, max)
+        } else {
+            None
+        };
+        let mid = match split {
             Some(mid) => mid,
-            None if end - start <= MAX_NODE_TRIANGLES => return index,
+            None if end - start <= MAX_NODE_TRIANGLES && depth < MEDIAN_DEPTH => return index,
             None => {
                 let axis = (max - min).max_position();
                 let mid = (start + end) / 2;
@@ -178,8 +188,8 @@ impl LeafScene {
                 mid
             }
         };
-        let left = self.build(start, mid);
-        let right = self.build(mid, end);
+        let left = self.build(start, mid, depth + 1);
+        let right = self.build(mid, end, depth + 1);
         self.nodes[index as usize] = Node {
             min,
             max,
@@ -209,6 +219,12 @@ impl LeafScene {
             lo = lo.min(c);
             hi = hi.max(c);
         }
+        // The bin of triangle `t`'s centre along `axis`.
+        let bin_of = |t: u32, axis: usize| {
+            let extent = hi[axis] - lo[axis];
+            (((centre(tris[t as usize])[axis] - lo[axis]) / extent * BINS as f32) as usize)
+                .min(BINS - 1)
+        };
         let area = |min: Vec3, max: Vec3| {
             let d = (max - min).max(Vec3::ZERO);
             d.x * d.y + d.y * d.z + d.z * d.x
@@ -221,15 +237,12 @@ impl LeafScene {
             if extent.is_nan() || extent <= 0.0 {
                 continue;
             }
-            let bin_of = |t: u32| {
-                (((centre(tris[t as usize])[axis] - lo[axis]) / extent * BINS as f32) as usize)
-                    .min(BINS - 1)
-            };
+            let bin = |t: u32| bin_of(t, axis);
             let mut count = [0u32; BINS];
             let mut bmin = [Vec3::splat(f32::INFINITY); BINS];
             let mut bmax = [Vec3::splat(f32::NEG_INFINITY); BINS];
             for &t in range {
-                let b = bin_of(t);
+                let b = bin(t);
                 count[b] += 1;
                 for v in tris[t as usize] {
                     bmin[b] = bmin[b].min(v);
@@ -269,12 +282,7 @@ impl LeafScene {
         if cost + TRAVERSAL_COST >= count as f32 && count <= MAX_NODE_TRIANGLES {
             return None;
         }
-        let extent = hi[axis] - lo[axis];
-        let goes_left = |t: u32| {
-            ((((centre(tris[t as usize])[axis] - lo[axis]) / extent * BINS as f32) as usize)
-                .min(BINS - 1))
-                < split
-        };
+        let goes_left = |t: u32| bin_of(t, axis) < split;
         let mut left: Vec<u32> = Vec::with_capacity(count);
         let mut right: Vec<u32> = Vec::with_capacity(count);
         for &t in range {
