@@ -7,8 +7,14 @@
 //!
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
-//!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
+//!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G]]
 //! ```
+//! `--images`: instead, the thesis' own measure (§5.7, fig. 5.16): the crown rendered by the
+//! model and by the tracer (`--directions` rays per intersection point, 256 by default as in
+//! the thesis) on a grid of `--samples G` eye rays a side (128), and each image's mean error
+//! over its mean light at pixels of 1, 4 and 16 eye rays a side (`lighting::image_error`);
+//! the last bins also with each leaf's seen-part gain (`lighting::seen_part`).
+//!
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
 //! map at three texel sizes, the crown's extinction over its depth, eq. 5.3's foliage maps)
 //! against the tracer's shadow rays, beside the baked attenuations' blend
@@ -35,7 +41,9 @@ fn main() {
     };
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     let sun_maps = args.iter().any(|a| a == "--sun-maps");
-    args.retain(|a| a != "--sun-maps");
+    let images = args.iter().any(|a| a == "--images");
+    args.retain(|a| a != "--sun-maps" && a != "--images");
+    let mut samples = 128u32;
     let mut i = 0;
     while i < args.len() {
         let value = |i: usize| -> usize {
@@ -52,6 +60,7 @@ fn main() {
             "--stride" => stride = value(i),
             "--points" => settings.points = value(i) as u32,
             "--directions" => settings.directions = value(i) as u32,
+            "--samples" => samples = value(i) as u32,
             "--rays-per-bin" => {
                 rays_per_bin = args
                     .get(i + 1)
@@ -65,7 +74,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G]]"
                 );
                 std::process::exit(2)
             }
@@ -84,8 +93,20 @@ fn main() {
         sun_map_table(leaves, stride, settings.points, light.to_sun, threads);
         return;
     }
+    if images {
+        image_table(
+            leaves,
+            &material,
+            &light,
+            samples,
+            settings.directions,
+            &rays_per_bin,
+            threads,
+        );
+        return;
+    }
     println!(
-        "| tree | leaves | τ | component | mean relative error per leaf | mean error / mean light | error of the mean | share of the light |"
+        "| tree | leaves | τ | component | mean relative error per leaf | mean error / mean light | error of the mean (> 0: model brighter) | share of the light |"
     );
     println!("|---|---|---|---|---|---|---|---|");
     // The crown the model assumes (uniform density, random orientations), then the procedural
@@ -224,5 +245,130 @@ fn sun_map_table(leaves: usize, stride: usize, points: u32, to_sun: Vec3, thread
                 100.0 * r.of_the_mean
             );
         }
+    }
+}
+
+/// The `--images` table: for the uniform ball and each procedural tree, the model's images
+/// against the tracer's at three pixel sizes.
+fn image_table(
+    leaves: usize,
+    material: &LeafMaterial,
+    light: &TraceLight,
+    samples: u32,
+    directions: u32,
+    rays_per_bin: &[u32],
+    threads: usize,
+) {
+    use bevy_foliage::lighting::image_error::{ImageError, ImageSettings, images_against_tracer};
+    println!(
+        "| tree | leaves | eye rays hitting | pixel (leaves wide) | pixels across | component | estimate | mean error / mean light | mean relative error per pixel | error of the mean (> 0: model brighter) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    let mut crowns = vec![(
+        "uniform ball".to_string(),
+        0.1f32,
+        uniform_ball(leaves, 1.5, 0.05, 5),
+    )];
+    for species in TreeSpecies::thesis_trees() {
+        crowns.push((
+            species.name.to_string(),
+            species.leaf_size,
+            generate(&species.with_leaf_count(leaves)).leaves,
+        ));
+    }
+    let mut models = vec![(SunThroughCrown::BlendedAttenuation, BinEstimate::Neighbours)];
+    models.extend(rays_per_bin.iter().map(|&rays_per_bin| {
+        (
+            SunThroughCrown::BlendedAttenuation,
+            BinEstimate::Traced { rays_per_bin },
+        )
+    }));
+    let settings = ImageSettings {
+        samples,
+        directions,
+        ..ImageSettings::default()
+    };
+    for (name, leaf_size, crown) in crowns {
+        let started = std::time::Instant::now();
+        let to_eye = Vec3::new(0.0, 0.3, 1.0);
+        let run = images_against_tracer(
+            &crown,
+            material,
+            light,
+            to_eye,
+            leaf_size,
+            &settings,
+            threads,
+            &models,
+            &[1, 4, 16],
+        );
+        let label = |k: usize| match models[k].1 {
+            BinEstimate::Neighbours => "§5.6 bins".to_string(),
+            BinEstimate::Traced { rays_per_bin } => format!("traced bins, {rays_per_bin} rays"),
+        };
+        let row = |e: &ImageError, component: &str, estimate: &str, c: &ComponentError| {
+            println!(
+                "| {name} | {} | {} | {:.2} | {} | {component} | {estimate} | {:.1} % | {:.1} % | {:.1} % |",
+                crown.len(),
+                run.hits,
+                e.pixel_in_leaves,
+                e.pixels_across,
+                100.0 * c.mean_absolute,
+                100.0 * c.mean_relative,
+                100.0 * c.of_the_mean
+            );
+        };
+        for size in 0..run.noise.len() {
+            for (k, (_, errors)) in run.models.iter().enumerate() {
+                row(&errors[size], "sky direct", &label(k), &errors[size].sky);
+            }
+            let seen_label = format!("{}, seen-part gain", label(models.len() - 1));
+            if let Some(seen) = run.seen.get(size) {
+                row(seen, "sky direct", &seen_label, &seen.sky);
+            }
+            row(
+                &run.noise[size],
+                "sky direct",
+                "the tracer against itself",
+                &run.noise[size].sky,
+            );
+            for (k, (_, errors)) in run.models.iter().enumerate() {
+                row(
+                    &errors[size],
+                    "sun direct",
+                    &format!("attenuation blend, {}", label(k)),
+                    &errors[size].sun,
+                );
+            }
+            if let Some(seen) = run.seen.get(size) {
+                row(
+                    seen,
+                    "sun direct",
+                    &format!("attenuation blend, {seen_label}"),
+                    &seen.sun,
+                );
+            }
+            row(
+                &run.shadow_map_sun[size],
+                "sun direct",
+                "shadow map, quarter-leaf texels, 3×3 filter",
+                &run.shadow_map_sun[size].sun,
+            );
+            for (k, (_, errors)) in run.models.iter().enumerate() {
+                row(
+                    &errors[size],
+                    "sun indirect (1 bounce)",
+                    &format!("attenuation blend, {}", label(k)),
+                    &errors[size].bounce,
+                );
+            }
+            row(
+                &run.noise[size],
+                "sun indirect (1 bounce)",
+                "the tracer against itself",
+                &run.noise[size].bounce,
+            );
+        }
+        eprintln!("{name}: {:.1} s", started.elapsed().as_secs_f32());
     }
 }

@@ -190,6 +190,16 @@ fn lobes(wl: Vec3) -> ([f32; 8], f32) {
     (w, sum)
 }
 
+/// Eight values of the sampling directions blended towards `w` by their cosine lobes (eq. 5.7's
+/// weights: continuous as `w` moves); `empty` where no lobe reaches `w`.
+pub fn lobe_blend(values: &[f32; 8], w: Vec3, empty: f32) -> f32 {
+    let (weights, sum) = lobes(w);
+    if sum <= 0.0 {
+        return empty;
+    }
+    (0..8).map(|j| weights[j] * values[j]).sum::<f32>() / sum
+}
+
 /// Eq. 5.7: the envelope's distance towards an arbitrary direction `wl`, the s_max of the
 /// directions in its hemisphere blended by cosine lobes (continuous as the sun moves).
 pub fn smooth_s_max(s_max: &[f32; 8], wl: Vec3) -> f32 {
@@ -227,13 +237,7 @@ pub fn sun_through_crown(
 ) -> f32 {
     match blend {
         SunThroughCrown::SmoothEnvelope => (-tau * smooth_s_max(s_max, wl)).exp(),
-        SunThroughCrown::BlendedAttenuation => {
-            let (w, sum) = lobes(wl);
-            if sum <= 0.0 {
-                return 1.0;
-            }
-            (0..8).map(|j| w[j] * attenuation[j]).sum::<f32>() / sum
-        }
+        SunThroughCrown::BlendedAttenuation => lobe_blend(attenuation, wl, 1.0),
     }
 }
 

@@ -1,0 +1,477 @@
+//! The tree lighting against the path tracer as images, the way Boulanger 2008 reports its
+//! error (§5.7, fig. 5.16: "an average error of 5 %, 7.5 %, 6 %" for the sky, the sun and the
+//! sun's bounce, against Monte Carlo renders with 256 rays per intersection point).
+//!
+//! A grid of parallel eye rays is cast over the crown; at the point each ray hits, the tracer
+//! gathers the light there (the same rays as [`super::path_trace`], all from that one point) and
+//! the model gives the leaf's light towards the eye. A pixel is a square block of the grid, so
+//! one trace gives the error at several pixel sizes. Why the pixel size matters: leaf by leaf
+//! the sun is all or nothing, which a statistical model of the crown cannot know (the per-leaf
+//! tables of `tree_lighting_error`); a pixel as wide as several leaves averages leaves in sun
+//! and in shade, and that average is what the model estimates.
+//!
+//! Plain Rust, no render types.
+
+use super::bins::proxies;
+use super::leaf_scene::LeafScene;
+use super::model::{
+    LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bounce_radiance, bsdf, sky_radiance,
+    sun_radiance, sun_through_crown,
+};
+use super::path_trace::{
+    ComponentError, TraceLight, TraceSettings, component_error, envelope_by, gather, luminance,
+};
+use super::seen_part::{DEFAULT_SEEN_POINTS, seen_gain, seen_part_gains_of_all};
+use super::sun_maps::{LightFrame, foliage_maps};
+use super::traced_bins::BinEstimate;
+use crate::pruning::leaves::LeafSet;
+use crate::rng::SplitMix64;
+use bevy::math::Vec3;
+
+/// How the crown is rendered and traced.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageSettings {
+    /// Eye rays a side over the crown's square: the pixels of the finest image.
+    pub samples: u32,
+    /// Rays per intersection point for the sky and each bounce (the thesis' renders: 256).
+    pub directions: u32,
+    /// Bounces of sunlight followed for the several-bounce figure (at least 1).
+    pub bounces: u32,
+    /// Seed of the tracer's random sequences (the noise rows trace again with another).
+    pub seed: u64,
+    /// Points per leaf for the gains of [`super::seen_part`] (0: not measured).
+    pub seen_points: u32,
+}
+
+impl Default for ImageSettings {
+    fn default() -> Self {
+        Self {
+            samples: 128,
+            directions: 256,
+            bounces: 1,
+            seed: 1,
+            seen_points: DEFAULT_SEEN_POINTS,
+        }
+    }
+}
+
+/// One image's error, per component, at one pixel size. [`ComponentError::leaves`] counts the
+/// pixels in its relative mean, and `mean_relative` is per pixel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ImageError {
+    /// Pixels across the crown's square.
+    pub pixels_across: u32,
+    /// A pixel's side in leaf sizes.
+    pub pixel_in_leaves: f32,
+    /// Sky and ground, direct.
+    pub sky: ComponentError,
+    /// The sun, direct.
+    pub sun: ComponentError,
+    /// The sun after one bounce (the model's term against the traced single bounce).
+    pub bounce: ComponentError,
+}
+
+/// Every image comparison of one crown, each per pixel size (finest first).
+#[derive(Clone, Debug, Default)]
+pub struct ImageComparison {
+    /// Per model, in the order given, its errors per pixel size, and the crown's fitted τ.
+    pub models: Vec<(f32, Vec<ImageError>)>,
+    /// The sun read at each eye ray's point from a shadow map of quarter-leaf texels with a
+    /// 3×3 filter (what the leaf shaders use for leaves near the eye), per pixel size; sky
+    /// and bounce are those of the first model.
+    pub shadow_map_sun: Vec<ImageError>,
+    /// The tracer against itself (a second trace with another seed): its own noise per pixel
+    /// size, below which no model can be shown closer to it.
+    pub noise: Vec<ImageError>,
+    /// The last model with its sky and sun scaled by each leaf's seen-part gain towards the
+    /// eye ([`super::seen_part`]), per pixel size; empty when
+    /// [`ImageSettings::seen_points`] is 0.
+    pub seen: Vec<ImageError>,
+    /// Eye rays that hit a leaf.
+    pub hits: usize,
+}
+
+/// What one eye ray found: the leaf, the point, and the traced light there from two seeds
+/// (luminance of sky, sun, one bounce, all bounces).
+struct Sample {
+    leaf: u32,
+    point: Vec3,
+    traced: [[f32; 4]; 2],
+}
+
+/// The block means of a `side × side` grid in blocks of `block × block` (`block` divides
+/// `side`): a pixel's value is the mean of its eye rays', background counted as dark.
+pub fn block_means(values: &[f32], side: usize, block: usize) -> Vec<f32> {
+    let across = side / block.max(1);
+    let mut out = vec![0.0; across * across];
+    for (i, v) in values.iter().enumerate().take(side * side) {
+        let (x, y) = (i % side / block, i / side / block);
+        if x < across && y < across {
+            out[y * across + x] += v;
+        }
+    }
+    let per = 1.0 / (block * block) as f32;
+    out.iter_mut().for_each(|v| *v *= per);
+    out
+}
+
+/// Renders `leaves` seen along `-to_eye` (parallel eye rays) with the model's every
+/// `(blend, bins)` of `models` and with the tracer, and measures each image against the
+/// traced one at pixels of `blocks × blocks` eye rays (block sizes that do not divide
+/// [`ImageSettings::samples`] are skipped). `leaf_size` sets the shadow map's texels (a quarter
+/// of it) and the pixel sizes reported.
+#[allow(clippy::too_many_arguments)]
+pub fn images_against_tracer(
+    leaves: &LeafSet,
+    material: &LeafMaterial,
+    light: &TraceLight,
+    to_eye: Vec3,
+    leaf_size: f32,
+    settings: &ImageSettings,
+    threads: usize,
+    models: &[(SunThroughCrown, BinEstimate)],
+    blocks: &[u32],
+) -> ImageComparison {
+    let scene = LeafScene::new(leaves);
+    if scene.leaf_count() == 0 {
+        return ImageComparison::default();
+    }
+    let view = to_eye.normalize_or(Vec3::Z);
+    let centre = leaves.positions.iter().copied().sum::<Vec3>() / leaves.positions.len() as f32;
+    let radius = leaves
+        .positions
+        .iter()
+        .map(|p| p.distance(centre))
+        .fold(0.0f32, f32::max)
+        .max(1e-3);
+    let side = settings.samples.max(1) as usize;
+    let cell = 2.0 * radius / side as f32;
+    let (a, b) = view.any_orthonormal_pair();
+    let trace = TraceSettings {
+        points: 1,
+        directions: settings.directions,
+        bounces: settings.bounces.max(1),
+        seed: settings.seed,
+    };
+    let again = TraceSettings {
+        seed: settings.seed.wrapping_add(0x5851_F42D),
+        ..trace
+    };
+    let sample = |index: usize| -> Option<Sample> {
+        let mut rng =
+            SplitMix64::new(settings.seed ^ (index as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        // Jittered in its cell: a pixel's eye rays spread over its whole area.
+        let u = -radius + ((index % side) as f32 + rng.next_f32()) * cell;
+        let v = radius - ((index / side) as f32 + rng.next_f32()) * cell;
+        let origin = centre + a * u + b * v + view * (2.0 * radius + 1.0);
+        let (t, leaf) = scene.hit(origin, -view, u32::MAX)?;
+        let x = origin - view * t;
+        let n = scene.normal(leaf as usize);
+        let sun = if scene.hit(x, light.to_sun, leaf).is_none() {
+            luminance(bsdf(material, n, view, light.to_sun) * light.sun)
+        } else {
+            0.0
+        };
+        let mut traced = [[0.0; 4]; 2];
+        for (k, s) in [trace, again].iter().enumerate() {
+            let mut rng =
+                SplitMix64::new(s.seed ^ (index as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
+            let g = gather(
+                &scene,
+                material,
+                light,
+                leaf as usize,
+                view,
+                s,
+                &mut rng,
+                &mut |_| x,
+            );
+            traced[k] = [
+                luminance(g.sky),
+                sun,
+                luminance(g.bounce),
+                luminance(g.bounces),
+            ];
+        }
+        Some(Sample {
+            leaf,
+            point: x,
+            traced,
+        })
+    };
+    let indices: Vec<usize> = (0..side * side).collect();
+    let chunk = indices.len().div_ceil(threads.max(1)).max(1);
+    let samples: Vec<Option<Sample>> = std::thread::scope(|s| {
+        let handles: Vec<_> = indices
+            .chunks(chunk)
+            .map(|part| s.spawn(move || part.iter().map(|&i| sample(i)).collect::<Vec<_>>()))
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("image tracer thread"))
+            .collect()
+    });
+    let traced_column = |seed: usize, k: usize| -> Vec<f32> {
+        samples
+            .iter()
+            .map(|s| s.as_ref().map_or(0.0, |s| s.traced[seed][k]))
+            .collect()
+    };
+    let blocks: Vec<usize> = blocks
+        .iter()
+        .map(|&b| b as usize)
+        .filter(|&b| b > 0 && side.is_multiple_of(b))
+        .collect();
+    // Measures images given per eye ray (sky, sun, bounce) against the first trace.
+    let reference: [Vec<f32>; 4] = std::array::from_fn(|k| traced_column(0, k));
+    let measure = |image: &[Vec<f32>; 3]| -> Vec<ImageError> {
+        blocks
+            .iter()
+            .map(|&block| {
+                let px = |v: &[f32]| block_means(v, side, block);
+                let (sky, sun, bounce, bounces) = (
+                    px(&reference[0]),
+                    px(&reference[1]),
+                    px(&reference[2]),
+                    px(&reference[3]),
+                );
+                let total: f32 = sky.iter().chain(&sun).chain(&bounces).sum();
+                ImageError {
+                    pixels_across: (side / block) as u32,
+                    pixel_in_leaves: cell * block as f32 / leaf_size.max(1e-6),
+                    sky: component_error(&px(&image[0]), &sky, total),
+                    sun: component_error(&px(&image[1]), &sun, total),
+                    bounce: component_error(&px(&image[2]), &bounce, total),
+                }
+            })
+            .collect()
+    };
+    let noise = measure(&[
+        traced_column(1, 0),
+        traced_column(1, 1),
+        traced_column(1, 2),
+    ]);
+
+    let leaf_proxies = proxies(leaves);
+    let sky = SkyLight::sky_and_ground(light.sky, light.ground);
+    let mut first_model: Option<[Vec<f32>; 3]> = None;
+    let mut last_model: Option<[Vec<f32>; 3]> = None;
+    let models: Vec<(f32, Vec<ImageError>)> = models
+        .iter()
+        .map(|&(blend, bins)| {
+            let envelope = envelope_by(bins, &leaf_proxies, &scene, threads);
+            let tau = envelope.tau;
+            let bounce = SunBounce::new(material, light.to_sun, tau);
+            let mut image: [Vec<f32>; 3] = Default::default();
+            for s in &samples {
+                let values = s.as_ref().map_or([0.0; 3], |s| {
+                    let leaf = s.leaf as usize;
+                    let n = scene.normal(leaf);
+                    let e = &envelope.leaves[leaf];
+                    let through =
+                        sun_through_crown(blend, tau, &e.attenuation, &e.s_max, light.to_sun);
+                    [
+                        luminance(sky_radiance(material, n, view, &e.attenuation, &sky)),
+                        luminance(sun_radiance(
+                            material,
+                            n,
+                            view,
+                            light.to_sun,
+                            through,
+                            light.sun,
+                        )),
+                        luminance(bounce_radiance(
+                            material, n, view, &bounce, through, &e.s_max, light.sun,
+                        )),
+                    ]
+                });
+                for k in 0..3 {
+                    image[k].push(values[k]);
+                }
+            }
+            let errors = measure(&image);
+            if first_model.is_none() {
+                first_model = Some(image.clone());
+            }
+            last_model = Some(image);
+            (tau, errors)
+        })
+        .collect();
+
+    // The shadow map's sun at each eye ray's point, as a fragment shader reads it.
+    let texel = 0.25 * leaf_size.max(1e-6);
+    let maps = foliage_maps(leaves, LightFrame::around(leaves, light.to_sun, texel));
+    let bias = maps.frame.texel.min(0.5 * leaf_size);
+    let mapped_sun: Vec<f32> = samples
+        .iter()
+        .map(|s| {
+            s.as_ref().map_or(0.0, |s| {
+                let n = scene.normal(s.leaf as usize);
+                let visible = maps.shadow_map(s.point, bias);
+                luminance(sun_radiance(
+                    material,
+                    n,
+                    view,
+                    light.to_sun,
+                    visible,
+                    light.sun,
+                ))
+            })
+        })
+        .collect();
+    let [model_sky, _, model_bounce] = first_model.unwrap_or_else(|| {
+        [
+            reference[0].clone(),
+            mapped_sun.clone(),
+            reference[2].clone(),
+        ]
+    });
+    let shadow_map_sun = measure(&[model_sky, mapped_sun, model_bounce]);
+    let seen = match last_model {
+        Some([mut sky, mut sun, bounce]) if settings.seen_points > 0 => {
+            let gains = seen_part_gains_of_all(&scene, settings.seen_points, &|_| 1.0, threads);
+            for (k, s) in samples.iter().enumerate() {
+                if let Some(s) = s {
+                    let gain = seen_gain(&gains[s.leaf as usize], view);
+                    sky[k] *= gain;
+                    sun[k] *= gain;
+                }
+            }
+            measure(&[sky, sun, bounce])
+        }
+        _ => Vec::new(),
+    };
+    ImageComparison {
+        models,
+        seen,
+        shadow_map_sun,
+        noise,
+        hits: samples.iter().flatten().count(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::path_trace::{push_square_leaf, uniform_ball};
+
+    fn light() -> TraceLight {
+        TraceLight {
+            sky: Vec3::new(0.4, 0.5, 0.7),
+            ground: Vec3::new(0.05, 0.04, 0.03),
+            to_sun: Vec3::new(0.3, 0.8, 0.2).normalize(),
+            sun: Vec3::new(3.0, 2.9, 2.7),
+        }
+    }
+
+    #[test]
+    fn a_pixel_is_the_mean_of_its_block() {
+        // 4 × 4 grid, values = index; 2 × 2 blocks.
+        let values: Vec<f32> = (0..16).map(|i| i as f32).collect();
+        let px = block_means(&values, 4, 2);
+        assert_eq!(px, vec![2.5, 4.5, 10.5, 12.5]);
+        assert_eq!(block_means(&values, 4, 4), vec![7.5]);
+        assert_eq!(block_means(&values, 4, 1), values);
+    }
+
+    /// One leaf facing the eye in full sun: every eye ray that hits it sees the whole sky and
+    /// the sun, so the tracer is exact against itself (cosine-sampled sides) and the model's
+    /// sun — nothing in the way, every bin open — and the shadow map's agree with it exactly.
+    #[test]
+    fn a_lone_leaf_is_exact_at_every_pixel_size() {
+        let mut leaves = LeafSet::default();
+        let to_eye = Vec3::new(0.2, 0.5, 1.0).normalize();
+        // Facing up: the sky fills its front and the ground its back, so cosine sampling is exact.
+        push_square_leaf(&mut leaves, Vec3::ZERO, 0.5, Vec3::Y);
+        let run = images_against_tracer(
+            &leaves,
+            &LeafMaterial::default(),
+            &light(),
+            to_eye,
+            1.0,
+            &ImageSettings {
+                samples: 16,
+                directions: 8,
+                ..ImageSettings::default()
+            },
+            2,
+            &[(SunThroughCrown::BlendedAttenuation, BinEstimate::Neighbours)],
+            &[1, 4, 16],
+        );
+        // The leaf (side 1, seen at a slant) inside the square of side 2·0.707 framing it.
+        assert!(run.hits > 16 * 16 / 8, "{}", run.hits);
+        assert_eq!(run.noise.len(), 3);
+        for (noise, model) in run.noise.iter().zip(&run.models[0].1) {
+            assert!(noise.sky.mean_absolute < 1e-4, "{noise:?}");
+            assert!(model.sun.mean_absolute < 1e-4, "{model:?}");
+            assert!(model.sun.share > 0.3);
+        }
+        for mapped in &run.shadow_map_sun {
+            assert!(mapped.sun.mean_absolute < 1e-4, "{mapped:?}");
+        }
+        assert_eq!(
+            run.noise
+                .iter()
+                .map(|e| e.pixels_across)
+                .collect::<Vec<_>>(),
+            vec![16, 4, 1]
+        );
+    }
+
+    /// On the crown the model assumes, leaf by leaf the sun is all or nothing, which eq. 5.8's
+    /// expectation cannot follow; pixels several leaves wide average leaves in sun and in shade,
+    /// and the sun's error falls towards the error of the crown's mean, which no pixel size
+    /// changes. The sky, smooth leaf to leaf, is close at every size.
+    #[test]
+    fn the_suns_image_error_falls_as_pixels_average_more_leaves() {
+        let leaves = uniform_ball(1500, 1.5, 0.05, 5);
+        let run = images_against_tracer(
+            &leaves,
+            &LeafMaterial::default(),
+            &light(),
+            Vec3::new(0.0, 0.3, 1.0),
+            0.1,
+            &ImageSettings {
+                samples: 64,
+                directions: 64,
+                ..ImageSettings::default()
+            },
+            2,
+            &[(SunThroughCrown::BlendedAttenuation, BinEstimate::Neighbours)],
+            &[1, 4, 16],
+        );
+        let errors = &run.models[0].1;
+        for e in errors {
+            eprintln!(
+                "pixel {:.2} leaves: sky {:.3}, sun {:.3} (mean {:+.3}), bounce {:.3}",
+                e.pixel_in_leaves,
+                e.sky.mean_absolute,
+                e.sun.mean_absolute,
+                e.sun.of_the_mean,
+                e.bounce.mean_absolute
+            );
+        }
+        let (fine, coarse) = (&errors[0], &errors[2]);
+        assert!((fine.pixel_in_leaves - 0.5).abs() < 0.05);
+        assert!(fine.sun.mean_absolute > 0.4, "{:?}", fine.sun);
+        assert!(
+            coarse.sun.mean_absolute < 0.35 * fine.sun.mean_absolute,
+            "{:?} against {:?}",
+            coarse.sun,
+            fine.sun
+        );
+        assert!(coarse.sun.mean_absolute >= coarse.sun.of_the_mean.abs());
+        for e in errors {
+            assert!((e.sun.of_the_mean - fine.sun.of_the_mean).abs() < 1e-4);
+        }
+        // The sky within a few per cent from pixels two leaves wide (the tracer's own noise at
+        // 64 rays a point dominates finer ones).
+        assert!(errors[1].sky.mean_absolute < 0.06, "{:?}", errors[1].sky);
+        assert!(errors[2].sky.mean_absolute < 0.03, "{:?}", errors[2].sky);
+        // Finer than the model, the shadow map's sun at each point is closer at every size.
+        for (mapped, model) in run.shadow_map_sun.iter().zip(errors) {
+            eprintln!("shadow map {:?}", mapped.sun);
+            assert!(mapped.sun.mean_absolute < model.sun.mean_absolute);
+        }
+    }
+}
