@@ -353,6 +353,7 @@ fn fuzz_billboard_cloud_cache_decoder() {
             (0..size * size * 4).map(|i| (i * 11) as u8).collect(),
         ],
         extinction: 0.8,
+        seen_gains: [1.0; 8],
         source_hash: 0xDEAD_BEEF,
         bake_ms: 12.5,
     };

@@ -12,14 +12,16 @@ use std::process::Command;
 fn bake_into(out: &Path) -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_foliage_bake"));
     command
-        // Two rays a bin: the traced bins' determinism is checked too, at a fraction of the
-        // default bake's cost.
+        // Two rays a bin and two points a leaf for the seen-part gains: the determinism of
+        // both is checked too, at a fraction of the default bake's cost.
         .args([
             "--resolution",
             "64",
             "--depth",
             "7",
             "--rays-per-bin",
+            "2",
+            "--seen-points",
             "2",
             "--out",
         ])

@@ -13,6 +13,7 @@ use bevy_foliage::lighting::model::{
     sun_through_crown,
 };
 use bevy_foliage::lighting::path_trace::LeafScene;
+use bevy_foliage::lighting::seen_part::{gain_of, seen_gain};
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::{PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::kept_index_total;
@@ -279,13 +280,19 @@ fn compare_with_model(
         let wo = (eye_local - baked.positions[first]).normalize();
         let baked_through =
             sun_through_crown(SunThroughCrown::BlendedAttenuation, tau, &a, &s_max, to_sun);
-        let through = at_leaf.unwrap_or(baked_through * outside);
+        // The part of the leaf in view: its sky and its blended sun scaled by the gain towards
+        // the eye (not the bounce, nor the sun a shadow map resolves at the leaf).
+        let seen = baked
+            .leaf_seen
+            .get(leaf as usize)
+            .map_or(1.0, |g| seen_gain(&g.map(gain_of), wo));
+        let through = at_leaf.unwrap_or((baked_through * seen).min(1.0) * outside);
         let bounced = if bounce_on {
             bounce_radiance(&optics, n, wo, &bounce, baked_through, &s_max, e_sun) * outside
         } else {
             Vec3::ZERO
         };
-        sky_radiance(&optics, n, wo, &a, &sky)
+        sky_radiance(&optics, n, wo, &a, &sky) * seen
             + sun_radiance(&optics, n, wo, to_sun, through, e_sun)
             + bounced
     };
@@ -746,6 +753,7 @@ fn block_cloud() -> (
         normal,
         light,
         extinction: 1.3,
+        seen_gains: CLOUD_SEEN_GAINS,
         source_hash: 1,
         bake_ms: 0.0,
     };
@@ -1007,8 +1015,17 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
             } else {
                 sunlit += 1;
             }
-            let radiance = sky_radiance(&optics, n, wo, &a, &sky)
-                + sun_radiance(&optics, n, wo, to_sun, through * outside, e_sun)
+            // The crown's seen-part gain towards the eye on the sky and the blended sun.
+            let seen = seen_gain(&CLOUD_SEEN_GAINS, wo);
+            let radiance = sky_radiance(&optics, n, wo, &a, &sky) * seen
+                + sun_radiance(
+                    &optics,
+                    n,
+                    wo,
+                    to_sun,
+                    (through * seen).min(1.0) * outside,
+                    e_sun,
+                )
                 + bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun) * outside;
             let want = radiance.to_array().map(|c| srgb(c) * 255.0);
             reference.set_pixel(x, y, [want[0] as u8, want[1] as u8, want[2] as u8, 255]);
@@ -1280,6 +1297,10 @@ fn a_tree_lit_crown_keeps_its_light_when_its_billboard_cloud_takes_over() {
     // crown (the measure sees a pop).
     assert!(off(light[2], light[0]) > 2.0 * HANDOVER_TOLERANCE);
 }
+
+/// The test cloud's seen-part gains, distinct per octant so that a shader that ignored them or
+/// read them in another order would be off.
+const CLOUD_SEEN_GAINS: [f32; 8] = [1.3, 1.1, 1.25, 1.0, 0.9, 1.2, 1.15, 1.05];
 
 /// How far a tree-lit crown's brightness may move when its billboard cloud takes over.
 const HANDOVER_TOLERANCE: f64 = 0.08;

@@ -2,16 +2,20 @@
 //!
 //! ```text
 //! cargo run -p bevy_foliage --bin foliage_bake -- [--out DIR] [--resolution N] [--depth D]
-//!     [--leaf-material NAME ...] [--rays-per-bin R | --neighbour-bins] [TREE | FILE.gltf | FILE.glb ...]
+//!     [--leaf-material NAME ...] [--rays-per-bin R | --neighbour-bins] [--seen-points P]
+//!     [TREE | FILE.gltf | FILE.glb ...]
 //! ```
 //! TREE is one of `olea`, `fraxinus`, `quercus`, `cedrus` (the thesis' test trees; default: all);
 //! a glTF file is split into leaves as `bevy_foliage::pruning::gltf` documents.
 //! `--rays-per-bin`: rays per bin of the tree lighting's traced bins (default 128, four times
 //! what a bake made at load time takes: see `lighting::traced_bins::OFFLINE_RAYS_PER_BIN`);
 //! `--neighbour-bins`: §5.6's estimate from the neighbours instead.
+//! `--seen-points`: points per leaf for the gains from a leaf's mean light to the part of it
+//! in view (`lighting::seen_part`; default 32, twice a bake at load time's; 0 for none); their time is the envelope stage's.
 //! Prints progress on stderr and one JSON object per tree on stdout (bake time per stage, leaf
 //! count, GPU bytes).
 
+use bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
 use bevy_foliage::lighting::traced_bins::{BinEstimate, OFFLINE_RAYS_PER_BIN};
 use bevy_foliage::pruning::bake::{BakeProgress, BakeSettings, BakeStage, CellCount, bake_masked};
 use bevy_foliage::pruning::format::save;
@@ -29,6 +33,7 @@ fn main() {
         bins: BinEstimate::Traced {
             rays_per_bin: OFFLINE_RAYS_PER_BIN,
         },
+        seen_points: OFFLINE_SEEN_POINTS,
         ..BakeSettings::default()
     };
     let mut names: Vec<String> = Vec::new();
@@ -63,9 +68,12 @@ fn main() {
                 }
             }
             "--neighbour-bins" => settings.bins = BinEstimate::Neighbours,
+            "--seen-points" => {
+                settings.seen_points = value("--seen-points").parse().expect("--seen-points P")
+            }
             "--help" | "-h" => {
                 eprintln!(
-                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [olea|fraxinus|quercus|cedrus ...]"
+                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [--seen-points P] [olea|fraxinus|quercus|cedrus ...]"
                 );
                 return;
             }

@@ -7,13 +7,15 @@
 //!
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
-//!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G]]
+//!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
+//!     [--images [--samples G] [--seen-points P]]
 //! ```
 //! `--images`: instead, the thesis' own measure (§5.7, fig. 5.16): the crown rendered by the
 //! model and by the tracer (`--directions` rays per intersection point, 256 by default as in
 //! the thesis) on a grid of `--samples G` eye rays a side (128), and each image's mean error
 //! over its mean light at pixels of 1, 4 and 16 eye rays a side (`lighting::image_error`);
-//! the last bins also with each leaf's seen-part gain (`lighting::seen_part`).
+//! the last bins also with each leaf's seen-part gains from `--seen-points` points (32;
+//! `lighting::seen_part`).
 //!
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
 //! map at three texel sizes, the crown's extinction over its depth, eq. 5.3's foliage maps)
@@ -44,6 +46,7 @@ fn main() {
     let images = args.iter().any(|a| a == "--images");
     args.retain(|a| a != "--sun-maps" && a != "--images");
     let mut samples = 128u32;
+    let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
     let mut i = 0;
     while i < args.len() {
         let value = |i: usize| -> usize {
@@ -61,6 +64,7 @@ fn main() {
             "--points" => settings.points = value(i) as u32,
             "--directions" => settings.directions = value(i) as u32,
             "--samples" => samples = value(i) as u32,
+            "--seen-points" => seen_points = value(i) as u32,
             "--rays-per-bin" => {
                 rays_per_bin = args
                     .get(i + 1)
@@ -74,7 +78,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P]]"
                 );
                 std::process::exit(2)
             }
@@ -98,8 +102,12 @@ fn main() {
             leaves,
             &material,
             &light,
-            samples,
-            settings.directions,
+            &bevy_foliage::lighting::image_error::ImageSettings {
+                samples,
+                directions: settings.directions,
+                seen_points,
+                ..Default::default()
+            },
             &rays_per_bin,
             threads,
         );
@@ -254,12 +262,11 @@ fn image_table(
     leaves: usize,
     material: &LeafMaterial,
     light: &TraceLight,
-    samples: u32,
-    directions: u32,
+    settings: &bevy_foliage::lighting::image_error::ImageSettings,
     rays_per_bin: &[u32],
     threads: usize,
 ) {
-    use bevy_foliage::lighting::image_error::{ImageError, ImageSettings, images_against_tracer};
+    use bevy_foliage::lighting::image_error::{ImageError, images_against_tracer};
     println!(
         "| tree | leaves | eye rays hitting | pixel (leaves wide) | pixels across | component | estimate | mean error / mean light | mean relative error per pixel | error of the mean (> 0: model brighter) |"
     );
@@ -283,11 +290,6 @@ fn image_table(
             BinEstimate::Traced { rays_per_bin },
         )
     }));
-    let settings = ImageSettings {
-        samples,
-        directions,
-        ..ImageSettings::default()
-    };
     for (name, leaf_size, crown) in crowns {
         let started = std::time::Instant::now();
         let to_eye = Vec3::new(0.0, 0.3, 1.0);
@@ -297,7 +299,7 @@ fn image_table(
             light,
             to_eye,
             leaf_size,
-            &settings,
+            settings,
             threads,
             &models,
             &[1, 4, 16],

@@ -111,6 +111,14 @@ pub fn impostor_material(albedo: Handle<Image>, normal: Handle<Image>) -> Standa
     }
 }
 
+/// Eight gains as the shader's two vectors.
+fn gains_as_vectors(g: &[f32; 8]) -> [Vec4; 2] {
+    [
+        Vec4::new(g[0], g[1], g[2], g[3]),
+        Vec4::new(g[4], g[5], g[6], g[7]),
+    ]
+}
+
 /// The tree lighting's extension of a cloud's material: its light atlases (sRGB: the bake
 /// stores the values sRGB-encoded), its crown and extinction; the scene's lights are filled in
 /// by `tree_lit::refresh_tree_lit_impostors`.
@@ -120,6 +128,7 @@ pub fn tree_lit_extension(data: &ImpostorData, light: [Handle<Image>; 3]) -> Tre
         params: TreeLitImpostorParams {
             crown_sphere: data.center.extend(data.radius),
             extinction: data.extinction,
+            seen_gains: gains_as_vectors(&data.seen_gains),
             ..default()
         },
         light0,

@@ -159,6 +159,7 @@ struct BakeJob {
     settling: ReadbackSettling,
     hash: u64,
     extinction: f32,
+    seen_gains: [f32; 8],
     latest: Arc<Mutex<Option<Vec<u8>>>>,
     parts: Vec<Entity>,
 }
@@ -498,6 +499,7 @@ fn start_impostor_bakes(
                     settling: ReadbackSettling::default(),
                     hash,
                     extinction: light.extinction,
+                    seen_gains: light.seen,
                     latest,
                     parts,
                 },
@@ -580,6 +582,7 @@ fn finish_impostor_bakes(
             normal,
             light,
             extinction: job.extinction,
+            seen_gains: job.seen_gains,
             source_hash: job.hash,
             bake_ms: job.started.elapsed().as_secs_f32() * 1e3,
         };

@@ -6,7 +6,8 @@
 //! version  u32      FORMAT_VERSION
 //! length   u64      payload bytes
 //! payload           header, planes, the albedo and normal atlases (RGBA8, `size × size`
-//!                   each), the crown's extinction τ (f32) and the three light atlases
+//!                   each), the crown's extinction τ (f32), its eight seen-part gains (f32)
+//!                   and the three light atlases
 //! checksum u64      FNV-1a 64 of the payload
 //! ```
 //!
@@ -23,9 +24,9 @@ use std::path::Path;
 pub const MAGIC: &[u8; 8] = b"BNBBCLOU";
 /// Current format version; bump on any layout change.
 ///
-/// Version 2 added the tree lighting's light atlases and the crown's extinction; a version-1
-/// cache is re-baked.
-pub const FORMAT_VERSION: u32 = 2;
+/// Version 2 added the tree lighting's light atlases and the crown's extinction, version 3 the
+/// crown's seen-part gains; an older cache is re-baked.
+pub const FORMAT_VERSION: u32 = 3;
 
 /// Light atlases of a billboard cloud: three, of three values a texel each (see
 /// `impostor::texture`).
@@ -71,6 +72,9 @@ pub struct ImpostorData {
     pub light: [Vec<u8>; LIGHT_ATLASES],
     /// The crown's extinction τ per unit of model space (Boulanger 2008, eq. 5.5).
     pub extinction: f32,
+    /// The crown's mean seen-part gain per eye octant (`lighting::seen_part`), by which the
+    /// tree lighting scales the leaf texels' sky and blended sun.
+    pub seen_gains: [f32; 8],
     /// Hash of the source geometry and bake settings: a cache whose hash differs is stale.
     pub source_hash: u64,
     /// How long the bake took (ms), for the report.
@@ -167,6 +171,7 @@ pub fn encode(data: &ImpostorData) -> Vec<u8> {
     p.extend_from_slice(&data.albedo);
     p.extend_from_slice(&data.normal);
     put_f32s(&mut p, &[data.extinction]);
+    put_f32s(&mut p, &data.seen_gains);
     for atlas in &data.light {
         p.extend_from_slice(atlas);
     }
@@ -309,6 +314,16 @@ pub fn decode(bytes: &[u8]) -> Result<ImpostorData, ImpostorFormatError> {
             "negative extinction {extinction}"
         )));
     }
+    let mut seen_gains = [0.0f32; 8];
+    for g in &mut seen_gains {
+        *g = r.f32()?;
+    }
+    let (low, high) = crate::lighting::seen_part::GAIN_RANGE;
+    if seen_gains.iter().any(|g| !(low..=high).contains(g)) {
+        return Err(ImpostorFormatError::Invalid(format!(
+            "seen-part gains {seen_gains:?} outside {low}..={high}"
+        )));
+    }
     let light = [
         r.take(bytes_per_atlas)?.to_vec(),
         r.take(bytes_per_atlas)?.to_vec(),
@@ -331,6 +346,7 @@ pub fn decode(bytes: &[u8]) -> Result<ImpostorData, ImpostorFormatError> {
         normal,
         light,
         extinction,
+        seen_gains,
         source_hash,
         bake_ms,
     })
@@ -388,6 +404,7 @@ pub(crate) mod tests {
                 (0..size * size * 4).map(|i| (i * 11) as u8).collect(),
             ],
             extinction: 1.5,
+            seen_gains: [1.0, 1.1, 1.2, 1.3, 0.9, 1.0, 1.05, 1.15],
             source_hash: 0xDEAD_BEEF,
             bake_ms: 12.5,
         }
@@ -445,6 +462,14 @@ pub(crate) mod tests {
             decode(&encode(&bad)),
             Err(ImpostorFormatError::Invalid(_))
         ));
+        for gain in [f32::NAN, 0.0, 9.0] {
+            let mut bad = sample();
+            bad.seen_gains[3] = gain;
+            assert!(matches!(
+                decode(&encode(&bad)),
+                Err(ImpostorFormatError::Invalid(_))
+            ));
+        }
         // An atlas size whose bytes are not there.
         let mut bad = sample();
         bad.atlas_size = 16;

@@ -24,6 +24,7 @@ pub use super::format::LIGHT_ATLASES;
 use crate::lighting::bins::{LeafProxy, proxies};
 use crate::lighting::envelope::crown_envelope;
 use crate::lighting::leaf_scene::LeafScene;
+use crate::lighting::seen_part::{DEFAULT_SEEN_POINTS, crown_mean_gains, seen_part_gains_of};
 use crate::lighting::traced_bins::{BinEstimate, crown_envelope_traced};
 use crate::pruning::format::fnv1a64;
 use crate::pruning::gltf::{GltfAlpha, GltfTree};
@@ -133,13 +134,27 @@ pub struct ImpostorSource {
 }
 
 /// The tree lighting's bake of an [`ImpostorSource`]'s leaves (Boulanger 2008, §5.6).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct SourceLight {
     /// Per leaf of [`ImpostorSource::leaves`], the light let through towards each of the eight
     /// directions.
     pub attenuation: Vec<[f32; 8]>,
     /// The crown's extinction τ per unit of model space (0: no leaf behind another).
     pub extinction: f32,
+    /// The crown's mean of its leaves' seen-part gains per eye octant
+    /// ([`crate::lighting::seen_part`]): an impostor texel's light atlases have no room for the
+    /// leaf's own, so the cloud scales its leaf texels by the crown's.
+    pub seen: [f32; 8],
+}
+
+impl Default for SourceLight {
+    fn default() -> Self {
+        Self {
+            attenuation: Vec::new(),
+            extinction: 0.0,
+            seen: [1.0; 8],
+        }
+    }
 }
 
 impl SourceLight {
@@ -266,9 +281,14 @@ impl ImpostorSource {
                 )
             }
         };
+        let (scene, opacity) = self.leaf_scene();
+        let opacity = |l: u32| opacity.get(l as usize).copied().unwrap_or(1.0);
+        let all: Vec<u32> = (0..self.leaves.len() as u32).collect();
+        let gains = seen_part_gains_of(&scene, &all, DEFAULT_SEEN_POINTS, &opacity, threads);
         SourceLight {
             attenuation: envelope.leaves.iter().map(|e| e.attenuation).collect(),
             extinction: envelope.tau,
+            seen: crown_mean_gains(&gains),
         }
     }
 
@@ -759,6 +779,7 @@ mod tests {
                 std::array::from_fn(|j| 0.05 * (j + 2) as f32),
             ],
             extinction: 1.0,
+            seen: [1.0; 8],
         };
         let atlases = bake_reference(&source, &cloud, &layout, &light);
         let (albedo, normal) = (&atlases.albedo, &atlases.normal);

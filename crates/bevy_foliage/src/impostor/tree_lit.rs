@@ -55,20 +55,24 @@ pub struct TreeLitImpostorParams {
     pub bounce: u32,
     /// Padding.
     pub pad: u32,
+    /// The crown's mean seen-part gain per eye octant (`lighting::seen_part`), octants 0–3 then
+    /// 4–7.
+    pub seen_gains: [Vec4; 2],
 }
 
 impl TreeLitImpostorParams {
     /// The cloud's own values (its crown and extinction) with the scene's lights and the
     /// settings' switches and optics from `leaves` (what the leaf materials get:
     /// `pruning::systems::tree_lights`).
-    pub fn new(leaves: &LeafParams, crown_sphere: Vec4, extinction: f32) -> Self {
+    pub fn new(leaves: &LeafParams, own: &TreeLitImpostorParams) -> Self {
         Self {
             lights: leaves.lights,
-            crown_sphere,
-            extinction,
+            crown_sphere: own.crown_sphere,
+            extinction: own.extinction,
             smooth_envelope: leaves.smooth_envelope,
             bounce: leaves.bounce,
             pad: 0,
+            seen_gains: own.seen_gains,
         }
     }
 }
@@ -124,7 +128,7 @@ pub fn refresh_tree_lit_impostors(
             continue;
         };
         let own = &material.extension.params;
-        let params = TreeLitImpostorParams::new(&lights, own.crown_sphere, own.extinction);
+        let params = TreeLitImpostorParams::new(&lights, own);
         if params != *own
             && let Some(mut material) = materials.get_mut(id)
         {

@@ -19,7 +19,7 @@
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
     shadows::fetch_directional_shadow,
 }
-#import bevy_foliage::tree_lighting::{TreeLightUniform, leaf_radiance, lights_of, optics_of}
+#import bevy_foliage::tree_lighting::{TreeLightUniform, leaf_radiance, lights_of, optics_of, seen_gain}
 
 struct TreeLitImpostorParams {
     lights: TreeLightUniform,
@@ -29,6 +29,8 @@ struct TreeLitImpostorParams {
     smooth_envelope: u32,
     bounce: u32,
     pad: u32,
+    // The crown's mean seen-part gain per eye octant (`lighting::seen_part`).
+    seen_gains: array<vec4<f32>, 2>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> params: TreeLitImpostorParams;
@@ -99,12 +101,18 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
             params.smooth_envelope != 0u,
             params.bounce != 0u,
         );
+        // The leaves in view are more open than their mean (`lighting::seen_part`): the crown's
+        // gain towards the eye on the sky and the blended sun, as the leaves have their own.
+        let g = params.seen_gains;
+        let seen = seen_gain(
+            array<f32, 8>(g[0].x, g[0].y, g[0].z, g[0].w, g[1].x, g[1].y, g[1].z, g[1].w), to_eye);
         // The shadow of what stands outside the crown, read where the sun's light enters it.
         let p_local = local_from_world * (p - world_from_local[3].xyz) / (scale * scale);
         let reach = max(dot(params.crown_sphere.xyz - p_local, lights.to_sun)
             + params.crown_sphere.w, 0.0) * scale;
         let outside = sun_shadow_at(p + params.lights.to_sun.xyz * reach, in.position.xy, pbr_input.flags);
-        let tree_lit = (light.sky + light.sun * light.through * outside + light.bounce * outside)
+        let through = min(light.through * seen, 1.0);
+        let tree_lit = (light.sky * seen + light.sun * through * outside + light.bounce * outside)
             * view_bindings::view.exposure;
         color += tree_lit * leaf;
     }

@@ -21,7 +21,7 @@ use super::model::{
 use super::path_trace::{
     ComponentError, TraceLight, TraceSettings, component_error, envelope_by, gather, luminance,
 };
-use super::seen_part::{DEFAULT_SEEN_POINTS, seen_gain, seen_part_gains_of_all};
+use super::seen_part::{DEFAULT_SEEN_POINTS, seen_gain, seen_part_gains_of};
 use super::sun_maps::{LightFrame, foliage_maps};
 use super::traced_bins::BinEstimate;
 use crate::pruning::leaves::LeafSet;
@@ -329,7 +329,10 @@ pub fn images_against_tracer(
     let shadow_map_sun = measure(&[model_sky, mapped_sun, model_bounce]);
     let seen = match last_model {
         Some([mut sky, mut sun, bounce]) if settings.seen_points > 0 => {
-            let gains = seen_part_gains_of_all(&scene, settings.seen_points, &|_| 1.0, threads);
+            let gains = {
+                let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
+                seen_part_gains_of(&scene, &all, settings.seen_points, &|_| 1.0, threads)
+            };
             for (k, s) in samples.iter().enumerate() {
                 if let Some(s) = s {
                     let gain = seen_gain(&gains[s.leaf as usize], view);

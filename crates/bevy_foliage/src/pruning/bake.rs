@@ -90,6 +90,9 @@ pub struct BakeSettings {
     pub threads: usize,
     /// How the tree lighting's bins are estimated (§5.6): traced through the leaves by default.
     pub bins: BinEstimate,
+    /// Points per leaf for the gains from a leaf's mean light to the part of it the eye sees
+    /// ([`crate::lighting::seen_part`]); 0 leaves every gain at 1 (the thesis' model as it is).
+    pub seen_points: u32,
 }
 
 impl Default for BakeSettings {
@@ -101,6 +104,7 @@ impl Default for BakeSettings {
             seed: 0x5EED,
             threads: 0,
             bins: BinEstimate::default(),
+            seen_points: crate::lighting::seen_part::DEFAULT_SEEN_POINTS,
         }
     }
 }
@@ -207,6 +211,10 @@ pub struct BakedFoliage {
     /// directions of [`DIRECTIONS`](crate::lighting::envelope::DIRECTIONS) (Boulanger 2008,
     /// §5.6; [`crate::lighting::envelope`]), quantised to `u16` (65,535 = all of it).
     pub leaf_light: Vec<[u16; 8]>,
+    /// Per stored leaf, the gains from its mean light to the part of it the eye sees from each
+    /// of the eight octants ([`crate::lighting::seen_part`]), quantised by
+    /// [`quantize_gain`](crate::lighting::seen_part::quantize_gain); empty: all 1.
+    pub leaf_seen: Vec<[u16; 8]>,
     /// The crown's fitted extinction τ per unit of model space (eq. 5.5; 0 for a crown with no
     /// leaf behind another): `s_max(P, ω_j) = −ln(a_j) / τ`.
     pub extinction: f32,
@@ -343,6 +351,13 @@ pub fn bake_masked(
         )));
     }
     settings.bins.checked().map_err(BakeError::Settings)?;
+    if settings.seen_points > crate::lighting::seen_part::MAX_SEEN_POINTS {
+        return Err(BakeError::Settings(format!(
+            "seen_points {} not in 0..={}",
+            settings.seen_points,
+            crate::lighting::seen_part::MAX_SEEN_POINTS
+        )));
+    }
     let (leaves, skipped) = leaves.sanitized();
     if leaves.is_empty() {
         return Err(BakeError::NoLeaves { skipped });
@@ -404,6 +419,7 @@ pub fn bake_masked(
         uvs: Vec::new(),
         centroid_offsets: Vec::new(),
         leaf_light: Vec::new(),
+        leaf_seen: Vec::new(),
         extinction: 0.0,
         skipped,
     };
@@ -514,13 +530,14 @@ pub fn bake_masked(
             proxy
         })
         .collect();
-    let envelope = match settings.bins {
-        BinEstimate::Neighbours => crate::lighting::envelope::crown_envelope(&stored, threads),
-        BinEstimate::Traced { rays_per_bin } => {
-            let scene = crate::lighting::leaf_scene::LeafScene::new(&leaves);
+    let needs_scene =
+        settings.seen_points > 0 || matches!(settings.bins, BinEstimate::Traced { .. });
+    let scene = needs_scene.then(|| crate::lighting::leaf_scene::LeafScene::new(&leaves));
+    let envelope = match (settings.bins, &scene) {
+        (BinEstimate::Traced { rays_per_bin }, Some(scene)) => {
             crate::lighting::traced_bins::crown_envelope_traced(
                 &stored,
-                &scene,
+                scene,
                 &stored_leaves,
                 &|_| opaque,
                 rays_per_bin,
@@ -534,6 +551,7 @@ pub fn bake_masked(
                 },
             )
         }
+        _ => crate::lighting::envelope::crown_envelope(&stored, threads),
     };
     baked.leaf_light = envelope
         .leaves
@@ -541,6 +559,19 @@ pub fn bake_masked(
         .map(|e| e.attenuation.map(crate::lighting::envelope::quantize_light))
         .collect();
     baked.extinction = envelope.tau;
+    if let (Some(scene), true) = (&scene, settings.seen_points > 0) {
+        use crate::lighting::seen_part::{quantize_gain, seen_part_gains_of};
+        baked.leaf_seen = seen_part_gains_of(
+            scene,
+            &stored_leaves,
+            settings.seen_points,
+            &|_| opaque,
+            threads,
+        )
+        .into_iter()
+        .map(|g| g.map(quantize_gain))
+        .collect();
+    }
     progress(BakeProgress {
         stage: BakeStage::Envelope,
         done: stored_leaves.len(),
@@ -640,6 +671,71 @@ mod tests {
             b.leaf_count() * 8
         );
         assert!((envelope.tau - b.extinction).abs() < 1e-3 * b.extinction);
+
+        // The seen-part gains likewise: each stored leaf's are those the leaf at that place
+        // gets from the original crown (found by its centre), the same random points and all.
+        use crate::lighting::seen_part::{DEFAULT_SEEN_POINTS, quantize_gain, seen_part_gains_of};
+        assert_eq!(b.leaf_seen.len(), b.leaf_count());
+        let original = generate(&TreeSpecies::olea().with_leaf_count(2000)).leaves;
+        let original_scene = LeafScene::new(&original);
+        let original_of: Vec<u32> = (0..b.leaf_count())
+            .map(|i| {
+                let c = scene.centre(i);
+                (0..original_scene.leaf_count())
+                    .min_by(|&x, &y| {
+                        let d = |l: usize| original_scene.centre(l).distance_squared(c);
+                        d(x).total_cmp(&d(y))
+                    })
+                    .unwrap() as u32
+            })
+            .collect();
+        let want = seen_part_gains_of(
+            &original_scene,
+            &original_of,
+            DEFAULT_SEEN_POINTS,
+            &|_| 1.0,
+            2,
+        );
+        let same = b
+            .leaf_seen
+            .iter()
+            .zip(&want)
+            .filter(|(stored, want)| **stored == want.map(quantize_gain))
+            .count();
+        assert_eq!(same, b.leaf_count());
+        // The part in view is the more open one: above 1 over the crown, from every octant.
+        for j in 0..8 {
+            let mean = want.iter().map(|g| g[j]).sum::<f32>() / want.len() as f32;
+            assert!(mean > 1.02, "octant {j}: {mean}");
+        }
+    }
+
+    /// With no points for the seen-part gains, the bake stores none (the leaves' mean light as
+    /// the thesis has it); an absurd count is refused.
+    #[test]
+    fn seen_part_gains_can_be_left_out() {
+        let tree = generate(&TreeSpecies::olea().with_leaf_count(300));
+        let settings = BakeSettings {
+            cells: CellCount::Depth(3),
+            resolution: 32,
+            seen_points: 0,
+            ..default()
+        };
+        assert!(
+            bake(&tree.leaves, &settings, &|_| {})
+                .unwrap()
+                .0
+                .leaf_seen
+                .is_empty()
+        );
+        let absurd = BakeSettings {
+            seen_points: u32::MAX,
+            ..settings
+        };
+        assert!(matches!(
+            bake(&tree.leaves, &absurd, &|_| {}),
+            Err(BakeError::Settings(_))
+        ));
     }
 
     #[test]

@@ -22,7 +22,7 @@ use std::path::Path;
 /// File signature.
 pub const MAGIC: &[u8; 8] = b"BNFOLIAG";
 /// Current format version; bump on any layout change.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 /// Why a baked foliage file could not be read.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -190,6 +190,8 @@ pub fn encode(baked: &BakedFoliage) -> Vec<u8> {
     w.vec3s(&baked.centroid_offsets);
     let light: Vec<u16> = baked.leaf_light.iter().flatten().copied().collect();
     w.u16s(&light);
+    let seen: Vec<u16> = baked.leaf_seen.iter().flatten().copied().collect();
+    w.u16s(&seen);
     w.u32s(&[baked.extinction.to_bits()]);
     let s = baked.skipped;
     w.u32s(&[s.non_finite as u32, s.degenerate as u32, s.malformed as u32]);
@@ -253,11 +255,16 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
     let uvs = r.vec2s()?;
     let centroid_offsets = r.vec3s()?;
     let light = r.u16s()?;
+    let seen = r.u16s()?;
     let extinction = r.u32s()?;
-    if light.len() % 8 != 0 || extinction.len() != 1 {
+    if light.len() % 8 != 0 || seen.len() % 8 != 0 || extinction.len() != 1 {
         return Err(FormatError::Invalid("leaf light section".into()));
     }
     let leaf_light = light
+        .chunks_exact(8)
+        .map(|c| std::array::from_fn(|j| c[j]))
+        .collect();
+    let leaf_seen = seen
         .chunks_exact(8)
         .map(|c| std::array::from_fn(|j| c[j]))
         .collect();
@@ -277,6 +284,7 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
         uvs,
         centroid_offsets,
         leaf_light,
+        leaf_seen,
         extinction: f32::from_bits(extinction[0]),
         skipped: SkippedLeaves {
             non_finite: skipped[0] as usize,
@@ -341,6 +349,13 @@ pub fn validate(b: &BakedFoliage) -> Result<(), FormatError> {
         return bad(format!(
             "leaf light for {} leaves, file has {}",
             b.leaf_light.len(),
+            b.leaf_count()
+        ));
+    }
+    if !b.leaf_seen.is_empty() && b.leaf_seen.len() != b.leaf_count() {
+        return bad(format!(
+            "seen-part gains for {} leaves, file has {}",
+            b.leaf_seen.len(),
             b.leaf_count()
         ));
     }
@@ -421,6 +436,17 @@ pub(crate) mod tests {
             decode(&encode(&short_light)),
             Err(FormatError::Invalid(_))
         ));
+        // Seen-part gains: none (all 1) or one set a leaf.
+        let mut short_seen = sample();
+        assert!(!short_seen.leaf_seen.is_empty());
+        short_seen.leaf_seen.pop();
+        assert!(matches!(
+            decode(&encode(&short_seen)),
+            Err(FormatError::Invalid(_))
+        ));
+        let mut no_seen = sample();
+        no_seen.leaf_seen.clear();
+        assert_eq!(decode(&encode(&no_seen)), Ok(no_seen));
         let mut bad_tau = sample();
         bad_tau.extinction = f32::NAN;
         assert!(matches!(

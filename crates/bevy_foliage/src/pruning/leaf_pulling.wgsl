@@ -60,7 +60,8 @@ struct LeafParams {
 // Per (instance, cell): kept index count, output offset, LoD(cell), 0.
 @group(#{MATERIAL_BIND_GROUP}) @binding(103) var<storage, read> cell_offsets: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var<storage, read> leaf_vertices: array<LeafVertex>;
-// Per leaf, its eight attenuations as u16 pairs (`store::LEAF_LIGHT_WORDS`).
+// Per leaf, its eight attenuations then its eight seen-part gains, as u16 pairs
+// (`store::LEAF_LIGHT_WORDS`).
 @group(#{MATERIAL_BIND_GROUP}) @binding(105) var<storage, read> leaf_light: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(106) var<uniform> leaf_params: LeafParams;
 
@@ -145,9 +146,8 @@ fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeaf
 // A clip position outside the view volume: triangles made of it are culled.
 const CULLED: vec4<f32> = vec4<f32>(2.0, 2.0, 2.0, 1.0);
 
-// The eight attenuations of leaf `leaf` (`lighting::bins::light_of` of the stored u16s).
-fn leaf_attenuation(leaf: u32) -> array<f32, 8> {
-    let words = leaf_light[leaf];
+// Eight stored u16s as fractions of 65,535.
+fn unpack_eight(words: vec4<u32>) -> array<f32, 8> {
     var a: array<f32, 8>;
     for (var k = 0u; k < 4u; k += 1u) {
         a[2u * k] = f32(words[k] & 0xffffu) / 65535.0;
@@ -155,3 +155,20 @@ fn leaf_attenuation(leaf: u32) -> array<f32, 8> {
     }
     return a;
 }
+
+// The eight attenuations of leaf `leaf` (`lighting::bins::light_of` of the stored u16s).
+fn leaf_attenuation(leaf: u32) -> array<f32, 8> {
+    return unpack_eight(leaf_light[2u * leaf]);
+}
+
+// The eight seen-part gains of leaf `leaf` (`lighting::seen_part::gain_of` of the stored u16s).
+fn leaf_seen_gains(leaf: u32) -> array<f32, 8> {
+    var g = unpack_eight(leaf_light[2u * leaf + 1u]);
+    for (var j = 0u; j < 8u; j += 1u) {
+        g[j] *= SEEN_GAIN_MAX;
+    }
+    return g;
+}
+
+// The largest gain a bake stores (`lighting::seen_part::GAIN_RANGE`).
+const SEEN_GAIN_MAX: f32 = 4.0;

@@ -80,8 +80,9 @@ pub fn mesh_tag(slot: u32, ty: &TypeSlot) -> u32 {
 pub const LEAF_VERTEX_WORDS: usize = 16;
 
 /// Words per leaf in the `leaf_light` buffer: its eight attenuations (`BakedFoliage::leaf_light`),
-/// two `u16` a word, direction `2k` in the low half of word `k`.
-pub const LEAF_LIGHT_WORDS: usize = 4;
+/// then its eight seen-part gains (`BakedFoliage::leaf_seen`), two `u16` a word, direction `2k`
+/// in the low half of word `k` of each four.
+pub const LEAF_LIGHT_WORDS: usize = 8;
 
 /// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf_pulling.wgsl`).
 pub const INSTANCE_WORDS: usize = 24;
@@ -208,11 +209,19 @@ pub fn update_foliage_store(
                     [centre.x, centre.y, centre.z, radius].map(f32::to_bits)
                 },
             };
-            // The leaves' attenuations; a bake without them (none stored) lets all light through.
+            // The leaves' attenuations (a bake without them, none stored, lets all light through)
+            // and seen-part gains.
             let light_base = (light.len() / LEAF_LIGHT_WORDS) as u32;
             for leaf in 0..tree.leaf_count() {
                 let a = tree.leaf_light.get(leaf).copied().unwrap_or([u16::MAX; 8]);
                 light.extend((0..4).map(|k| a[2 * k] as u32 | (a[2 * k + 1] as u32) << 16));
+                // A bake without gains: the leaf's mean light as it is.
+                let g = tree
+                    .leaf_seen
+                    .get(leaf)
+                    .copied()
+                    .unwrap_or([crate::lighting::seen_part::quantize_gain(1.0); 8]);
+                light.extend((0..4).map(|k| g[2 * k] as u32 | (g[2 * k + 1] as u32) << 16));
             }
             cfl.extend_from_slice(&tree.cell_first_leaf);
             vis.extend(tree.visibility.iter().map(|&v| v as u32));

@@ -136,6 +136,19 @@ fn one_minus_exp_over(g: f32, s: f32) -> f32 {
     return (1.0 - exp(-x)) / g;
 }
 
+// Eight gains of the octants blended towards the eye `to_eye` by their cosine lobes (eq. 5.7's
+// weights; `lighting::seen_part::seen_gain`).
+fn seen_gain(gains: array<f32, 8>, to_eye: vec3<f32>) -> f32 {
+    var sum = 0.0;
+    var blended = 0.0;
+    for (var j = 0u; j < 8u; j += 1u) {
+        let lobe = max(dot(to_eye, direction(j)), 0.0);
+        sum += lobe;
+        blended += lobe * gains[j];
+    }
+    return select(1.0, blended / sum, sum > 0.0);
+}
+
 // The whole of eq. 5.2 for one leaf (`sky + sun * through + bounce` of the result) of unit normal `n` seen from `to_eye`, whose eight
 // directions let `attenuation` through, in a crown of extinction `tau` (`model::leaf_radiance`).
 // `smooth_envelope` picks eq. 5.7's blend of envelope distances for the sun through the crown
