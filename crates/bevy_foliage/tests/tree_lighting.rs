@@ -118,6 +118,7 @@ fn scene(name: &str, sun_shadows: bool) -> Option<Scene> {
         ground_albedo: Vec3::new(0.3, 0.25, 0.2),
         sun_through_crown: SunThroughCrown::BlendedAttenuation,
         bounce: true,
+        seen_part: true,
     };
     lit_app(&mut harness, &lighting);
     harness.app_mut().insert_resource(FoliagePruningSettings {
@@ -282,10 +283,10 @@ fn compare_with_model(
             sun_through_crown(SunThroughCrown::BlendedAttenuation, tau, &a, &s_max, to_sun);
         // The part of the leaf in view: its sky and its blended sun scaled by the gain towards
         // the eye (not the bounce, nor the sun a shadow map resolves at the leaf).
-        let seen = baked
-            .leaf_seen
-            .get(leaf as usize)
-            .map_or(1.0, |g| seen_gain(&g.map(gain_of), wo));
+        let seen = match baked.leaf_seen.get(leaf as usize) {
+            Some(g) if lighting.seen_part => seen_gain(&g.map(gain_of), wo),
+            _ => 1.0,
+        };
         let through = at_leaf.unwrap_or((baked_through * seen).min(1.0) * outside);
         let bounced = if bounce_on {
             bounce_radiance(&optics, n, wo, &bounce, baked_through, &s_max, e_sun) * outside
@@ -428,6 +429,48 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
     assert!(
         within as f32 >= 0.99 * compared as f32,
         "{within} of {compared} leaf pixels within 3/255 of the CPU model (worst {worst:.1})"
+    );
+
+    // Without the seen-part gains the leaves show the model without them, and many pixels move.
+    let without = TreeLightingSettings {
+        seen_part: false,
+        ..lighting.clone()
+    };
+    harness.world_mut().insert_resource(without.clone());
+    for _ in 0..4 {
+        harness.step();
+    }
+    let plain = compare_with_model(
+        &mut harness,
+        &baked,
+        &without,
+        instance,
+        to_sun_world,
+        eye,
+        |_| false,
+        false,
+        0.0,
+    );
+    let moved = (0..check.image.height)
+        .flat_map(|y| (0..check.image.width).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let (a, b) = (check.image.pixel(x, y), plain.image.pixel(x, y));
+            (0..3).any(|c| (a[c] as i32 - b[c] as i32).abs() > 3)
+        })
+        .count();
+    println!(
+        "without the seen-part gains: {} of {} within 3/255 of the model without them, worst {:.1}/255; {moved} pixels moved by > 3/255",
+        plain.within, plain.compared, plain.worst
+    );
+    assert!(
+        plain.within as f32 >= 0.99 * plain.compared as f32,
+        "{} of {} leaf pixels within 3/255 of the CPU model without the gains",
+        plain.within,
+        plain.compared
+    );
+    assert!(
+        moved * 4 >= compared as usize,
+        "the gains move only {moved} pixels"
     );
 }
 
@@ -795,6 +838,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
         ground_albedo: Vec3::new(0.3, 0.25, 0.2),
         sun_through_crown: SunThroughCrown::BlendedAttenuation,
         bounce: true,
+        seen_part: true,
     };
     lit_app(&mut harness, &lighting);
     let (data, blocks) = block_cloud();
@@ -1016,7 +1060,11 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
                 sunlit += 1;
             }
             // The crown's seen-part gain towards the eye on the sky and the blended sun.
-            let seen = seen_gain(&CLOUD_SEEN_GAINS, wo);
+            let seen = if lighting.seen_part {
+                seen_gain(&CLOUD_SEEN_GAINS, wo)
+            } else {
+                1.0
+            };
             let radiance = sky_radiance(&optics, n, wo, &a, &sky) * seen
                 + sun_radiance(
                     &optics,

@@ -53,8 +53,8 @@ pub struct TreeLitImpostorParams {
     pub smooth_envelope: u32,
     /// 1: one bounce of sunlight.
     pub bounce: u32,
-    /// Padding.
-    pub pad: u32,
+    /// 1: the crown's seen-part gains on (`TreeLightingSettings::seen_part`).
+    pub seen_part: u32,
     /// The crown's mean seen-part gain per eye octant (`lighting::seen_part`), octants 0–3 then
     /// 4–7.
     pub seen_gains: [Vec4; 2],
@@ -71,7 +71,7 @@ impl TreeLitImpostorParams {
             extinction: own.extinction,
             smooth_envelope: leaves.smooth_envelope,
             bounce: leaves.bounce,
-            pad: 0,
+            seen_part: leaves.seen_part,
             seen_gains: own.seen_gains,
         }
     }

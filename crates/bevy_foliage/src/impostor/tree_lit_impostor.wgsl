@@ -28,7 +28,7 @@ struct TreeLitImpostorParams {
     extinction: f32,
     smooth_envelope: u32,
     bounce: u32,
-    pad: u32,
+    seen_part: u32,
     // The crown's mean seen-part gain per eye octant (`lighting::seen_part`).
     seen_gains: array<vec4<f32>, 2>,
 }
@@ -104,8 +104,9 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
         // The leaves in view are more open than their mean (`lighting::seen_part`): the crown's
         // gain towards the eye on the sky and the blended sun, as the leaves have their own.
         let g = params.seen_gains;
-        let seen = seen_gain(
-            array<f32, 8>(g[0].x, g[0].y, g[0].z, g[0].w, g[1].x, g[1].y, g[1].z, g[1].w), to_eye);
+        let seen = select(1.0, seen_gain(
+            array<f32, 8>(g[0].x, g[0].y, g[0].z, g[0].w, g[1].x, g[1].y, g[1].z, g[1].w), to_eye),
+            params.seen_part != 0u);
         // The shadow of what stands outside the crown, read where the sun's light enters it.
         let p_local = local_from_world * (p - world_from_local[3].xyz) / (scale * scale);
         let reach = max(dot(params.crown_sphere.xyz - p_local, lights.to_sun)

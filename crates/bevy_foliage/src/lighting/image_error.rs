@@ -356,16 +356,7 @@ pub fn images_against_tracer(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lighting::path_trace::{push_square_leaf, uniform_ball};
-
-    fn light() -> TraceLight {
-        TraceLight {
-            sky: Vec3::new(0.4, 0.5, 0.7),
-            ground: Vec3::new(0.05, 0.04, 0.03),
-            to_sun: Vec3::new(0.3, 0.8, 0.2).normalize(),
-            sun: Vec3::new(3.0, 2.9, 2.7),
-        }
-    }
+    use crate::lighting::path_trace::{push_square_leaf, test_light as light, uniform_ball};
 
     #[test]
     fn a_pixel_is_the_mean_of_its_block() {

@@ -535,18 +535,24 @@ pub fn models_against_tracer(
         .collect()
 }
 
+/// The sky, ground and sun the tracer's and the image comparison's tests light leaves with.
+#[cfg(test)]
+pub(crate) fn test_light() -> TraceLight {
+    TraceLight {
+        sky: Vec3::new(0.4, 0.5, 0.7),
+        ground: Vec3::new(0.05, 0.04, 0.03),
+        to_sun: Vec3::new(0.3, 0.8, 0.2).normalize(),
+        sun: Vec3::new(3.0, 2.9, 2.7),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::lighting::model::{SkyLight, sky_radiance, sun_radiance};
 
     fn light() -> TraceLight {
-        TraceLight {
-            sky: Vec3::new(0.4, 0.5, 0.7),
-            ground: Vec3::new(0.05, 0.04, 0.03),
-            to_sun: Vec3::new(0.3, 0.8, 0.2).normalize(),
-            sun: Vec3::new(3.0, 2.9, 2.7),
-        }
+        test_light()
     }
 
     #[test]

@@ -39,6 +39,9 @@ pub struct TreeLightingSettings {
     pub sun_through_crown: SunThroughCrown,
     /// Add one bounce of sunlight off the neighbouring leaves (eq. 5.24).
     pub bounce: bool,
+    /// Scale each leaf's sky and blended sun by its baked gain towards the eye: the part of a
+    /// leaf in view is more open than the leaf's mean ([`crate::lighting::seen_part`]).
+    pub seen_part: bool,
 }
 
 impl Default for TreeLightingSettings {
@@ -54,6 +57,7 @@ impl Default for TreeLightingSettings {
             ground_albedo: Vec3::new(0.2, 0.25, 0.15),
             sun_through_crown: SunThroughCrown::default(),
             bounce: true,
+            seen_part: true,
         }
     }
 }

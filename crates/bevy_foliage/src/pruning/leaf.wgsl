@@ -47,7 +47,7 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
     );
     // The part of the leaf in view is more open than its mean (`lighting::seen_part`): its sky,
     // and the sun where the crown's blend stands for it, scaled by the gain towards the eye.
-    let seen = seen_gain(leaf_seen_gains(leaf.leaf), to_eye);
+    let seen = select(1.0, seen_gain(leaf_seen_gains(leaf.leaf), to_eye), leaf_params.seen_part != 0u);
     light.sky *= seen;
     light.through = min(light.through * seen, 1.0);
     // A channel the base colour lacks sends no light either.

@@ -43,11 +43,11 @@ struct LeafParams {
     pad_y: u32,
     // The tree lighting (`lighting::settings::TreeLightingSettings`, `tree_lighting.wgsl`): on,
     // the sun through the crown by eq. 5.7's envelope blend (else the attenuations' blend), the
-    // bounce on.
+    // bounce on, the seen-part gains on.
     tree_lighting: u32,
     smooth_envelope: u32,
     bounce: u32,
-    pad_z: u32,
+    seen_part: u32,
     // The leaves' optics and the scene's lights.
     lights: TreeLightUniform,
     // The material's base colour (linear rgb): the optics are multiples of it.

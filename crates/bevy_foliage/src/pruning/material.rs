@@ -45,8 +45,9 @@ pub struct LeafParams {
     pub smooth_envelope: u32,
     /// 1 to add one bounce of sunlight (eq. 5.24).
     pub bounce: u32,
-    /// Padding.
-    pub pad_z: u32,
+    /// 1 to scale the sky and the blended sun by the leaf's seen-part gain towards the eye
+    /// ([`crate::lighting::seen_part`]).
+    pub seen_part: u32,
     /// The tree lighting's optics and the scene's lights.
     pub lights: TreeLightUniform,
     /// The material's base colour (linear rgb): the optics are multiples of it.
@@ -108,7 +109,7 @@ impl Default for LeafParams {
             tree_lighting: 0,
             smooth_envelope: 0,
             bounce: 1,
-            pad_z: 0,
+            seen_part: 1,
             lights: TreeLightUniform::default(),
             albedo: Vec4::ONE,
         }
