@@ -14,12 +14,10 @@
 
 use super::bins::proxies;
 use super::leaf_scene::LeafScene;
-use super::model::{
-    LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bounce_radiance, bsdf, sky_radiance,
-    sun_radiance, sun_through_crown,
-};
+use super::model::{LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bsdf, sun_radiance};
 use super::path_trace::{
-    ComponentError, TraceLight, TraceSettings, component_error, envelope_by, gather, luminance,
+    ComponentError, ModelLight, TraceLight, TraceSettings, component_error, envelope_by, gather,
+    luminance,
 };
 use super::seen_part::{DEFAULT_SEEN_POINTS, seen_gain, seen_part_gains_of};
 use super::sun_maps::{LightFrame, foliage_maps};
@@ -264,26 +262,17 @@ pub fn images_against_tracer(
             let bounce = SunBounce::new(material, light.to_sun, tau);
             let mut image: [Vec<f32>; 3] = Default::default();
             for s in &samples {
+                let model = ModelLight {
+                    material,
+                    light,
+                    sky: &sky,
+                    bounce: &bounce,
+                    blend,
+                    tau,
+                };
                 let values = s.as_ref().map_or([0.0; 3], |s| {
                     let leaf = s.leaf as usize;
-                    let n = scene.normal(leaf);
-                    let e = &envelope.leaves[leaf];
-                    let through =
-                        sun_through_crown(blend, tau, &e.attenuation, &e.s_max, light.to_sun);
-                    [
-                        luminance(sky_radiance(material, n, view, &e.attenuation, &sky)),
-                        luminance(sun_radiance(
-                            material,
-                            n,
-                            view,
-                            light.to_sun,
-                            through,
-                            light.sun,
-                        )),
-                        luminance(bounce_radiance(
-                            material, n, view, &bounce, through, &e.s_max, light.sun,
-                        )),
-                    ]
+                    model.of(&envelope.leaves[leaf], scene.normal(leaf), view)
                 });
                 for k in 0..3 {
                     image[k].push(values[k]);

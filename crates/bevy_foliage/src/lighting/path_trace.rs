@@ -10,7 +10,7 @@
 //! the same piecewise environment as [`SkyLight::uniform`](super::model::SkyLight::uniform).
 
 use super::bins::{LeafProxy, proxies};
-use super::envelope::{CrownEnvelope, crown_envelope};
+use super::envelope::{CrownEnvelope, LeafEnvelope, crown_envelope};
 pub use super::leaf_scene::LeafScene;
 use super::leaf_scene::uniform_direction;
 use super::model::{
@@ -372,6 +372,46 @@ fn trace_leaves(
     })
 }
 
+/// The model's light on a leaf, for the comparisons with the tracer.
+pub(crate) struct ModelLight<'a> {
+    pub material: &'a LeafMaterial,
+    pub light: &'a TraceLight,
+    pub sky: &'a SkyLight,
+    pub bounce: &'a SunBounce,
+    pub blend: SunThroughCrown,
+    pub tau: f32,
+}
+
+impl ModelLight<'_> {
+    /// The luminance of the sky, the sun and the bounce a leaf of normal `n` and envelope `e`
+    /// sends along `wo`.
+    pub fn of(&self, e: &LeafEnvelope, n: Vec3, wo: Vec3) -> [f32; 3] {
+        let (material, light) = (self.material, self.light);
+        let through =
+            sun_through_crown(self.blend, self.tau, &e.attenuation, &e.s_max, light.to_sun);
+        [
+            luminance(sky_radiance(material, n, wo, &e.attenuation, self.sky)),
+            luminance(sun_radiance(
+                material,
+                n,
+                wo,
+                light.to_sun,
+                through,
+                light.sun,
+            )),
+            luminance(bounce_radiance(
+                material,
+                n,
+                wo,
+                self.bounce,
+                through,
+                &e.s_max,
+                light.sun,
+            )),
+        ]
+    }
+}
+
 /// The crown's envelope as a bake computes it, its bins estimated by `bins`.
 pub(crate) fn envelope_by(
     bins: BinEstimate,
@@ -502,24 +542,15 @@ pub fn models_against_tracer(
                 .iter()
                 .map(|&leaf| {
                     let wo = (eye - scene.centre(leaf)).normalize_or(Vec3::Y);
-                    let n = scene.normal(leaf);
-                    let e = &envelope.leaves[leaf];
-                    let through =
-                        sun_through_crown(blend, tau, &e.attenuation, &e.s_max, light.to_sun);
-                    [
-                        luminance(sky_radiance(material, n, wo, &e.attenuation, &sky)),
-                        luminance(sun_radiance(
-                            material,
-                            n,
-                            wo,
-                            light.to_sun,
-                            through,
-                            light.sun,
-                        )),
-                        luminance(bounce_radiance(
-                            material, n, wo, &bounce, through, &e.s_max, light.sun,
-                        )),
-                    ]
+                    let model = ModelLight {
+                        material,
+                        light,
+                        sky: &sky,
+                        bounce: &bounce,
+                        blend,
+                        tau,
+                    };
+                    model.of(&envelope.leaves[leaf], scene.normal(leaf), wo)
                 })
                 .collect();
             let term = |k: usize| -> Vec<f32> { model.iter().map(|m| m[k]).collect() };
