@@ -9,8 +9,10 @@
 //! the mean over its seen part: `E[open(p) · V(p, e)] / (E[open(p)] · E[V(p, e)])`, with
 //! `open(p)` the cosine-weighted share of the sphere open from point `p` (the sky's weighting,
 //! both sides of the leaf) and `V(p, e)` the light let through from `p` towards an eye
-//! direction `e` of the octant. Plain Rust; the leaf shaders would blend the eight gains by the
-//! eye direction's cosine lobes, as they blend the bins for the sun (eq. 5.7's weights).
+//! direction `e` of the octant. Plain Rust, baked with the bins (`BakeSettings::seen_points`);
+//! the leaf shaders blend a leaf's eight gains by the eye direction's cosine lobes, as they
+//! blend the bins for the sun (eq. 5.7's weights; [`seen_gain`]), and scale the sky and the
+//! blended sun by it; billboard clouds use the crown's mean gains ([`crown_mean_gains`]).
 
 use super::bins::DIRECTIONS;
 use super::leaf_scene::{LeafScene, uniform_direction};
