@@ -260,16 +260,16 @@ pub fn images_against_tracer(
             let envelope = envelope_by(bins, &leaf_proxies, &scene, threads);
             let tau = envelope.tau;
             let bounce = SunBounce::new(material, light.to_sun, tau);
+            let model = ModelLight {
+                material,
+                light,
+                sky: &sky,
+                bounce: &bounce,
+                blend,
+                tau,
+            };
             let mut image: [Vec<f32>; 3] = Default::default();
             for s in &samples {
-                let model = ModelLight {
-                    material,
-                    light,
-                    sky: &sky,
-                    bounce: &bounce,
-                    blend,
-                    tau,
-                };
                 let values = s.as_ref().map_or([0.0; 3], |s| {
                     let leaf = s.leaf as usize;
                     model.of(&envelope.leaves[leaf], scene.normal(leaf), view)

@@ -538,19 +538,19 @@ pub fn models_against_tracer(
             let envelope = envelope_by(bins, &leaf_proxies, &scene, threads);
             let tau = envelope.tau;
             let bounce = SunBounce::new(material, light.to_sun, tau);
+            let light_of = ModelLight {
+                material,
+                light,
+                sky: &sky,
+                bounce: &bounce,
+                blend,
+                tau,
+            };
             let model: Vec<[f32; 3]> = picked
                 .iter()
                 .map(|&leaf| {
                     let wo = (eye - scene.centre(leaf)).normalize_or(Vec3::Y);
-                    let model = ModelLight {
-                        material,
-                        light,
-                        sky: &sky,
-                        bounce: &bounce,
-                        blend,
-                        tau,
-                    };
-                    model.of(&envelope.leaves[leaf], scene.normal(leaf), wo)
+                    light_of.of(&envelope.leaves[leaf], scene.normal(leaf), wo)
                 })
                 .collect();
             let term = |k: usize| -> Vec<f32> { model.iter().map(|m| m[k]).collect() };
