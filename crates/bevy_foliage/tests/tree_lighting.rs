@@ -9,11 +9,11 @@ use bevy::light::CascadeShadowConfigBuilder;
 use bevy::prelude::*;
 use bevy_foliage::lighting::bins::{DARKEST_LIGHT, light_of};
 use bevy_foliage::lighting::model::{
-    SkyLight, SunBounce, SunThroughCrown, bounce_radiance, sky_radiance, sun_radiance,
+    SkyLight, SunBounce, SunThroughCrown, bounce_radiance, open_share, sky_radiance, sun_radiance,
     sun_through_crown,
 };
 use bevy_foliage::lighting::path_trace::LeafScene;
-use bevy_foliage::lighting::seen_part::{gain_of, seen_gain};
+use bevy_foliage::lighting::seen_part::{covered_gain, gain_of, quantize_gain, seen_gain};
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::{PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::kept_index_total;
@@ -35,6 +35,9 @@ const BASE: Vec3 = Vec3::new(0.9, 0.8, 0.6);
 /// How far a crown pruned to about half its leaves (area compensated) may move the crown's light
 /// from full detail's at the same view.
 const TOLERANCE: f64 = 0.08;
+/// Every octant's seen-part gain in the check of the bounce's covered-part gain: strong enough
+/// that the bounce of the test crown's leaves, most of their sphere covered, falls visibly.
+const STRONG_GAIN: f32 = 3.0;
 
 fn srgb(linear: f32) -> f32 {
     let c = linear.clamp(0.0, 1.0);
@@ -201,6 +204,8 @@ struct Check {
     within: u32,
     worst: f32,
     bounce_visible: u32,
+    /// Compared pixels the covered part's gain on the bounce moves by more than 3/255.
+    covered_visible: u32,
     /// Compared pixels the sun reaches from outside the crown, and those it does not.
     sunlit: u32,
     shaded: u32,
@@ -273,7 +278,12 @@ fn compare_with_model(
     let e_sun = Vec3::splat(SUN);
     // The light of `leaf` when the sun reaches it from outside the crown by `outside` and, with
     // leaf shadows, reaches the point by `at_leaf`.
-    let expected = |leaf: u32, bounce_on: bool, outside: f32, at_leaf: Option<f32>| -> Vec3 {
+    let expected = |leaf: u32,
+                    bounce_on: bool,
+                    covered_on: bool,
+                    outside: f32,
+                    at_leaf: Option<f32>|
+     -> Vec3 {
         let a = baked.leaf_light[leaf as usize].map(light_of);
         let s_max = a.map(|a| -a.max(DARKEST_LIGHT).ln() / tau);
         let first = baked.indices[baked.leaf_index_start[leaf as usize] as usize] as usize;
@@ -282,14 +292,21 @@ fn compare_with_model(
         let baked_through =
             sun_through_crown(SunThroughCrown::BlendedAttenuation, tau, &a, &s_max, to_sun);
         // The part of the leaf in view: its sky and its blended sun scaled by the gain towards
-        // the eye (not the bounce, nor the sun a shadow map resolves at the leaf).
+        // the eye (not the sun a shadow map resolves at the leaf), its bounce by the covered
+        // part's gain.
         let seen = match baked.leaf_seen.get(leaf as usize) {
             Some(g) if lighting.seen_part => seen_gain(&g.map(gain_of), wo),
             _ => 1.0,
         };
         let through = at_leaf.unwrap_or((baked_through * seen).min(1.0) * outside);
         let bounced = if bounce_on {
-            bounce_radiance(&optics, n, wo, &bounce, baked_through, &s_max, e_sun) * outside
+            let covered = if lighting.seen_part && covered_on {
+                covered_gain(seen, open_share(n, &a))
+            } else {
+                1.0
+            };
+            bounce_radiance(&optics, n, wo, &bounce, baked_through, &s_max, e_sun)
+                * (covered * outside)
         } else {
             Vec3::ZERO
         };
@@ -319,6 +336,7 @@ fn compare_with_model(
         within: 0,
         worst: 0.0,
         bounce_visible: 0,
+        covered_visible: 0,
         sunlit: 0,
         shaded: 0,
         image: RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]),
@@ -352,10 +370,13 @@ fn compare_with_model(
             } else {
                 check.shaded += 1;
             }
-            let want = expected(leaf, true, outside, at_leaf)
+            let want = expected(leaf, true, true, outside, at_leaf)
                 .to_array()
                 .map(|c| srgb(c) * 255.0);
-            let plain = expected(leaf, false, outside, at_leaf)
+            let plain = expected(leaf, false, true, outside, at_leaf)
+                .to_array()
+                .map(|c| srgb(c) * 255.0);
+            let uncovered = expected(leaf, true, false, outside, at_leaf)
                 .to_array()
                 .map(|c| srgb(c) * 255.0);
             let got = image.pixel(x, y);
@@ -372,6 +393,9 @@ fn compare_with_model(
             if (0..3).any(|c| (want[c] - plain[c]).abs() > 6.0) {
                 check.bounce_visible += 1;
             }
+            if (0..3).any(|c| (want[c] - uncovered[c]).abs() > 3.0) {
+                check.covered_visible += 1;
+            }
         }
     }
     check.image = image;
@@ -387,6 +411,7 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         instance,
         to_sun_world,
         eye,
+        tree,
         ..
     }) = scene("tree_lighting", false)
     else {
@@ -471,6 +496,66 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
     assert!(
         moved * 4 >= compared as usize,
         "the gains move only {moved} pixels"
+    );
+
+    // The bounce takes the covered part's gain: with strong gains (every leaf's seen part much
+    // more open than the leaf) it falls, and the leaves show the model with it — in pixels
+    // where a bounce without it would be off by more than the tolerance.
+    harness.world_mut().insert_resource(lighting.clone());
+    let strong = BakedFoliage {
+        leaf_seen: vec![[quantize_gain(STRONG_GAIN); 8]; baked.leaf_count()],
+        ..baked.clone()
+    };
+    let material = harness
+        .world_mut()
+        .get::<PrunedFoliage>(tree)
+        .unwrap()
+        .material
+        .clone();
+    let handle = harness
+        .world_mut()
+        .resource_mut::<Assets<BakedFoliage>>()
+        .add(strong.clone());
+    harness.world_mut().despawn(tree);
+    harness.world_mut().spawn((
+        PrunedFoliage {
+            baked: handle,
+            material,
+        },
+        instance,
+    ));
+    for _ in 0..4 {
+        harness.step();
+    }
+    harness.wait_until_ready().unwrap();
+    let covered = compare_with_model(
+        &mut harness,
+        &strong,
+        &lighting,
+        instance,
+        to_sun_world,
+        eye,
+        |_| false,
+        false,
+        0.0,
+    );
+    covered.save("tree_strong_gains");
+    println!(
+        "with every gain {STRONG_GAIN}: {} of {} within 3/255 of the model, worst {:.1}/255; the covered part's gain moves {} of them by > 3/255",
+        covered.within, covered.compared, covered.worst, covered.covered_visible
+    );
+    assert!(
+        covered.covered_visible * 4 >= covered.compared,
+        "the covered part's gain shows in too few pixels ({} of {}) for the test to see it",
+        covered.covered_visible,
+        covered.compared
+    );
+    assert!(
+        covered.within as f32 >= 0.99 * covered.compared as f32,
+        "{} of {} leaf pixels within 3/255 of the CPU model with strong gains (worst {:.1})",
+        covered.within,
+        covered.compared,
+        covered.worst
     );
 }
 
@@ -812,6 +897,8 @@ struct CloudCheck {
     sunlit: u32,
     shaded: u32,
     leaves_unlike_pbr: u32,
+    /// Compared leaf pixels the covered part's gain on the bounce moves by more than 3/255.
+    covered_visible: u32,
     bark: u32,
     bark_same: u32,
 }
@@ -976,6 +1063,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
     let e_sun = Vec3::splat(SUN);
     let (mut compared, mut within, mut worst) = (0u32, 0u32, 0.0f32);
     let (mut bark, mut bark_same, mut leaves_unlike_pbr) = (0u32, 0u32, 0u32);
+    let mut covered_visible = 0u32;
     let (mut sunlit, mut shaded) = (0u32, 0u32);
     // The sun's light enters the crown on the plane touching its bounding sphere on the sun's
     // side; the plate's shadow edge is blurred over a few texels.
@@ -1059,11 +1147,13 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
             } else {
                 sunlit += 1;
             }
-            // The crown's seen-part gain towards the eye on the sky and the blended sun.
-            let seen = if lighting.seen_part {
-                seen_gain(&CLOUD_SEEN_GAINS, wo)
+            // The crown's seen-part gain towards the eye on the sky and the blended sun, the
+            // covered part's on the bounce.
+            let (seen, covered) = if lighting.seen_part {
+                let seen = seen_gain(&CLOUD_SEEN_GAINS, wo);
+                (seen, covered_gain(seen, open_share(n, &a)))
             } else {
-                1.0
+                (1.0, 1.0)
             };
             let radiance = sky_radiance(&optics, n, wo, &a, &sky) * seen
                 + sun_radiance(
@@ -1074,8 +1164,15 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
                     (through * seen).min(1.0) * outside,
                     e_sun,
                 )
-                + bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun) * outside;
+                + bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun)
+                    * (covered * outside);
             let want = radiance.to_array().map(|c| srgb(c) * 255.0);
+            let uncovered = (radiance
+                + bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun)
+                    * ((1.0 - covered) * outside))
+                .to_array()
+                .map(|c| srgb(c) * 255.0);
+            covered_visible += (0..3).any(|c| (want[c] - uncovered[c]).abs() > 3.0) as u32;
             reference.set_pixel(x, y, [want[0] as u8, want[1] as u8, want[2] as u8, 255]);
             let off = (0..3)
                 .map(|c| (got[c] as f32 - want[c]).abs())
@@ -1093,7 +1190,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
     reference.save_png(dir.join(format!("{name}_cpu.png"))).ok();
     pbr.save_png(dir.join(format!("{name}_pbr.png"))).ok();
     eprintln!(
-        "{name}: leaf pixels {within} of {compared} within 3/255 (worst {worst:.1}; {sunlit} sunlit, {shaded} shaded), {leaves_unlike_pbr} unlike Bevy's PBR; bark pixels: {bark_same} of {bark} as Bevy's PBR"
+        "{name}: leaf pixels {within} of {compared} within 3/255 (worst {worst:.1}; {sunlit} sunlit, {shaded} shaded), {leaves_unlike_pbr} unlike Bevy's PBR, {covered_visible} moved by > 3/255 by the covered part's gain on the bounce; bark pixels: {bark_same} of {bark} as Bevy's PBR"
     );
     Some(CloudCheck {
         compared,
@@ -1102,6 +1199,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
         sunlit,
         shaded,
         leaves_unlike_pbr,
+        covered_visible,
         bark,
         bark_same,
     })
@@ -1116,6 +1214,13 @@ fn a_tree_lit_billboard_cloud_lights_each_leaf_texel_as_the_model_does() {
     };
     assert!(c.compared > 1500, "{} leaf pixels compared", c.compared);
     assert_eq!(c.within, c.compared, "worst {:.1}/255", c.worst);
+    // The bounce's covered-part gain is part of what is checked.
+    assert!(
+        c.covered_visible * 4 >= c.compared,
+        "the covered part's gain shows in {} of {} pixels",
+        c.covered_visible,
+        c.compared
+    );
     assert!(c.bark > 300, "{} bark pixels", c.bark);
     assert_eq!(c.bark_same, c.bark);
     // The tree lighting changed the leaves: the comparison is not with Bevy's lighting.
@@ -1347,8 +1452,10 @@ fn a_tree_lit_crown_keeps_its_light_when_its_billboard_cloud_takes_over() {
 }
 
 /// The test cloud's seen-part gains, distinct per octant so that a shader that ignored them or
-/// read them in another order would be off.
-const CLOUD_SEEN_GAINS: [f32; 8] = [1.3, 1.1, 1.25, 1.0, 0.9, 1.2, 1.15, 1.05];
+/// read them in another order would be off; below 1, so that the bounce's covered-part gain
+/// (above 1 then) lifts it by more than the tolerance in most leaf pixels, where gains above 1
+/// would saturate the sky first.
+const CLOUD_SEEN_GAINS: [f32; 8] = [0.3, 0.4, 0.25, 0.35, 0.45, 0.3, 0.4, 0.35];
 
 /// How far a tree-lit crown's brightness may move when its billboard cloud takes over.
 const HANDOVER_TOLERANCE: f64 = 0.08;

@@ -15,7 +15,7 @@
 //! the thesis) on a grid of `--samples G` eye rays a side (128), and each image's mean error
 //! over its mean light at pixels of 1, 4 and 16 eye rays a side (`lighting::image_error`);
 //! the last bins also with each leaf's seen-part gains from `--seen-points` points (32;
-//! `lighting::seen_part`).
+//! `lighting::seen_part`): on the sky and the sun, and the covered part's on the bounce.
 //!
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
 //! map at three texel sizes, the crown's extinction over its depth, eq. 5.3's foliage maps)
@@ -362,6 +362,17 @@ fn image_table(
                     "sun indirect (1 bounce)",
                     &format!("attenuation blend, {}", label(k)),
                     &errors[size].bounce,
+                );
+            }
+            if let Some(seen) = run.seen.get(size) {
+                row(
+                    seen,
+                    "sun indirect (1 bounce)",
+                    &format!(
+                        "attenuation blend, {}, covered-part gain",
+                        label(models.len() - 1)
+                    ),
+                    &seen.bounce,
                 );
             }
             row(

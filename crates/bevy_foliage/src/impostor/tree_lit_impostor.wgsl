@@ -19,7 +19,7 @@
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
     shadows::fetch_directional_shadow,
 }
-#import bevy_foliage::tree_lighting::{TreeLightUniform, leaf_radiance, lights_of, optics_of, seen_gain}
+#import bevy_foliage::tree_lighting::{TreeLightUniform, covered_gain, leaf_radiance, lights_of, optics_of, seen_gain}
 
 struct TreeLitImpostorParams {
     lights: TreeLightUniform,
@@ -102,7 +102,8 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
             params.bounce != 0u,
         );
         // The leaves in view are more open than their mean (`lighting::seen_part`): the crown's
-        // gain towards the eye on the sky and the blended sun, as the leaves have their own.
+        // gain towards the eye on the sky and the blended sun, as the leaves have their own,
+        // and the covered part's gain on the bounce.
         let g = params.seen_gains;
         let seen = select(1.0, seen_gain(
             array<f32, 8>(g[0].x, g[0].y, g[0].z, g[0].w, g[1].x, g[1].y, g[1].z, g[1].w), to_eye),
@@ -113,7 +114,8 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
             + params.crown_sphere.w, 0.0) * scale;
         let outside = sun_shadow_at(p + params.lights.to_sun.xyz * reach, in.position.xy, pbr_input.flags);
         let through = min(light.through * seen, 1.0);
-        let tree_lit = (light.sky * seen + light.sun * through * outside + light.bounce * outside)
+        let bounce = light.bounce * select(1.0, covered_gain(seen, light.open), params.seen_part != 0u);
+        let tree_lit = (light.sky * seen + light.sun * through * outside + bounce * outside)
             * view_bindings::view.exposure;
         color += tree_lit * leaf;
     }

@@ -13,13 +13,16 @@
 //! Plain Rust, no render types.
 
 use super::bins::proxies;
+use super::envelope::CrownEnvelope;
 use super::leaf_scene::LeafScene;
-use super::model::{LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bsdf, sun_radiance};
+use super::model::{
+    LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bsdf, open_share, sun_radiance,
+};
 use super::path_trace::{
     ComponentError, ModelLight, TraceLight, TraceSettings, component_error, envelope_by, gather,
     luminance,
 };
-use super::seen_part::{DEFAULT_SEEN_POINTS, seen_gain, seen_part_gains_of};
+use super::seen_part::{DEFAULT_SEEN_POINTS, covered_gain, seen_gain, seen_part_gains_of};
 use super::sun_maps::{LightFrame, foliage_maps};
 use super::traced_bins::BinEstimate;
 use crate::pruning::leaves::LeafSet;
@@ -82,8 +85,8 @@ pub struct ImageComparison {
     /// size, below which no model can be shown closer to it.
     pub noise: Vec<ImageError>,
     /// The last model with its sky and sun scaled by each leaf's seen-part gain towards the
-    /// eye ([`super::seen_part`]), per pixel size; empty when
-    /// [`ImageSettings::seen_points`] is 0.
+    /// eye and its bounce by the covered part's gain ([`super::seen_part`]), per pixel size;
+    /// empty when [`ImageSettings::seen_points`] is 0.
     pub seen: Vec<ImageError>,
     /// Eye rays that hit a leaf.
     pub hits: usize,
@@ -253,7 +256,7 @@ pub fn images_against_tracer(
     let leaf_proxies = proxies(leaves);
     let sky = SkyLight::sky_and_ground(light.sky, light.ground);
     let mut first_model: Option<[Vec<f32>; 3]> = None;
-    let mut last_model: Option<[Vec<f32>; 3]> = None;
+    let mut last_model: Option<([Vec<f32>; 3], CrownEnvelope)> = None;
     let models: Vec<(f32, Vec<ImageError>)> = models
         .iter()
         .map(|&(blend, bins)| {
@@ -282,7 +285,7 @@ pub fn images_against_tracer(
             if first_model.is_none() {
                 first_model = Some(image.clone());
             }
-            last_model = Some(image);
+            last_model = Some((image, envelope));
             (tau, errors)
         })
         .collect();
@@ -317,16 +320,19 @@ pub fn images_against_tracer(
     });
     let shadow_map_sun = measure(&[model_sky, mapped_sun, model_bounce]);
     let seen = match last_model {
-        Some([mut sky, mut sun, bounce]) if settings.seen_points > 0 => {
+        Some(([mut sky, mut sun, mut bounce], envelope)) if settings.seen_points > 0 => {
             let gains = {
                 let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
                 seen_part_gains_of(&scene, &all, settings.seen_points, &|_| 1.0, threads)
             };
             for (k, s) in samples.iter().enumerate() {
                 if let Some(s) = s {
-                    let gain = seen_gain(&gains[s.leaf as usize], view);
+                    let leaf = s.leaf as usize;
+                    let gain = seen_gain(&gains[leaf], view);
                     sky[k] *= gain;
                     sun[k] *= gain;
+                    let open = open_share(scene.normal(leaf), &envelope.leaves[leaf].attenuation);
+                    bounce[k] *= covered_gain(gain, open);
                 }
             }
             measure(&[sky, sun, bounce])

@@ -183,6 +183,18 @@ pub fn sky_radiance(
     sum / PI
 }
 
+/// The share of the sphere around a leaf of normal `n` its bins let through, each direction
+/// weighted by its cosine on either side of the leaf (∫ |n·ω| a(ω) dω / 2π): what eq. 5.6 sums
+/// for a uniform sky, the leaf's openness. `1 − open` is the share its neighbours cover, from
+/// which the bounce comes.
+pub fn open_share(n: Vec3, attenuation: &[f32; 8]) -> f32 {
+    let cosines: [f32; 8] = std::array::from_fn(|j| octant_cosine(n, j));
+    (0..8)
+        .map(|j| (cosines[j] + cosines[7 - j]) * attenuation[j])
+        .sum::<f32>()
+        / (2.0 * PI)
+}
+
 /// The cosine lobe weights M(ω_l · ω_j) of eq. 5.7 and their sum.
 fn lobes(wl: Vec3) -> ([f32; 8], f32) {
     let w = DIRECTIONS.map(|d| m(wl.dot(d)));
@@ -467,6 +479,32 @@ mod tests {
             let l = sky_radiance(&mat, n, n, &[1.0; 8], &even);
             let want = mat.reflectance_front + mat.transmittance_back;
             assert!((l - want).length() < 1e-5, "{n}: {l} vs {want}");
+        }
+    }
+
+    #[test]
+    fn the_open_share_weights_the_bins_by_their_cosines_on_both_sides() {
+        let mut rng = SplitMix64::new(5);
+        for _ in 0..50 {
+            let n = random_unit(&mut rng);
+            // Nothing around: open; everything shut: closed.
+            assert!((open_share(n, &[1.0; 8]) - 1.0).abs() < 1e-5);
+            assert!(open_share(n, &[0.0; 8]).abs() < 1e-6);
+            // Against the integral it stands for, by Monte Carlo over the sphere.
+            let a: [f32; 8] = std::array::from_fn(|_| rng.next_f32());
+            let (mut sum, mut weight) = (0.0f64, 0.0f64);
+            for _ in 0..20_000 {
+                let w = random_unit(&mut rng);
+                let c = n.dot(w).abs() as f64;
+                sum += c * a[crate::lighting::bins::bin_of(w)] as f64;
+                weight += c;
+            }
+            let want = (sum / weight) as f32;
+            assert!(
+                (open_share(n, &a) - want).abs() < 0.01,
+                "{} against {want}",
+                open_share(n, &a)
+            );
         }
     }
 

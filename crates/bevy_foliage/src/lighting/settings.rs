@@ -39,8 +39,9 @@ pub struct TreeLightingSettings {
     pub sun_through_crown: SunThroughCrown,
     /// Add one bounce of sunlight off the neighbouring leaves (eq. 5.24).
     pub bounce: bool,
-    /// Scale each leaf's sky and blended sun by its baked gain towards the eye: the part of a
-    /// leaf in view is more open than the leaf's mean ([`crate::lighting::seen_part`]).
+    /// Scale each leaf's sky and blended sun by its baked gain towards the eye, and its bounce
+    /// by the covered part's gain: the part of a leaf in view is more open than the leaf's mean
+    /// ([`crate::lighting::seen_part`]).
     pub seen_part: bool,
 }
 

@@ -7,7 +7,7 @@
 #ifdef TREE_LIGHTING
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
 #import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_params, leaf_seen_gains}
-#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, leaf_radiance, lights_of, optics_of, seen_gain}
+#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, leaf_radiance, lights_of, optics_of, seen_gain}
 
 // The tree instance's frame, read once per vertex: world directions into the model's frame
 // (the transpose undoes a rotation and, once normalised, a uniform scale), the instance's scale
@@ -46,10 +46,14 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
         leaf_params.bounce != 0u,
     );
     // The part of the leaf in view is more open than its mean (`lighting::seen_part`): its sky,
-    // and the sun where the crown's blend stands for it, scaled by the gain towards the eye.
-    let seen = select(1.0, seen_gain(leaf_seen_gains(leaf.leaf), to_eye), leaf_params.seen_part != 0u);
-    light.sky *= seen;
-    light.through = min(light.through * seen, 1.0);
+    // and the sun where the crown's blend stands for it, scaled by the gain towards the eye;
+    // its bounce, from the covered rest of the sphere, by the covered part's gain.
+    if leaf_params.seen_part != 0u {
+        let seen = seen_gain(leaf_seen_gains(leaf.leaf), to_eye);
+        light.sky *= seen;
+        light.through = min(light.through * seen, 1.0);
+        light.bounce *= covered_gain(seen, light.open);
+    }
     // A channel the base colour lacks sends no light either.
     let lacks = albedo <= vec3(0.0);
     let inverse = 1.0 / max(albedo, vec3(1e-6));

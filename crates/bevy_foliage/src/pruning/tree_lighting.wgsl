@@ -12,6 +12,8 @@ const XI: f32 = 0.57735026;
 const PI: f32 = 3.14159265;
 // The least light a stored attenuation holds (`lighting::bins::DARKEST_LIGHT`).
 const DARKEST_LIGHT: f32 = 1.52590219e-5;
+// The largest seen-part gain (`lighting::seen_part::GAIN_RANGE`).
+const COVERED_GAIN_MAX: f32 = 4.0;
 
 // The leaf's reflectances and transmittances per channel (`model::LeafMaterial`).
 struct LeafOptics {
@@ -67,6 +69,8 @@ struct LeafLight {
     sun: vec3<f32>,
     through: f32,
     bounce: vec3<f32>,
+    // The leaf's open share of the sphere (`model::open_share`), for the bounce's seen-part gain.
+    open: f32,
 }
 
 fn direction(j: u32) -> vec3<f32> {
@@ -149,6 +153,17 @@ fn seen_gain(gains: array<f32, 8>, to_eye: vec3<f32>) -> f32 {
     return select(1.0, blended / sum, sum > 0.0);
 }
 
+// The seen-part gain of the part of the sphere the neighbours cover, where the bounce comes
+// from, for the sky's gain `gain` and the leaf's open share `open`
+// (`lighting::seen_part::covered_gain`).
+fn covered_gain(gain: f32, open: f32) -> f32 {
+    if open >= 1.0 - 1e-4 {
+        return 1.0;
+    }
+    let o = max(open, 0.0);
+    return clamp((1.0 - gain * o) / (1.0 - o), 0.0, COVERED_GAIN_MAX);
+}
+
 // The whole of eq. 5.2 for one leaf (`sky + sun * through + bounce` of the result) of unit normal `n` seen from `to_eye`, whose eight
 // directions let `attenuation` through, in a crown of extinction `tau` (`model::leaf_radiance`).
 // `smooth_envelope` picks eq. 5.7's blend of envelope distances for the sun through the crown
@@ -185,12 +200,15 @@ fn leaf_radiance(
         far_side = optics.reflectance_back;
     }
     var sky = vec3(0.0);
+    var open = 0.0;
     for (var j = 0u; j < 8u; j += 1u) {
         let radiance = select(lights.ground, lights.sky, direction(j).y > 0.0);
         sky += (lit_side * cosines[j] + far_side * cosines[7u - j]) * (attenuation[j] * radiance);
+        open += (cosines[j] + cosines[7u - j]) * attenuation[j];
     }
     var out: LeafLight;
     out.sky = sky / PI;
+    out.open = open / (2.0 * PI);
     out.sun = vec3(0.0);
     out.through = 1.0;
     out.bounce = vec3(0.0);
