@@ -8,6 +8,7 @@ use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::light::CascadeShadowConfigBuilder;
 use bevy::prelude::*;
 use bevy_foliage::lighting::bins::{DARKEST_LIGHT, light_of};
+use bevy_foliage::lighting::hotspot::Hotspot;
 use bevy_foliage::lighting::model::{
     SkyLight, SunBounce, SunThroughCrown, bounce_radiance, open_share, sky_radiance, sun_radiance,
     sun_through_crown,
@@ -38,6 +39,9 @@ const TOLERANCE: f64 = 0.08;
 /// Every octant's seen-part gain in the check of the bounce's covered-part gain: strong enough
 /// that the bounce of the test crown's leaves, most of their sphere covered, falls visibly.
 const STRONG_GAIN: f32 = 3.0;
+/// The strong stage's hotspot: the exponent on the blended sun (darker where the crown's blend,
+/// scaled by the strong gains, stays below 1) and the factor on the bounce.
+const STRONG_HOTSPOT: (f32, f32) = (3.0, 2.0);
 
 fn srgb(linear: f32) -> f32 {
     let c = linear.clamp(0.0, 1.0);
@@ -206,6 +210,10 @@ struct Check {
     bounce_visible: u32,
     /// Compared pixels the covered part's gain on the bounce moves by more than 3/255.
     covered_visible: u32,
+    /// Compared pixels the crown's hotspot moves by more than 3/255, and those its exponent on
+    /// the sun alone moves so.
+    hotspot_visible: u32,
+    hotspot_sun_visible: u32,
     /// Compared pixels the sun reaches from outside the crown, and those it does not.
     sunlit: u32,
     shaded: u32,
@@ -281,6 +289,7 @@ fn compare_with_model(
     let expected = |leaf: u32,
                     bounce_on: bool,
                     covered_on: bool,
+                    hotspot_on: bool,
                     outside: f32,
                     at_leaf: Option<f32>|
      -> Vec3 {
@@ -298,7 +307,14 @@ fn compare_with_model(
             Some(g) if lighting.seen_part => seen_gain(&g.map(gain_of), wo),
             _ => 1.0,
         };
-        let through = at_leaf.unwrap_or((baked_through * seen).min(1.0) * outside);
+        // The crown's hotspot by the angle between the eye and the sun, with the gains.
+        let spot = if lighting.seen_part && hotspot_on {
+            baked.hotspot
+        } else {
+            Hotspot::default()
+        };
+        let through = at_leaf
+            .unwrap_or(spot.sun_through((baked_through * seen).min(1.0), wo, to_sun) * outside);
         let bounced = if bounce_on {
             let covered = if lighting.seen_part && covered_on {
                 covered_gain(seen, open_share(n, &a))
@@ -306,7 +322,7 @@ fn compare_with_model(
                 1.0
             };
             bounce_radiance(&optics, n, wo, &bounce, baked_through, &s_max, e_sun)
-                * (covered * outside)
+                * (covered * outside * spot.bounce_at(wo, to_sun))
         } else {
             Vec3::ZERO
         };
@@ -337,6 +353,8 @@ fn compare_with_model(
         worst: 0.0,
         bounce_visible: 0,
         covered_visible: 0,
+        hotspot_visible: 0,
+        hotspot_sun_visible: 0,
         sunlit: 0,
         shaded: 0,
         image: RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]),
@@ -370,13 +388,19 @@ fn compare_with_model(
             } else {
                 check.shaded += 1;
             }
-            let want = expected(leaf, true, true, outside, at_leaf)
+            let want = expected(leaf, true, true, true, outside, at_leaf)
                 .to_array()
                 .map(|c| srgb(c) * 255.0);
-            let plain = expected(leaf, false, true, outside, at_leaf)
+            let plain = expected(leaf, false, true, true, outside, at_leaf)
                 .to_array()
                 .map(|c| srgb(c) * 255.0);
-            let uncovered = expected(leaf, true, false, outside, at_leaf)
+            let uncovered = expected(leaf, true, false, true, outside, at_leaf)
+                .to_array()
+                .map(|c| srgb(c) * 255.0);
+            let no_hotspot = expected(leaf, true, true, false, outside, at_leaf)
+                .to_array()
+                .map(|c| srgb(c) * 255.0);
+            let plain_no_hotspot = expected(leaf, false, true, false, outside, at_leaf)
                 .to_array()
                 .map(|c| srgb(c) * 255.0);
             let got = image.pixel(x, y);
@@ -395,6 +419,12 @@ fn compare_with_model(
             }
             if (0..3).any(|c| (want[c] - uncovered[c]).abs() > 3.0) {
                 check.covered_visible += 1;
+            }
+            if (0..3).any(|c| (want[c] - no_hotspot[c]).abs() > 3.0) {
+                check.hotspot_visible += 1;
+            }
+            if (0..3).any(|c| (plain[c] - plain_no_hotspot[c]).abs() > 3.0) {
+                check.hotspot_sun_visible += 1;
             }
         }
     }
@@ -440,16 +470,12 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         ..
     } = check;
     println!(
-        "tree lighting: {compared} pixels inside leaves compared, {within} within 3/255, worst {worst:.1}/255; the bounce moves {bounce_visible} of them by > 6/255"
+        "tree lighting: {compared} pixels inside leaves compared, {within} within 3/255, worst {worst:.1}/255; the bounce moves {bounce_visible} of them by > 6/255; the crown's hotspot {:?}",
+        baked.hotspot
     );
     assert!(
         compared >= 800,
         "too few leaf pixels to compare: {compared}"
-    );
-    // The bounce is a visible part of what is checked.
-    assert!(
-        bounce_visible * 4 >= compared,
-        "the bounce shows in too few pixels ({bounce_visible} of {compared}) for the test to see it"
     );
     assert!(
         within as f32 >= 0.99 * compared as f32,
@@ -497,13 +523,33 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         moved * 4 >= compared as usize,
         "the gains move only {moved} pixels"
     );
+    // The bounce is a visible part of what is checked: here, where the gains and the crown's
+    // hotspot (which at this view's angle to the sun dim it) leave it whole.
+    println!(
+        "without them the bounce moves {} of {} by > 6/255",
+        plain.bounce_visible, plain.compared
+    );
+    assert!(
+        plain.bounce_visible * 4 >= plain.compared,
+        "the bounce shows in too few pixels ({} of {}) for the test to see it",
+        plain.bounce_visible,
+        plain.compared
+    );
 
     // The bounce takes the covered part's gain: with strong gains (every leaf's seen part much
     // more open than the leaf) it falls, and the leaves show the model with it — in pixels
     // where a bounce without it would be off by more than the tolerance.
     harness.world_mut().insert_resource(lighting.clone());
+    // And a strong hotspot: the blended sun raised to 1/3 (brighter) and the bounce doubled,
+    // which the model with them must follow too.
     let strong = BakedFoliage {
         leaf_seen: vec![[quantize_gain(STRONG_GAIN); 8]; baked.leaf_count()],
+        hotspot: Hotspot {
+            sun: [STRONG_HOTSPOT.0; 4],
+            bounce: [STRONG_HOTSPOT.1; 4],
+        }
+        .sanitized()
+        .0,
         ..baked.clone()
     };
     let material = harness
@@ -549,6 +595,22 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         "the covered part's gain shows in too few pixels ({} of {}) for the test to see it",
         covered.covered_visible,
         covered.compared
+    );
+    println!(
+        "the crown's hotspot (sun exponent {}, bounce × {}) moves {} of {} by > 3/255 ({} by its sun alone)",
+        STRONG_HOTSPOT.0,
+        STRONG_HOTSPOT.1,
+        covered.hotspot_visible,
+        covered.compared,
+        covered.hotspot_sun_visible
+    );
+    assert!(
+        covered.hotspot_visible * 4 >= covered.compared
+            && covered.hotspot_sun_visible * 5 >= covered.compared,
+        "the hotspot shows in too few pixels ({} of {}, {} by its sun alone) for the test to see it",
+        covered.hotspot_visible,
+        covered.compared,
+        covered.hotspot_sun_visible
     );
     assert!(
         covered.within as f32 >= 0.99 * covered.compared as f32,
@@ -882,6 +944,7 @@ fn block_cloud() -> (
         light,
         extinction: 1.3,
         seen_gains: CLOUD_SEEN_GAINS,
+        hotspot: CLOUD_HOTSPOT,
         source_hash: 1,
         bake_ms: 0.0,
     };
@@ -1149,27 +1212,27 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
             }
             // The crown's seen-part gain towards the eye on the sky and the blended sun, the
             // covered part's on the bounce.
-            let (seen, covered) = if lighting.seen_part {
+            // And the crown's hotspot by the eye's angle to the sun.
+            let (seen, covered, spot) = if lighting.seen_part {
                 let seen = seen_gain(&CLOUD_SEEN_GAINS, wo);
-                (seen, covered_gain(seen, open_share(n, &a)))
+                (seen, covered_gain(seen, open_share(n, &a)), CLOUD_HOTSPOT)
             } else {
-                (1.0, 1.0)
+                (1.0, 1.0, Hotspot::default())
             };
+            let bounced = bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun)
+                * (outside * spot.bounce_at(wo, to_sun));
             let radiance = sky_radiance(&optics, n, wo, &a, &sky) * seen
                 + sun_radiance(
                     &optics,
                     n,
                     wo,
                     to_sun,
-                    (through * seen).min(1.0) * outside,
+                    spot.sun_through((through * seen).min(1.0), wo, to_sun) * outside,
                     e_sun,
                 )
-                + bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun)
-                    * (covered * outside);
+                + bounced * covered;
             let want = radiance.to_array().map(|c| srgb(c) * 255.0);
-            let uncovered = (radiance
-                + bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun)
-                    * ((1.0 - covered) * outside))
+            let uncovered = (radiance + bounced * (1.0 - covered))
                 .to_array()
                 .map(|c| srgb(c) * 255.0);
             covered_visible += (0..3).any(|c| (want[c] - uncovered[c]).abs() > 3.0) as u32;
@@ -1456,6 +1519,13 @@ fn a_tree_lit_crown_keeps_its_light_when_its_billboard_cloud_takes_over() {
 /// (above 1 then) lifts it by more than the tolerance in most leaf pixels, where gains above 1
 /// would saturate the sky first.
 const CLOUD_SEEN_GAINS: [f32; 8] = [0.3, 0.4, 0.25, 0.35, 0.45, 0.3, 0.4, 0.35];
+
+/// The test cloud's hotspot: distinct nodes, none 1, so a shader that skips or misreads it
+/// shows.
+const CLOUD_HOTSPOT: Hotspot = Hotspot {
+    sun: [0.5, 0.75, 1.5, 2.0],
+    bounce: [1.75, 1.5, 0.75, 0.5],
+};
 
 /// How far a tree-lit crown's brightness may move when its billboard cloud takes over.
 const HANDOVER_TOLERANCE: f64 = 0.08;

@@ -3,7 +3,7 @@
 //! ```text
 //! cargo run -p bevy_foliage --bin foliage_bake -- [--out DIR] [--resolution N] [--depth D]
 //!     [--leaf-material NAME ...] [--rays-per-bin R | --neighbour-bins] [--seen-points P]
-//!     [TREE | FILE.gltf | FILE.glb ...]
+//!     [--no-hotspot] [TREE | FILE.gltf | FILE.glb ...]
 //! ```
 //! TREE is one of `olea`, `fraxinus`, `quercus`, `cedrus` (the thesis' test trees; default: all);
 //! a glTF file is split into leaves as `bevy_foliage::pruning::gltf` documents.
@@ -12,6 +12,8 @@
 //! `--neighbour-bins`: §5.6's estimate from the neighbours instead.
 //! `--seen-points`: points per leaf for the gains from a leaf's mean light to the part of it
 //! in view (`lighting::seen_part`; default 32, twice a bake at load time's; 0 for none); their time is the envelope stage's.
+//! `--no-hotspot`: leave the crown's hotspot (`lighting::hotspot`) unmeasured, its factors at 1
+//! (measured by default with `HotspotSettings::OFFLINE`; its time is the envelope stage's too).
 //! Prints progress on stderr and one JSON object per tree on stdout (bake time per stage, leaf
 //! count, GPU bytes).
 
@@ -34,6 +36,7 @@ fn main() {
             rays_per_bin: OFFLINE_RAYS_PER_BIN,
         },
         seen_points: OFFLINE_SEEN_POINTS,
+        hotspot: bevy_foliage::lighting::hotspot::HotspotSettings::OFFLINE,
         ..BakeSettings::default()
     };
     let mut names: Vec<String> = Vec::new();
@@ -68,12 +71,15 @@ fn main() {
                 }
             }
             "--neighbour-bins" => settings.bins = BinEstimate::Neighbours,
+            "--no-hotspot" => {
+                settings.hotspot = bevy_foliage::lighting::hotspot::HotspotSettings::NONE
+            }
             "--seen-points" => {
                 settings.seen_points = value("--seen-points").parse().expect("--seen-points P")
             }
             "--help" | "-h" => {
                 eprintln!(
-                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [--seen-points P] [olea|fraxinus|quercus|cedrus ...]"
+                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [--seen-points P] [--no-hotspot] [olea|fraxinus|quercus|cedrus ...]"
                 );
                 return;
             }

@@ -8,14 +8,19 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P]]
+//!     [--images [--samples G] [--seen-points P] [--hotspot]] [--sun X,Y,Z]
 //! ```
+//! `--sun X,Y,Z`: the direction towards the sun (0.5, 0.7, 0.3 by default; the eye looks from
+//! (0, 0.3, 1)) — the model's errors depend on the angle between the two.
 //! `--images`: instead, the thesis' own measure (§5.7, fig. 5.16): the crown rendered by the
 //! model and by the tracer (`--directions` rays per intersection point, 256 by default as in
 //! the thesis) on a grid of `--samples G` eye rays a side (128), and each image's mean error
 //! over its mean light at pixels of 1, 4 and 16 eye rays a side (`lighting::image_error`);
 //! the last bins also with each leaf's seen-part gains from `--seen-points` points (32;
-//! `lighting::seen_part`): on the sky and the sun, and the covered part's on the bounce.
+//! `lighting::seen_part`): on the sky and the sun, and the covered part's on the bounce;
+//! `--hotspot` adds rows with the crown's hotspot (`lighting::hotspot`, measured with
+//! `HotspotSettings::OFFLINE` from its own rays) on the sun and the bounce, and prints its
+//! factors.
 //!
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
 //! map at three texel sizes, the crown's extinction over its depth, eq. 5.3's foliage maps)
@@ -44,9 +49,11 @@ fn main() {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     let sun_maps = args.iter().any(|a| a == "--sun-maps");
     let images = args.iter().any(|a| a == "--images");
-    args.retain(|a| a != "--sun-maps" && a != "--images");
+    let hotspot = args.iter().any(|a| a == "--hotspot");
+    args.retain(|a| a != "--sun-maps" && a != "--images" && a != "--hotspot");
     let mut samples = 128u32;
     let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
+    let mut to_sun = Vec3::new(0.5, 0.7, 0.3).normalize();
     let mut i = 0;
     while i < args.len() {
         let value = |i: usize| -> usize {
@@ -65,6 +72,20 @@ fn main() {
             "--directions" => settings.directions = value(i) as u32,
             "--samples" => samples = value(i) as u32,
             "--seen-points" => seen_points = value(i) as u32,
+            "--sun" => {
+                to_sun = args
+                    .get(i + 1)
+                    .map(|v| v.split(',').map(|c| c.trim().parse::<f32>()).collect())
+                    .and_then(|c: Result<Vec<f32>, _>| c.ok())
+                    .filter(|c| c.len() == 3 && c.iter().all(|c| c.is_finite()))
+                    .map(|c| Vec3::new(c[0], c[1], c[2]))
+                    .filter(|v| v.length() > 1e-3)
+                    .map(Vec3::normalize)
+                    .unwrap_or_else(|| {
+                        eprintln!("--sun takes x,y,z (a direction towards the sun)");
+                        std::process::exit(2)
+                    })
+            }
             "--rays-per-bin" => {
                 rays_per_bin = args
                     .get(i + 1)
@@ -78,7 +99,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot]] [--sun x,y,z]"
                 );
                 std::process::exit(2)
             }
@@ -90,7 +111,7 @@ fn main() {
     let light = TraceLight {
         sky: Vec3::new(0.35, 0.45, 0.65),
         ground: Vec3::new(0.35, 0.45, 0.65) * 0.15,
-        to_sun: Vec3::new(0.5, 0.7, 0.3).normalize(),
+        to_sun,
         sun: Vec3::new(3.2, 3.0, 2.7),
     };
     if sun_maps {
@@ -106,6 +127,7 @@ fn main() {
                 samples,
                 directions: settings.directions,
                 seen_points,
+                hotspot,
                 ..Default::default()
             },
             &rays_per_bin,
@@ -325,6 +347,14 @@ fn image_table(
                 row(&errors[size], "sky direct", &label(k), &errors[size].sky);
             }
             let seen_label = format!("{}, seen-part gain", label(models.len() - 1));
+            let hotspot_label = format!(
+                "{}, the crown's hotspot",
+                if run.seen.is_empty() {
+                    label(models.len() - 1)
+                } else {
+                    seen_label.clone()
+                }
+            );
             if let Some(seen) = run.seen.get(size) {
                 row(seen, "sky direct", &seen_label, &seen.sky);
             }
@@ -349,6 +379,9 @@ fn image_table(
                     &format!("attenuation blend, {seen_label}"),
                     &seen.sun,
                 );
+            }
+            if let Some(spot) = run.hotspot.get(size) {
+                row(spot, "sun direct", &hotspot_label, &spot.sun);
             }
             row(
                 &run.shadow_map_sun[size],
@@ -375,12 +408,23 @@ fn image_table(
                     &seen.bounce,
                 );
             }
+            if let Some(spot) = run.hotspot.get(size) {
+                row(
+                    spot,
+                    "sun indirect (1 bounce)",
+                    &hotspot_label,
+                    &spot.bounce,
+                );
+            }
             row(
                 &run.noise[size],
                 "sun indirect (1 bounce)",
                 "the tracer against itself",
                 &run.noise[size].bounce,
             );
+        }
+        if let Some(h) = &run.hotspot_factors {
+            eprintln!("{name}: hotspot sun {:.3?} bounce {:.3?}", h.sun, h.bounce);
         }
         eprintln!("{name}: {:.1} s", started.elapsed().as_secs_f32());
     }

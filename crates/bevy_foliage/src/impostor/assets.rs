@@ -129,6 +129,7 @@ pub fn tree_lit_extension(data: &ImpostorData, light: [Handle<Image>; 3]) -> Tre
             crown_sphere: data.center.extend(data.radius),
             extinction: data.extinction,
             seen_gains: gains_as_vectors(&data.seen_gains),
+            hotspot: data.hotspot.packed().into(),
             ..default()
         },
         light0,

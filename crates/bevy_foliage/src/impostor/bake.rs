@@ -160,6 +160,7 @@ struct BakeJob {
     hash: u64,
     extinction: f32,
     seen_gains: [f32; 8],
+    hotspot: crate::lighting::hotspot::Hotspot,
     latest: Arc<Mutex<Option<Vec<u8>>>>,
     parts: Vec<Entity>,
 }
@@ -500,6 +501,7 @@ fn start_impostor_bakes(
                     hash,
                     extinction: light.extinction,
                     seen_gains: light.seen,
+                    hotspot: light.hotspot,
                     latest,
                     parts,
                 },
@@ -583,6 +585,7 @@ fn finish_impostor_bakes(
             light,
             extinction: job.extinction,
             seen_gains: job.seen_gains,
+            hotspot: job.hotspot,
             source_hash: job.hash,
             bake_ms: job.started.elapsed().as_secs_f32() * 1e3,
         };

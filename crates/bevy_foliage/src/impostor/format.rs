@@ -25,8 +25,8 @@ pub const MAGIC: &[u8; 8] = b"BNBBCLOU";
 /// Current format version; bump on any layout change.
 ///
 /// Version 2 added the tree lighting's light atlases and the crown's extinction, version 3 the
-/// crown's seen-part gains; an older cache is re-baked.
-pub const FORMAT_VERSION: u32 = 3;
+/// crown's seen-part gains, version 4 the crown's hotspot; an older cache is re-baked.
+pub const FORMAT_VERSION: u32 = 4;
 
 /// Light atlases of a billboard cloud: three, of three values a texel each (see
 /// `impostor::texture`).
@@ -75,6 +75,9 @@ pub struct ImpostorData {
     /// The crown's mean seen-part gain per eye octant (`lighting::seen_part`), by which the
     /// tree lighting scales the leaf texels' sky and blended sun.
     pub seen_gains: [f32; 8],
+    /// The crown's hotspot (`lighting::hotspot`), by which the tree lighting raises the leaf
+    /// texels' blended sun and scales their bounce by the eye's angle to the sun.
+    pub hotspot: crate::lighting::hotspot::Hotspot,
     /// Hash of the source geometry and bake settings: a cache whose hash differs is stale.
     pub source_hash: u64,
     /// How long the bake took (ms), for the report.
@@ -172,6 +175,9 @@ pub fn encode(data: &ImpostorData) -> Vec<u8> {
     p.extend_from_slice(&data.normal);
     put_f32s(&mut p, &[data.extinction]);
     put_f32s(&mut p, &data.seen_gains);
+    for word in data.hotspot.packed() {
+        p.extend_from_slice(&word.to_le_bytes());
+    }
     for atlas in &data.light {
         p.extend_from_slice(atlas);
     }
@@ -324,6 +330,15 @@ pub fn decode(bytes: &[u8]) -> Result<ImpostorData, ImpostorFormatError> {
             "seen-part gains {seen_gains:?} outside {low}..={high}"
         )));
     }
+    let hotspot = crate::lighting::hotspot::Hotspot::unpacked([r.u32()?, r.u32()?]);
+    if hotspot.sanitized().1 {
+        return Err(ImpostorFormatError::Invalid(format!(
+            "hotspot factors {:?} / {:?} outside {:?}",
+            hotspot.sun,
+            hotspot.bounce,
+            crate::lighting::hotspot::HOTSPOT_RANGE
+        )));
+    }
     let light = [
         r.take(bytes_per_atlas)?.to_vec(),
         r.take(bytes_per_atlas)?.to_vec(),
@@ -347,6 +362,7 @@ pub fn decode(bytes: &[u8]) -> Result<ImpostorData, ImpostorFormatError> {
         light,
         extinction,
         seen_gains,
+        hotspot,
         source_hash,
         bake_ms,
     })
@@ -405,6 +421,10 @@ pub(crate) mod tests {
             ],
             extinction: 1.5,
             seen_gains: [1.0, 1.1, 1.2, 1.3, 0.9, 1.0, 1.05, 1.15],
+            hotspot: crate::lighting::hotspot::Hotspot {
+                sun: [0.5, 0.75, 1.25, 1.5],
+                bounce: [1.0, 0.75, 0.5, 0.25],
+            },
             source_hash: 0xDEAD_BEEF,
             bake_ms: 12.5,
         }

@@ -23,6 +23,7 @@ use super::format::ImpostorPlane;
 pub use super::format::LIGHT_ATLASES;
 use crate::lighting::bins::{LeafProxy, proxies};
 use crate::lighting::envelope::crown_envelope;
+use crate::lighting::hotspot::{Hotspot, HotspotSettings, crown_hotspot};
 use crate::lighting::leaf_scene::LeafScene;
 use crate::lighting::seen_part::{DEFAULT_SEEN_POINTS, crown_mean_gains, seen_part_gains_of};
 use crate::lighting::traced_bins::{BinEstimate, crown_envelope_traced};
@@ -145,6 +146,9 @@ pub struct SourceLight {
     /// ([`crate::lighting::seen_part`]): an impostor texel's light atlases have no room for the
     /// leaf's own, so the cloud scales its leaf texels by the crown's.
     pub seen: [f32; 8],
+    /// The crown's hotspot ([`crate::lighting::hotspot`]) measured against the cloud's own
+    /// model (every leaf texel with the crown's mean gains).
+    pub hotspot: Hotspot,
 }
 
 impl Default for SourceLight {
@@ -153,6 +157,7 @@ impl Default for SourceLight {
             attenuation: Vec::new(),
             extinction: 0.0,
             seen: [1.0; 8],
+            hotspot: Hotspot::default(),
         }
     }
 }
@@ -285,10 +290,24 @@ impl ImpostorSource {
         let opacity = |l: u32| opacity.get(l as usize).copied().unwrap_or(1.0);
         let all: Vec<u32> = (0..self.leaves.len() as u32).collect();
         let gains = seen_part_gains_of(&scene, &all, DEFAULT_SEEN_POINTS, &opacity, threads);
+        let seen = crown_mean_gains(&gains);
+        let hotspot = crown_hotspot(
+            &scene,
+            &envelope,
+            &vec![seen; self.leaves.len()],
+            &|l| Some(l as usize),
+            &crate::lighting::settings::TreeLightingSettings::default().optics,
+            &opacity,
+            &HotspotSettings::default(),
+            threads,
+        )
+        .sanitized()
+        .0;
         SourceLight {
             attenuation: envelope.leaves.iter().map(|e| e.attenuation).collect(),
             extinction: envelope.tau,
-            seen: crown_mean_gains(&gains),
+            seen,
+            hotspot,
         }
     }
 
@@ -780,6 +799,7 @@ mod tests {
             ],
             extinction: 1.0,
             seen: [1.0; 8],
+            hotspot: Hotspot::default(),
         };
         let atlases = bake_reference(&source, &cloud, &layout, &light);
         let (albedo, normal) = (&atlases.albedo, &atlases.normal);

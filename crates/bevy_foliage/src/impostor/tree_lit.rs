@@ -58,6 +58,9 @@ pub struct TreeLitImpostorParams {
     /// The crown's mean seen-part gain per eye octant (`lighting::seen_part`), octants 0–3 then
     /// 4–7.
     pub seen_gains: [Vec4; 2],
+    /// The crown's hotspot packed (`lighting::hotspot::Hotspot::packed`): the sun's exponent
+    /// nodes, then the bounce's.
+    pub hotspot: UVec2,
 }
 
 impl TreeLitImpostorParams {
@@ -73,6 +76,7 @@ impl TreeLitImpostorParams {
             bounce: leaves.bounce,
             seen_part: leaves.seen_part,
             seen_gains: own.seen_gains,
+            hotspot: own.hotspot,
         }
     }
 }

@@ -19,7 +19,7 @@
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
     shadows::fetch_directional_shadow,
 }
-#import bevy_foliage::tree_lighting::{TreeLightUniform, covered_gain, leaf_radiance, lights_of, optics_of, seen_gain}
+#import bevy_foliage::tree_lighting::{TreeLightUniform, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, seen_gain}
 
 struct TreeLitImpostorParams {
     lights: TreeLightUniform,
@@ -31,6 +31,8 @@ struct TreeLitImpostorParams {
     seen_part: u32,
     // The crown's mean seen-part gain per eye octant (`lighting::seen_part`).
     seen_gains: array<vec4<f32>, 2>,
+    // The crown's hotspot (`lighting::hotspot`): the sun's exponent nodes, the bounce's.
+    hotspot: vec2<u32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> params: TreeLitImpostorParams;
@@ -113,8 +115,14 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
         let reach = max(dot(params.crown_sphere.xyz - p_local, lights.to_sun)
             + params.crown_sphere.w, 0.0) * scale;
         let outside = sun_shadow_at(p + params.lights.to_sun.xyz * reach, in.position.xy, pbr_input.flags);
-        let through = min(light.through * seen, 1.0);
-        let bounce = light.bounce * select(1.0, covered_gain(seen, light.open), params.seen_part != 0u);
+        // And the crown's hotspot by the eye's angle to the sun, with the gains.
+        var through = min(light.through * seen, 1.0);
+        var bounce = light.bounce;
+        if params.seen_part != 0u {
+            let cos_alpha = dot(to_eye, lights.to_sun);
+            through = pow(through, hotspot_at(params.hotspot.x, cos_alpha));
+            bounce *= covered_gain(seen, light.open) * hotspot_at(params.hotspot.y, cos_alpha);
+        }
         let tree_lit = (light.sky * seen + light.sun * through * outside + bounce * outside)
             * view_bindings::view.exposure;
         color += tree_lit * leaf;

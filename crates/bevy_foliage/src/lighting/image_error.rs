@@ -16,7 +16,7 @@ use super::bins::proxies;
 use super::envelope::CrownEnvelope;
 use super::leaf_scene::LeafScene;
 use super::model::{
-    LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bsdf, open_share, sun_radiance,
+    LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bsdf, lobe_blend, open_share, sun_radiance,
 };
 use super::path_trace::{
     ComponentError, ModelLight, TraceLight, TraceSettings, component_error, envelope_by, gather,
@@ -42,6 +42,9 @@ pub struct ImageSettings {
     pub seed: u64,
     /// Points per leaf for the gains of [`super::seen_part`] (0: not measured).
     pub seen_points: u32,
+    /// Whether to measure the crown's hotspot ([`super::hotspot`], with another seed than the
+    /// images') and render the last model with it.
+    pub hotspot: bool,
 }
 
 impl Default for ImageSettings {
@@ -52,6 +55,7 @@ impl Default for ImageSettings {
             bounces: 1,
             seed: 1,
             seen_points: DEFAULT_SEEN_POINTS,
+            hotspot: false,
         }
     }
 }
@@ -88,6 +92,11 @@ pub struct ImageComparison {
     /// eye and its bounce by the covered part's gain ([`super::seen_part`]), per pixel size;
     /// empty when [`ImageSettings::seen_points`] is 0.
     pub seen: Vec<ImageError>,
+    /// As `seen` (or the last model), the sun's term and the bounce scaled by the crown's
+    /// hotspot at the image's phase angle; empty unless [`ImageSettings::hotspot`].
+    pub hotspot: Vec<ImageError>,
+    /// The hotspot measured, when it was.
+    pub hotspot_factors: Option<super::hotspot::Hotspot>,
     /// Eye rays that hit a leaf.
     pub hits: usize,
 }
@@ -319,29 +328,73 @@ pub fn images_against_tracer(
         ]
     });
     let shadow_map_sun = measure(&[model_sky, mapped_sun, model_bounce]);
-    let seen = match last_model {
-        Some(([mut sky, mut sun, mut bounce], envelope)) if settings.seen_points > 0 => {
-            let gains = {
-                let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
-                seen_part_gains_of(&scene, &all, settings.seen_points, &|_| 1.0, threads)
-            };
-            for (k, s) in samples.iter().enumerate() {
-                if let Some(s) = s {
-                    let leaf = s.leaf as usize;
-                    let gain = seen_gain(&gains[leaf], view);
-                    sky[k] *= gain;
-                    sun[k] *= gain;
-                    let open = open_share(scene.normal(leaf), &envelope.leaves[leaf].attenuation);
-                    bounce[k] *= covered_gain(gain, open);
+    let gains = (settings.seen_points > 0).then(|| {
+        let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
+        seen_part_gains_of(&scene, &all, settings.seen_points, &|_| 1.0, threads)
+    });
+    let hotspot_factors = match (&last_model, settings.hotspot) {
+        (Some((_, envelope)), true) => Some(super::hotspot::crown_hotspot(
+            &scene,
+            envelope,
+            gains.as_deref().unwrap_or(&[]),
+            &|l| Some(l as usize),
+            material,
+            &|_| 1.0,
+            &super::hotspot::HotspotSettings::OFFLINE,
+            threads,
+        )),
+        _ => None,
+    };
+    let (seen, hotspot) = match last_model {
+        Some(([sky, sun, bounce], envelope)) => {
+            // The image with the gains (where measured) and the sun through the crown as
+            // `through` gives it per leaf.
+            // The image with the gains (where measured), the sun through the crown as
+            // `through(leaf, blend, gain)` makes the leaf's share of it (the gain applied), and
+            // the bounce scaled by `bounce_factor`.
+            let with = |through: &dyn Fn(usize, f32, f32) -> f32, bounce_factor: f32| {
+                let (mut sky, mut sun, mut bounce) = (sky.clone(), sun.clone(), bounce.clone());
+                for (k, s) in samples.iter().enumerate() {
+                    if let Some(s) = s {
+                        let leaf = s.leaf as usize;
+                        let e = &envelope.leaves[leaf];
+                        let old = lobe_blend(&e.attenuation, light.to_sun, 1.0);
+                        let gain = gains.as_ref().map_or(1.0, |g| seen_gain(&g[leaf], view));
+                        let new = through(leaf, old, gain);
+                        // The sun's term is linear in the share let through; the bounce in the
+                        // light at the leaf before the gain.
+                        sun[k] *= if old > 0.0 { new / old } else { 1.0 };
+                        bounce[k] *= bounce_factor;
+                        if gains.is_some() {
+                            sky[k] *= gain;
+                            let open = open_share(scene.normal(leaf), &e.attenuation);
+                            bounce[k] *= covered_gain(gain, open);
+                        }
+                    }
                 }
-            }
-            measure(&[sky, sun, bounce])
+                measure(&[sky, sun, bounce])
+            };
+            let seen = if gains.is_some() {
+                with(&|_, old, gain| old * gain, 1.0)
+            } else {
+                Vec::new()
+            };
+            let hotspot = match &hotspot_factors {
+                Some(h) => with(
+                    &|_, old, gain| h.sun_through((old * gain).min(1.0), view, light.to_sun),
+                    h.bounce_at(view, light.to_sun),
+                ),
+                None => Vec::new(),
+            };
+            (seen, hotspot)
         }
-        _ => Vec::new(),
+        _ => (Vec::new(), Vec::new()),
     };
     ImageComparison {
         models,
         seen,
+        hotspot,
+        hotspot_factors,
         shadow_map_sun,
         noise,
         hits: samples.iter().flatten().count(),

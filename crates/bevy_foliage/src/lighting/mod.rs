@@ -8,12 +8,15 @@
 //! of sunlight of §5.2–5.4), the CPU reference of the leaf shaders, with [`path_trace`] the
 //! Monte Carlo ground truth it is measured against leaf by leaf, and [`image_error`] as
 //! images at several pixel sizes, the way the thesis reports its error, with [`seen_part`] the
-//! gain from a leaf's mean to the part of it the eye sees; [`settings`] switches the leaf
+//! gain from a leaf's mean to the part of it the eye sees and [`hotspot`] the crown's
+//! dependence on the angle between the eye and the sun (the eye's and the sun's paths share
+//! their gaps); [`settings`] switches the leaf
 //! shaders between it and Bevy's lighting; [`sun_maps`] measures maps rendered from the sun (shadow map, foliage
 //! maps) as the leaves' sun against the same tracer.
 
 pub mod bins;
 pub mod envelope;
+pub mod hotspot;
 pub mod image_error;
 pub mod leaf_scene;
 pub mod leaf_tree;

@@ -20,6 +20,10 @@
 //! ([`covered_gain`]; the shaders take Ō from the leaf's bins, [`super::model::open_share`]).
 //! In the images of the four procedural trees the bounce's bias falls from +16…+23 % to
 //! +10.5…+17.5 % with it (`tree_lighting_error --images`).
+//!
+//! The gain the sun takes here is the sky's, whatever the sun's direction; how the sun's share
+//! of the part in view depends on where the sun is from the eye is the crown's hotspot
+//! ([`super::hotspot`]), measured with these gains.
 
 use super::bins::DIRECTIONS;
 use super::leaf_scene::{LeafScene, uniform_direction};

@@ -41,7 +41,8 @@ pub struct TreeLightingSettings {
     pub bounce: bool,
     /// Scale each leaf's sky and blended sun by its baked gain towards the eye, and its bounce
     /// by the covered part's gain: the part of a leaf in view is more open than the leaf's mean
-    /// ([`crate::lighting::seen_part`]).
+    /// ([`crate::lighting::seen_part`]); and apply the crown's hotspot by the angle between
+    /// the eye and the sun, measured with those gains ([`crate::lighting::hotspot`]).
     pub seen_part: bool,
 }
 

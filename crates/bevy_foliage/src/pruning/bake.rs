@@ -93,6 +93,12 @@ pub struct BakeSettings {
     /// Points per leaf for the gains from a leaf's mean light to the part of it the eye sees
     /// ([`crate::lighting::seen_part`]); 0 leaves every gain at 1 (the thesis' model as it is).
     pub seen_points: u32,
+    /// How the crown's hotspot is measured — how what the eye sees of the crown's sun and
+    /// bounce depends on the angle between the eye and the sun ([`crate::lighting::hotspot`])
+    /// — where the bake traces through the leaves (traced bins or seen-part gains);
+    /// [`HotspotSettings::NONE`](crate::lighting::hotspot::HotspotSettings::NONE), or a bake
+    /// that traces nothing, leaves its factors at 1.
+    pub hotspot: crate::lighting::hotspot::HotspotSettings,
 }
 
 impl Default for BakeSettings {
@@ -105,6 +111,7 @@ impl Default for BakeSettings {
             threads: 0,
             bins: BinEstimate::default(),
             seen_points: crate::lighting::seen_part::DEFAULT_SEEN_POINTS,
+            hotspot: Default::default(),
         }
     }
 }
@@ -215,6 +222,10 @@ pub struct BakedFoliage {
     /// of the eight octants ([`crate::lighting::seen_part`]), quantised by
     /// [`quantize_gain`](crate::lighting::seen_part::quantize_gain); empty: all 1.
     pub leaf_seen: Vec<[u16; 8]>,
+    /// The crown's hotspot: factors on the sun's term and the bounce by the angle between the
+    /// eye and the sun ([`crate::lighting::hotspot`]), as stored (quantised); all 1 when not
+    /// measured.
+    pub hotspot: crate::lighting::hotspot::Hotspot,
     /// The crown's fitted extinction τ per unit of model space (eq. 5.5; 0 for a crown with no
     /// leaf behind another): `s_max(P, ω_j) = −ln(a_j) / τ`.
     pub extinction: f32,
@@ -358,6 +369,7 @@ pub fn bake_masked(
             crate::lighting::seen_part::MAX_SEEN_POINTS
         )));
     }
+    settings.hotspot.checked().map_err(BakeError::Settings)?;
     let (leaves, skipped) = leaves.sanitized();
     if leaves.is_empty() {
         return Err(BakeError::NoLeaves { skipped });
@@ -420,6 +432,7 @@ pub fn bake_masked(
         centroid_offsets: Vec::new(),
         leaf_light: Vec::new(),
         leaf_seen: Vec::new(),
+        hotspot: Default::default(),
         extinction: 0.0,
         skipped,
     };
@@ -571,6 +584,30 @@ pub fn bake_masked(
         .into_iter()
         .map(|g| g.map(quantize_gain))
         .collect();
+    }
+    if let Some(scene) = &scene {
+        use crate::lighting::hotspot::crown_hotspot;
+        use crate::lighting::seen_part::gain_of;
+        // What the shaders read: the stored gains, and the settings' default optics (the
+        // factors are ratios, unchanged by the base colour that scales them).
+        let gains: Vec<[f32; 8]> = baked.leaf_seen.iter().map(|g| g.map(gain_of)).collect();
+        let mut stored_of = vec![None; leaves.len()];
+        for (i, &l) in stored_leaves.iter().enumerate() {
+            stored_of[l as usize] = Some(i);
+        }
+        let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
+        baked.hotspot = crown_hotspot(
+            scene,
+            &envelope,
+            &gains,
+            &|l| stored_of.get(l as usize).copied().flatten(),
+            &optics,
+            &|_| opaque,
+            &settings.hotspot,
+            threads,
+        )
+        .sanitized()
+        .0;
     }
     progress(BakeProgress {
         stage: BakeStage::Envelope,
@@ -730,6 +767,42 @@ mod tests {
         );
         let absurd = BakeSettings {
             seen_points: u32::MAX,
+            ..settings
+        };
+        assert!(matches!(
+            bake(&tree.leaves, &absurd, &|_| {}),
+            Err(BakeError::Settings(_))
+        ));
+    }
+
+    /// The crown's hotspot is measured in a bake (the olive's sun exponent below 1 with the sun
+    /// behind the eye, above 1 facing it), left at 1 with no measurement, and an absurd
+    /// measurement is refused.
+    #[test]
+    fn the_hotspot_is_baked_or_left_out() {
+        use crate::lighting::hotspot::{Hotspot, HotspotSettings};
+        let tree = generate(&TreeSpecies::olea().with_leaf_count(600));
+        let settings = BakeSettings {
+            cells: CellCount::Depth(3),
+            resolution: 32,
+            ..default()
+        };
+        let h = bake(&tree.leaves, &settings, &|_| {}).unwrap().0.hotspot;
+        assert!(h.sun[0] < 0.9 && h.sun[3] > 1.05, "{h:?}");
+        assert_eq!(h.sanitized(), (h, false));
+        let none = BakeSettings {
+            hotspot: HotspotSettings::NONE,
+            ..settings.clone()
+        };
+        assert_eq!(
+            bake(&tree.leaves, &none, &|_| {}).unwrap().0.hotspot,
+            Hotspot::default()
+        );
+        let absurd = BakeSettings {
+            hotspot: HotspotSettings {
+                eye_rays: u32::MAX,
+                ..HotspotSettings::default()
+            },
             ..settings
         };
         assert!(matches!(

@@ -22,7 +22,7 @@ use std::path::Path;
 /// File signature.
 pub const MAGIC: &[u8; 8] = b"BNFOLIAG";
 /// Current format version; bump on any layout change.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 
 /// Why a baked foliage file could not be read.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -192,6 +192,7 @@ pub fn encode(baked: &BakedFoliage) -> Vec<u8> {
     w.u16s(&light);
     let seen: Vec<u16> = baked.leaf_seen.iter().flatten().copied().collect();
     w.u16s(&seen);
+    w.u32s(&baked.hotspot.packed());
     w.u32s(&[baked.extinction.to_bits()]);
     let s = baked.skipped;
     w.u32s(&[s.non_finite as u32, s.degenerate as u32, s.malformed as u32]);
@@ -256,7 +257,12 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
     let centroid_offsets = r.vec3s()?;
     let light = r.u16s()?;
     let seen = r.u16s()?;
+    let hotspot = r.u32s()?;
     let extinction = r.u32s()?;
+    let hotspot = match hotspot.as_slice() {
+        &[sun, bounce] => crate::lighting::hotspot::Hotspot::unpacked([sun, bounce]),
+        _ => return Err(FormatError::Invalid("hotspot section".into())),
+    };
     if light.len() % 8 != 0 || seen.len() % 8 != 0 || extinction.len() != 1 {
         return Err(FormatError::Invalid("leaf light section".into()));
     }
@@ -285,6 +291,7 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
         centroid_offsets,
         leaf_light,
         leaf_seen,
+        hotspot,
         extinction: f32::from_bits(extinction[0]),
         skipped: SkippedLeaves {
             non_finite: skipped[0] as usize,
@@ -357,6 +364,15 @@ pub fn validate(b: &BakedFoliage) -> Result<(), FormatError> {
             "seen-part gains for {} leaves, file has {}",
             b.leaf_seen.len(),
             b.leaf_count()
+        ));
+    }
+    let (_, bad_hotspot) = b.hotspot.sanitized();
+    if bad_hotspot {
+        return bad(format!(
+            "hotspot factors {:?} / {:?} outside {:?}",
+            b.hotspot.sun,
+            b.hotspot.bounce,
+            crate::lighting::hotspot::HOTSPOT_RANGE
         ));
     }
     if !(b.extinction.is_finite() && b.extinction >= 0.0) {
@@ -447,6 +463,28 @@ pub(crate) mod tests {
         let mut no_seen = sample();
         no_seen.leaf_seen.clear();
         assert_eq!(decode(&encode(&no_seen)), Ok(no_seen));
+        // The hotspot: measured in a bake (not the all-1 default), kept through a file, and
+        // a factor out of range refused.
+        let measured = sample();
+        assert_ne!(
+            measured.hotspot,
+            crate::lighting::hotspot::Hotspot::default()
+        );
+        assert_eq!(
+            decode(&encode(&measured)).unwrap().hotspot,
+            measured.hotspot
+        );
+        let mut bad_hotspot = sample();
+        bad_hotspot.hotspot.bounce[2] = 0.0;
+        assert!(matches!(
+            validate(&bad_hotspot),
+            Err(FormatError::Invalid(_))
+        ));
+        bad_hotspot.hotspot.bounce[2] = f32::NAN;
+        assert!(matches!(
+            validate(&bad_hotspot),
+            Err(FormatError::Invalid(_))
+        ));
         let mut bad_tau = sample();
         bad_tau.extinction = f32::NAN;
         assert!(matches!(

@@ -7,7 +7,7 @@
 #ifdef TREE_LIGHTING
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
 #import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_params, leaf_seen_gains}
-#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, leaf_radiance, lights_of, optics_of, seen_gain}
+#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, seen_gain}
 
 // The tree instance's frame, read once per vertex: world directions into the model's frame
 // (the transpose undoes a rotation and, once normalised, a uniform scale), the instance's scale
@@ -47,12 +47,15 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
     );
     // The part of the leaf in view is more open than its mean (`lighting::seen_part`): its sky,
     // and the sun where the crown's blend stands for it, scaled by the gain towards the eye;
-    // its bounce, from the covered rest of the sphere, by the covered part's gain.
+    // its bounce, from the covered rest of the sphere, by the covered part's gain. Then the
+    // crown's hotspot (`lighting::hotspot`) by the angle between the eye and the sun: the
+    // blended sun raised to its exponent, the bounce scaled.
     if leaf_params.seen_part != 0u {
         let seen = seen_gain(leaf_seen_gains(leaf.leaf), to_eye);
+        let cos_alpha = dot(to_eye, frame.to_sun);
         light.sky *= seen;
-        light.through = min(light.through * seen, 1.0);
-        light.bounce *= covered_gain(seen, light.open);
+        light.through = pow(min(light.through * seen, 1.0), hotspot_at(leaf.hotspot.x, cos_alpha));
+        light.bounce *= covered_gain(seen, light.open) * hotspot_at(leaf.hotspot.y, cos_alpha);
     }
     // A channel the base colour lacks sends no light either.
     let lacks = albedo <= vec3(0.0);

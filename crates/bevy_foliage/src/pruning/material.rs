@@ -46,7 +46,8 @@ pub struct LeafParams {
     /// 1 to add one bounce of sunlight (eq. 5.24).
     pub bounce: u32,
     /// 1 to scale the sky and the blended sun by the leaf's seen-part gain towards the eye,
-    /// the bounce by the covered part's gain ([`crate::lighting::seen_part`]).
+    /// the bounce by the covered part's gain ([`crate::lighting::seen_part`]), and both by the
+    /// crown's hotspot ([`crate::lighting::hotspot`]).
     pub seen_part: u32,
     /// The tree lighting's optics and the scene's lights.
     pub lights: TreeLightUniform,

@@ -63,6 +63,8 @@ pub struct TypeSlot {
     /// The crown's bounding sphere in model space (centre xyz, radius), as `f32` bits: where
     /// the sun's light from outside enters the crown.
     pub crown_sphere_bits: [u32; 4],
+    /// The crown's hotspot ([`BakedFoliage::hotspot`]) packed as the leaf shaders read it.
+    pub hotspot: [u32; 2],
 }
 
 /// Set in a pruned tree's `MeshTag` when it is drawn with a quad slot mesh; the low bits are the
@@ -199,6 +201,7 @@ pub fn update_foliage_store(
                 full_index_count: tree.indices.len() as u32,
                 quads: tree.quad_leaves() && !store_force_triangles,
                 extinction_bits: tree.extinction.to_bits(),
+                hotspot: tree.hotspot.packed(),
                 crown_sphere_bits: {
                     let centre = tree.crown_center();
                     let radius = tree

@@ -164,6 +164,18 @@ fn covered_gain(gain: f32, open: f32) -> f32 {
     return clamp((1.0 - gain * o) / (1.0 - o), 0.0, COVERED_GAIN_MAX);
 }
 
+// The crown's hotspot at the phase angle whose cosine is `cos_alpha` (eye · sun), from four u8
+// nodes in 64ths over α = 0, π/3, 2π/3, π, linearly in the angle
+// (`lighting::hotspot::at_phase`).
+fn hotspot_at(nodes: u32, cos_alpha: f32) -> f32 {
+    let x = acos(clamp(cos_alpha, -1.0, 1.0)) / PI * 3.0;
+    let i = min(u32(floor(x)), 2u);
+    let f = clamp(x - f32(i), 0.0, 1.0);
+    let a = f32((nodes >> (8u * i)) & 0xffu) / 64.0;
+    let b = f32((nodes >> (8u * (i + 1u))) & 0xffu) / 64.0;
+    return mix(a, b, f);
+}
+
 // The whole of eq. 5.2 for one leaf (`sky + sun * through + bounce` of the result) of unit normal `n` seen from `to_eye`, whose eight
 // directions let `attenuation` through, in a crown of extinction `tau` (`model::leaf_radiance`).
 // `smooth_envelope` picks eq. 5.7's blend of envelope distances for the sun through the crown
