@@ -8,7 +8,7 @@ use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::light::CascadeShadowConfigBuilder;
 use bevy::prelude::*;
 use bevy_foliage::lighting::bins::{DARKEST_LIGHT, light_of};
-use bevy_foliage::lighting::hotspot::Hotspot;
+use bevy_foliage::lighting::hotspot::{HOTSPOT_NODES, Hotspot};
 use bevy_foliage::lighting::model::{
     SkyLight, SunBounce, SunThroughCrown, bounce_radiance, open_share, sky_radiance, sun_radiance,
     sun_through_crown,
@@ -388,21 +388,18 @@ fn compare_with_model(
             } else {
                 check.shaded += 1;
             }
-            let want = expected(leaf, true, true, true, outside, at_leaf)
-                .to_array()
-                .map(|c| srgb(c) * 255.0);
-            let plain = expected(leaf, false, true, true, outside, at_leaf)
-                .to_array()
-                .map(|c| srgb(c) * 255.0);
-            let uncovered = expected(leaf, true, false, true, outside, at_leaf)
-                .to_array()
-                .map(|c| srgb(c) * 255.0);
-            let no_hotspot = expected(leaf, true, true, false, outside, at_leaf)
-                .to_array()
-                .map(|c| srgb(c) * 255.0);
-            let plain_no_hotspot = expected(leaf, false, true, false, outside, at_leaf)
-                .to_array()
-                .map(|c| srgb(c) * 255.0);
+            // The pixel the model gives with the bounce, the covered part's gain and the
+            // hotspot each on or off, in 255ths of sRGB.
+            let pixel = |bounce: bool, covered: bool, hotspot: bool| {
+                expected(leaf, bounce, covered, hotspot, outside, at_leaf)
+                    .to_array()
+                    .map(|c| srgb(c) * 255.0)
+            };
+            let want = pixel(true, true, true);
+            let plain = pixel(false, true, true);
+            let uncovered = pixel(true, false, true);
+            let no_hotspot = pixel(true, true, false);
+            let plain_no_hotspot = pixel(false, true, false);
             let got = image.pixel(x, y);
             let [r, g, b] = want.map(|c| c.round() as u8);
             check.reference.set_pixel(x, y, [r, g, b, 255]);
@@ -545,8 +542,8 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
     let strong = BakedFoliage {
         leaf_seen: vec![[quantize_gain(STRONG_GAIN); 8]; baked.leaf_count()],
         hotspot: Hotspot {
-            sun: [STRONG_HOTSPOT.0; 4],
-            bounce: [STRONG_HOTSPOT.1; 4],
+            sun: [STRONG_HOTSPOT.0; HOTSPOT_NODES],
+            bounce: [STRONG_HOTSPOT.1; HOTSPOT_NODES],
         }
         .sanitized()
         .0,
@@ -1523,8 +1520,8 @@ const CLOUD_SEEN_GAINS: [f32; 8] = [0.3, 0.4, 0.25, 0.35, 0.45, 0.3, 0.4, 0.35];
 /// The test cloud's hotspot: distinct nodes, none 1, so a shader that skips or misreads it
 /// shows.
 const CLOUD_HOTSPOT: Hotspot = Hotspot {
-    sun: [0.5, 0.75, 1.5, 2.0],
-    bounce: [1.75, 1.5, 0.75, 0.5],
+    sun: [0.5, 0.625, 0.75, 1.25, 1.5, 1.625, 1.875, 2.0],
+    bounce: [1.75, 1.625, 1.5, 1.25, 0.75, 0.625, 0.5, 0.375],
 };
 
 /// How far a tree-lit crown's brightness may move when its billboard cloud takes over.

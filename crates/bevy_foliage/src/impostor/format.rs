@@ -330,7 +330,11 @@ pub fn decode(bytes: &[u8]) -> Result<ImpostorData, ImpostorFormatError> {
             "seen-part gains {seen_gains:?} outside {low}..={high}"
         )));
     }
-    let hotspot = crate::lighting::hotspot::Hotspot::unpacked([r.u32()?, r.u32()?]);
+    let mut words = [0u32; crate::lighting::hotspot::HOTSPOT_WORDS];
+    for w in &mut words {
+        *w = r.u32()?;
+    }
+    let hotspot = crate::lighting::hotspot::Hotspot::unpacked(words);
     if hotspot.sanitized().1 {
         return Err(ImpostorFormatError::Invalid(format!(
             "hotspot factors {:?} / {:?} outside {:?}",
@@ -422,8 +426,8 @@ pub(crate) mod tests {
             extinction: 1.5,
             seen_gains: [1.0, 1.1, 1.2, 1.3, 0.9, 1.0, 1.05, 1.15],
             hotspot: crate::lighting::hotspot::Hotspot {
-                sun: [0.5, 0.75, 1.25, 1.5],
-                bounce: [1.0, 0.75, 0.5, 0.25],
+                sun: [0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0],
+                bounce: [1.0, 0.875, 0.75, 0.625, 0.5, 0.375, 0.25, 0.125],
             },
             source_hash: 0xDEAD_BEEF,
             bake_ms: 12.5,

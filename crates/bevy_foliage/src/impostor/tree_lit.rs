@@ -60,7 +60,7 @@ pub struct TreeLitImpostorParams {
     pub seen_gains: [Vec4; 2],
     /// The crown's hotspot packed (`lighting::hotspot::Hotspot::packed`): the sun's exponent
     /// nodes, then the bounce's.
-    pub hotspot: UVec2,
+    pub hotspot: UVec4,
 }
 
 impl TreeLitImpostorParams {

@@ -32,7 +32,7 @@ struct TreeLitImpostorParams {
     // The crown's mean seen-part gain per eye octant (`lighting::seen_part`).
     seen_gains: array<vec4<f32>, 2>,
     // The crown's hotspot (`lighting::hotspot`): the sun's exponent nodes, the bounce's.
-    hotspot: vec2<u32>,
+    hotspot: vec4<u32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> params: TreeLitImpostorParams;
@@ -120,8 +120,8 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
         var bounce = light.bounce;
         if params.seen_part != 0u {
             let cos_alpha = dot(to_eye, lights.to_sun);
-            through = pow(through, hotspot_at(params.hotspot.x, cos_alpha));
-            bounce *= covered_gain(seen, light.open) * hotspot_at(params.hotspot.y, cos_alpha);
+            through = pow(through, hotspot_at(params.hotspot.xy, cos_alpha));
+            bounce *= covered_gain(seen, light.open) * hotspot_at(params.hotspot.zw, cos_alpha);
         }
         let tree_lit = (light.sky * seen + light.sun * through * outside + bounce * outside)
             * view_bindings::view.exposure;

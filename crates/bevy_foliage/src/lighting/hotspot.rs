@@ -20,12 +20,13 @@
 //! ray and the bounce by gathering the neighbours' sunlight as [`super::path_trace`] does.
 //! Plain Rust, baked with the bins; the leaf and cloud shaders interpolate the nodes at the
 //! eye's phase angle, raise the blended sun's share to the sun's and scale the bounce by the
-//! bounce's. Measured at seven sun directions (`tree_lighting_error --images --hotspot`), the
-//! sun's bias on the trees goes from −40…−43 % to −16…−19 % behind the eye and from
-//! +18…+63 % to −8…+20 % against it, the bounce's from +94…+171 % to +15…+45 % against it and
-//! from +9…+45 % to −14…+11 % from the side; what is left lies between the nodes (the hotspot's
-//! peak is narrower than a node's span) and in what the angle alone does not say (a low sun
-//! crosses more of a tall crown than a high one at the same angle).
+//! bounce's. Measured at seven sun directions (`tree_lighting_error --images --hotspot`,
+//! pixels 4–5 leaves wide), the sun's bias on the trees goes from −40…−43 % to −7…−10 % behind
+//! the eye and from +18…+63 % to −13…+14 % against it, the bounce's from +94…+171 % to
+//! +4.5…+31 % against it and from +9…+45 % to −8.5…+20 % from the side and above (with four
+//! nodes instead of eight: −16…−19 %, and +15…+45 % against). What is left lies between the
+//! nodes (the hotspot's peak is narrower than a node's span) and in what the angle alone does
+//! not say (a low sun crosses more of a tall crown than a high one at the same angle).
 
 use super::envelope::CrownEnvelope;
 use super::leaf_scene::{LeafScene, uniform_direction};
@@ -39,7 +40,11 @@ use std::f32::consts::PI;
 /// Phase angles the hotspot is given at, evenly from 0 to π (the shaders interpolate linearly
 /// in the angle between them); each node's value is measured over the angles its
 /// interpolation covers.
-pub const HOTSPOT_NODES: usize = 4;
+pub const HOTSPOT_NODES: usize = 8;
+
+/// Words a crown's hotspot takes packed ([`Hotspot::packed`]): a byte a node, the sun's nodes
+/// then the bounce's.
+pub const HOTSPOT_WORDS: usize = HOTSPOT_NODES / 2;
 
 /// Bounds of a hotspot factor as stored (`u8` steps of 1/64, above 0).
 pub const HOTSPOT_RANGE: (f32, f32) = (1.0 / 64.0, 255.0 / 64.0);
@@ -169,23 +174,24 @@ impl Hotspot {
         q as f32 / 64.0
     }
 
-    /// The eight factors packed in two words as the leaf shaders read them (sun nodes in the
-    /// first word, bounce nodes in the second, node 0 in the low byte).
-    pub fn packed(&self) -> [u32; 2] {
-        let word = |v: &[f32; HOTSPOT_NODES]| {
-            v.iter()
-                .enumerate()
-                .fold(0u32, |w, (k, &x)| w | (Self::quantize(x) as u32) << (8 * k))
-        };
-        [word(&self.sun), word(&self.bounce)]
+    /// The factors packed as the leaf shaders read them: a byte a node, four to a word, the
+    /// low byte first — the sun's nodes, then the bounce's.
+    pub fn packed(&self) -> [u32; HOTSPOT_WORDS] {
+        let bytes: Vec<u8> = self
+            .sun
+            .iter()
+            .chain(&self.bounce)
+            .map(|&x| Self::quantize(x))
+            .collect();
+        std::array::from_fn(|w| u32::from_le_bytes(std::array::from_fn(|b| bytes[4 * w + b])))
     }
 
     /// The factors of [`Self::packed`]'s words.
-    pub fn unpacked(words: [u32; 2]) -> Self {
-        let nodes = |w: u32| std::array::from_fn(|k| Self::dequantize((w >> (8 * k)) as u8));
+    pub fn unpacked(words: [u32; HOTSPOT_WORDS]) -> Self {
+        let byte = |i: usize| Self::dequantize(words[i / 4].to_le_bytes()[i % 4]);
         Self {
-            sun: nodes(words[0]),
-            bounce: nodes(words[1]),
+            sun: std::array::from_fn(byte),
+            bounce: std::array::from_fn(|k| byte(HOTSPOT_NODES + k)),
         }
     }
 
@@ -413,35 +419,37 @@ mod tests {
     }
 
     #[test]
-    fn the_nodes_are_interpolated_in_the_angle_and_stored_in_two_words() {
-        let nodes = [0.5, 1.0, 2.0, 3.0];
-        assert!((at_phase(&nodes, 1.0) - 0.5).abs() < 1e-6);
-        assert!((at_phase(&nodes, -1.0) - 3.0).abs() < 1e-6);
-        // α = π/2: halfway between the nodes at π/3 and 2π/3.
-        assert!((at_phase(&nodes, 0.0) - 1.5).abs() < 1e-5);
-        // α = π/6: halfway between the first two.
-        assert!((at_phase(&nodes, (PI / 6.0).cos()) - 0.75).abs() < 1e-5);
+    fn the_nodes_are_interpolated_in_the_angle_and_packed_a_byte_each() {
+        // Node k at α = k·π/7, value k + 1.
+        let nodes: [f32; HOTSPOT_NODES] = std::array::from_fn(|k| (k + 1) as f32 * 0.25);
+        let at = |alpha: f32| at_phase(&nodes, alpha.cos());
+        assert!((at(0.0) - 0.25).abs() < 1e-6);
+        assert!((at(PI) - 2.0).abs() < 1e-5);
+        // Halfway between nodes 3 and 4 (α = π/2), and a quarter of the way from node 1 to 2.
+        assert!((at(0.5 * PI) - 1.125).abs() < 1e-4);
+        assert!((at(1.25 * PI / 7.0) - 0.5625).abs() < 1e-4);
         let h = Hotspot {
-            sun: [0.25, 0.5, 1.0, 1.5],
-            bounce: [0.75, 1.0, 2.0, 3.5],
+            sun: std::array::from_fn(|k| 0.25 + 0.125 * k as f32),
+            bounce: std::array::from_fn(|k| 3.5 - 0.375 * k as f32),
         };
         assert_eq!(Hotspot::unpacked(h.packed()), h);
         assert_eq!(h.sanitized(), (h, false));
-        assert_eq!(Hotspot::default().packed(), [0x4040_4040; 2]);
+        assert_eq!(Hotspot::default().packed(), [0x4040_4040; HOTSPOT_WORDS]);
+        // Node 0 of the sun in the first word's low byte, node 0 of the bounce in the third's.
+        assert_eq!(h.packed()[0] & 0xff, 16);
+        assert_eq!(h.packed()[HOTSPOT_WORDS / 2] & 0xff, 224);
         // Out of range or not a number: clamped (NaN to 1) and reported.
-        let bad = Hotspot {
-            sun: [f32::NAN, 0.0, 9.0, 1.0],
-            ..Hotspot::default()
-        };
+        let mut bad = Hotspot::default();
+        bad.sun[..3].copy_from_slice(&[f32::NAN, 0.0, 9.0]);
         let (fixed, was_bad) = bad.sanitized();
         assert!(was_bad);
-        assert_eq!(fixed.sun, [1.0, HOTSPOT_RANGE.0, HOTSPOT_RANGE.1, 1.0]);
+        assert_eq!(fixed.sun[..4], [1.0, HOTSPOT_RANGE.0, HOTSPOT_RANGE.1, 1.0]);
         // The exponent leaves a share of 0 or 1 as it is.
         assert_eq!(h.sun_through(1.0, Vec3::Y, Vec3::Y), 1.0);
         assert_eq!(h.sun_through(0.0, Vec3::Y, Vec3::Y), 0.0);
-        // The sun behind the eye (α = 0, node 0's exponent ¼) and facing it (α = π, 1.5).
+        // The sun behind the eye (α = 0: node 0's exponent ¼) and facing it (α = π: 1.125).
         assert!((h.sun_through(0.25, Vec3::Y, Vec3::Y) - 0.25f32.powf(0.25)).abs() < 1e-6);
-        assert!((h.sun_through(0.25, Vec3::Y, -Vec3::Y) - 0.25f32.powf(1.5)).abs() < 1e-6);
+        assert!((h.sun_through(0.25, Vec3::Y, -Vec3::Y) - 0.25f32.powf(1.125)).abs() < 1e-6);
     }
 
     /// A leaf with nothing around it: every share is 1 and nothing bounces, so there is
@@ -477,8 +485,9 @@ mod tests {
         );
         eprintln!("{h:?}");
         assert!(h.sun[0] < 0.8, "{:?}", h.sun);
-        assert!(h.sun[3] > 1.02, "{:?}", h.sun);
-        assert!(h.sun[0] < h.sun[1] && h.sun[1] < h.sun[3], "{:?}", h.sun);
+        let last = HOTSPOT_NODES - 1;
+        assert!(h.sun[last] > 1.02, "{:?}", h.sun);
+        assert!(h.sun[0] < h.sun[1] && h.sun[1] < h.sun[last], "{:?}", h.sun);
         // The bounce on the uniform crown is eq. 5.24's own case: within a tenth of the model.
         for b in h.bounce {
             assert!((b - 1.0).abs() < 0.12, "{:?}", h.bounce);

@@ -788,7 +788,7 @@ mod tests {
             ..default()
         };
         let h = bake(&tree.leaves, &settings, &|_| {}).unwrap().0.hotspot;
-        assert!(h.sun[0] < 0.9 && h.sun[3] > 1.05, "{h:?}");
+        assert!(h.sun[0] < 0.9 && h.sun[7] > 1.05, "{h:?}");
         assert_eq!(h.sanitized(), (h, false));
         let none = BakeSettings {
             hotspot: HotspotSettings::NONE,

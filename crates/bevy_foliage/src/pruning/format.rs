@@ -259,9 +259,9 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
     let seen = r.u16s()?;
     let hotspot = r.u32s()?;
     let extinction = r.u32s()?;
-    let hotspot = match hotspot.as_slice() {
-        &[sun, bounce] => crate::lighting::hotspot::Hotspot::unpacked([sun, bounce]),
-        _ => return Err(FormatError::Invalid("hotspot section".into())),
+    let hotspot = match <[u32; crate::lighting::hotspot::HOTSPOT_WORDS]>::try_from(hotspot) {
+        Ok(words) => crate::lighting::hotspot::Hotspot::unpacked(words),
+        Err(_) => return Err(FormatError::Invalid("hotspot section".into())),
     };
     if light.len() % 8 != 0 || seen.len() % 8 != 0 || extinction.len() != 1 {
         return Err(FormatError::Invalid("leaf light section".into()));

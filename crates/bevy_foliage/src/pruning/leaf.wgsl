@@ -54,8 +54,8 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
         let seen = seen_gain(leaf_seen_gains(leaf.leaf), to_eye);
         let cos_alpha = dot(to_eye, frame.to_sun);
         light.sky *= seen;
-        light.through = pow(min(light.through * seen, 1.0), hotspot_at(leaf.hotspot.x, cos_alpha));
-        light.bounce *= covered_gain(seen, light.open) * hotspot_at(leaf.hotspot.y, cos_alpha);
+        light.through = pow(min(light.through * seen, 1.0), hotspot_at(leaf.hotspot.xy, cos_alpha));
+        light.bounce *= covered_gain(seen, light.open) * hotspot_at(leaf.hotspot.zw, cos_alpha);
     }
     // A channel the base colour lacks sends no light either.
     let lacks = albedo <= vec3(0.0);

@@ -78,8 +78,8 @@ struct PulledLeafVertex {
     extinction: f32,
     // The crown's bounding sphere in model space (centre, radius).
     crown_sphere: vec4<f32>,
-    // The crown's hotspot, packed (`Instance::hotspot_sun`, `hotspot_bounce`).
-    hotspot: vec2<u32>,
+    // The crown's hotspot, packed (`Instance::hotspot`).
+    hotspot: vec4<u32>,
     // The largest distance of the leaf's corners from its centre, in model space.
     leaf_radius: f32,
 }
@@ -138,7 +138,7 @@ fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeaf
     out.leaf = v.leaf;
     out.extinction = bitcast<f32>(inst.extinction_bits);
     out.crown_sphere = bitcast<vec4<f32>>(inst.crown_sphere_bits);
-    out.hotspot = vec2(inst.hotspot_sun, inst.hotspot_bounce);
+    out.hotspot = inst.hotspot;
     out.leaf_radius = v.leaf_radius;
     out.world_position = mesh_functions::mesh_position_local_to_world(world_from_local, vec4<f32>(out.local_position, 1.0));
     out.clip_position = position_world_to_clip(out.world_position.xyz);

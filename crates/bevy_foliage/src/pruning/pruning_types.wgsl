@@ -20,12 +20,14 @@ struct Instance {
     cell_offsets_base: u32, // first `cell_offsets` entry of this instance
     shadow_slot: u32,      // the record shadow views draw (the light's selection, or this one)
     extinction_bits: u32,  // the crown's extinction τ per unit of model space (f32 bits)
-    // The crown's hotspot (`lighting::hotspot::Hotspot::packed`): four u8 nodes over the phase
-    // angle each, the sun's exponent then the bounce's factor, in 64ths.
-    hotspot_sun: u32,
-    hotspot_bounce: u32,
+    pad_b: u32,
+    pad_c: u32,
     // The crown's bounding sphere in model space (centre xyz, radius; f32 bits).
     crown_sphere_bits: vec4<u32>,
+    // The crown's hotspot (`lighting::hotspot::Hotspot::packed`): eight u8 nodes over the phase
+    // angle each, in 64ths — the sun's exponent in the first two words, the bounce's factor in
+    // the last two.
+    hotspot: vec4<u32>,
 }
 
 // A packed leaf vertex (`LEAF_VERTEX_WORDS` words, `store.rs`).

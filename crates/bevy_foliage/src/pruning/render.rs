@@ -218,12 +218,16 @@ fn prepare_pruning(
             region.cell_offsets_base,
             shadow_slot,
             ty.extinction_bits,
-            ty.hotspot[0],
-            ty.hotspot[1],
+            0,
+            0,
             ty.crown_sphere_bits[0],
             ty.crown_sphere_bits[1],
             ty.crown_sphere_bits[2],
             ty.crown_sphere_bits[3],
+            ty.hotspot[0],
+            ty.hotspot[1],
+            ty.hotspot[2],
+            ty.hotspot[3],
         ]);
     };
     for (entity, slot, params) in &extracted.instances {

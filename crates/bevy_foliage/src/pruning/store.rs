@@ -64,7 +64,7 @@ pub struct TypeSlot {
     /// the sun's light from outside enters the crown.
     pub crown_sphere_bits: [u32; 4],
     /// The crown's hotspot ([`BakedFoliage::hotspot`]) packed as the leaf shaders read it.
-    pub hotspot: [u32; 2],
+    pub hotspot: [u32; crate::lighting::hotspot::HOTSPOT_WORDS],
 }
 
 /// Set in a pruned tree's `MeshTag` when it is drawn with a quad slot mesh; the low bits are the
@@ -87,7 +87,7 @@ pub const LEAF_VERTEX_WORDS: usize = 16;
 pub const LEAF_LIGHT_WORDS: usize = 8;
 
 /// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf_pulling.wgsl`).
-pub const INSTANCE_WORDS: usize = 24;
+pub const INSTANCE_WORDS: usize = 28;
 
 /// Handles of the shared pruning buffers.
 #[derive(Clone, Debug, Default)]

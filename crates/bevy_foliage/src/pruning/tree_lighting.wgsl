@@ -164,16 +164,18 @@ fn covered_gain(gain: f32, open: f32) -> f32 {
     return clamp((1.0 - gain * o) / (1.0 - o), 0.0, COVERED_GAIN_MAX);
 }
 
-// The crown's hotspot at the phase angle whose cosine is `cos_alpha` (eye · sun), from four u8
-// nodes in 64ths over α = 0, π/3, 2π/3, π, linearly in the angle
-// (`lighting::hotspot::at_phase`).
-fn hotspot_at(nodes: u32, cos_alpha: f32) -> f32 {
-    let x = acos(clamp(cos_alpha, -1.0, 1.0)) / PI * 3.0;
-    let i = min(u32(floor(x)), 2u);
+// Node `k` of eight u8 nodes packed four to a word, low byte first, in 64ths.
+fn hotspot_node(nodes: vec2<u32>, k: u32) -> f32 {
+    return f32((nodes[k / 4u] >> (8u * (k % 4u))) & 0xffu) / 64.0;
+}
+
+// The crown's hotspot at the phase angle whose cosine is `cos_alpha` (eye · sun), from eight
+// nodes evenly over α = 0 … π, linearly in the angle (`lighting::hotspot::at_phase`).
+fn hotspot_at(nodes: vec2<u32>, cos_alpha: f32) -> f32 {
+    let x = acos(clamp(cos_alpha, -1.0, 1.0)) / PI * 7.0;
+    let i = min(u32(floor(x)), 6u);
     let f = clamp(x - f32(i), 0.0, 1.0);
-    let a = f32((nodes >> (8u * i)) & 0xffu) / 64.0;
-    let b = f32((nodes >> (8u * (i + 1u))) & 0xffu) / 64.0;
-    return mix(a, b, f);
+    return mix(hotspot_node(nodes, i), hotspot_node(nodes, i + 1u), f);
 }
 
 // The whole of eq. 5.2 for one leaf (`sky + sun * through + bounce` of the result) of unit normal `n` seen from `to_eye`, whose eight
