@@ -207,6 +207,10 @@ impl Hotspot {
     }
 }
 
+/// What one (node, pair) job of [`crown_hotspot`] finds: the sun's samples (weight, the model's
+/// share, the traced share) and the bounce's sums (traced, modelled).
+type JobSums = (Vec<[f32; 3]>, [f64; 2]);
+
 /// A phase angle for node `k`: drawn from the hat function the shaders' linear interpolation
 /// gives the node (1 at the node, 0 at its neighbours), so that each node's value is its
 /// hat-weighted mean of the crown's ratio — the cusp of the hotspot at α = 0 spread over the
@@ -260,7 +264,7 @@ pub fn crown_hotspot(
         .collect();
     // Per job: the sun's samples (weight, the model's share t, the traced share) and the
     // bounce's sums (traced, modelled).
-    let work = |&(k, i): &(usize, u32)| -> (Vec<[f32; 3]>, [f64; 2]) {
+    let work = |&(k, i): &(usize, u32)| -> JobSums {
         let mut rng = SplitMix64::new(
             settings.seed ^ ((k as u64) << 32 | i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
         );
@@ -330,7 +334,7 @@ pub fn crown_hotspot(
         (sun, sums)
     };
     let chunk = jobs.len().div_ceil(threads.max(1)).max(1);
-    let results: Vec<((usize, u32), (Vec<[f32; 3]>, [f64; 2]))> = std::thread::scope(|s| {
+    let results: Vec<((usize, u32), JobSums)> = std::thread::scope(|s| {
         let handles: Vec<_> = jobs
             .chunks(chunk)
             .map(|part| s.spawn(move || part.iter().map(|j| (*j, work(j))).collect::<Vec<_>>()))
