@@ -89,7 +89,7 @@ pub struct ImageComparison {
     /// size, below which no model can be shown closer to it.
     pub noise: Vec<ImageError>,
     /// The last model with its sky and sun scaled by each leaf's seen-part gain towards the
-    /// eye and its bounce by the covered part's gain ([`super::seen_part`]), per pixel size;
+    /// eye (the sun's share capped at 1, as the leaf shaders cap it) and its bounce by the covered part's gain ([`super::seen_part`]), per pixel size;
     /// empty when [`ImageSettings::seen_points`] is 0.
     pub seen: Vec<ImageError>,
     /// As `seen` (or the last model), the sun's term and the bounce scaled by the crown's
@@ -347,8 +347,6 @@ pub fn images_against_tracer(
     };
     let (seen, hotspot) = match last_model {
         Some(([sky, sun, bounce], envelope)) => {
-            // The image with the gains (where measured) and the sun through the crown as
-            // `through` gives it per leaf.
             // The image with the gains (where measured), the sun through the crown as
             // `through(leaf, blend, gain)` makes the leaf's share of it (the gain applied), and
             // the bounce scaled by `bounce_factor`.
@@ -375,7 +373,7 @@ pub fn images_against_tracer(
                 measure(&[sky, sun, bounce])
             };
             let seen = if gains.is_some() {
-                with(&|_, old, gain| old * gain, 1.0)
+                with(&|_, old, gain| (old * gain).min(1.0), 1.0)
             } else {
                 Vec::new()
             };
