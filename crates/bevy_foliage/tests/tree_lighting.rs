@@ -5,7 +5,7 @@
 
 use bevy::camera::Exposure;
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
-use bevy::light::CascadeShadowConfigBuilder;
+use bevy::light::{CascadeShadowConfig, CascadeShadowConfigBuilder, Cascades};
 use bevy::prelude::*;
 use bevy_foliage::lighting::bins::{DARKEST_LIGHT, light_of};
 use bevy_foliage::lighting::hotspot::{HOTSPOT_NODES, Hotspot};
@@ -15,6 +15,7 @@ use bevy_foliage::lighting::model::{
 };
 use bevy_foliage::lighting::path_trace::LeafScene;
 use bevy_foliage::lighting::seen_part::{covered_gain, gain_of, quantize_gain, seen_gain};
+use bevy_foliage::lighting::sun_maps::{LEAF_SHADOW_FINE, LeafShadowOffset};
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::{PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::kept_index_total;
@@ -64,6 +65,37 @@ fn stored_leaves(baked: &BakedFoliage) -> LeafSet {
             .windows(2)
             .map(|w| w[0]..w[1])
             .collect(),
+    }
+}
+
+/// The texel side of the sun's shadow cascade that holds world point `p`, as the leaf shader
+/// picks it (the first cascade whose far bound lies beyond the point's view depth); 0 without
+/// cascades. Every texel the crown may use must let the shader read the map alone at the leaf
+/// (at most `LEAF_SHADOW_FINE` of the smallest leaf), as the CPU model here assumes.
+fn cascade_texels(world: &mut World, camera: &GlobalTransform) -> impl Fn(Vec3) -> f32 + use<> {
+    let bounds: Vec<(f32, f32)> = world
+        .query::<(&Cascades, &CascadeShadowConfig)>()
+        .iter(world)
+        .next()
+        .and_then(|(cascades, config)| {
+            let per_view = cascades.cascades.values().next()?;
+            Some(
+                config
+                    .bounds
+                    .iter()
+                    .zip(per_view)
+                    .map(|(bound, cascade)| (*bound, cascade.texel_size))
+                    .collect(),
+            )
+        })
+        .unwrap_or_default();
+    let (origin, forward) = (camera.translation(), camera.forward());
+    move |p: Vec3| {
+        let depth = (p - origin).dot(*forward);
+        bounds
+            .iter()
+            .find(|(bound, _)| depth < *bound)
+            .map_or(0.0, |(_, texel)| *texel)
     }
 }
 
@@ -331,13 +363,20 @@ fn compare_with_model(
             + bounced
     };
     // Whether the sun reaches world point p on `leaf`: nothing outside and, with leaf shadows,
-    // no other leaf in the way; `None` near the edge of a shadow.
+    // no other leaf in the way from where the shaders read the shadow map (the point moved
+    // towards the sun by `LeafShadowOffset::SHADERS` texels of its cascade); `None` near the
+    // edge of a shadow.
     let (across_a, across_b) = to_sun_world.any_orthonormal_pair();
+    let texel_at = cascade_texels(harness.world_mut(), &camera_transform);
+    let leaves = stored_leaves(baked);
     let reaches = |leaf: u32, p: Vec3| -> bool {
+        let n = instance.rotation * scene.normal(leaf as usize);
+        let offset = LeafShadowOffset::SHADERS.texels_for(n, to_sun_world);
+        let moved = p + to_sun_world * (offset * texel_at(p));
         !outside_blocked(p)
             && (!leaf_shadows
                 || scene
-                    .hit(from_world.transform_point3(p), to_sun, leaf)
+                    .hit(from_world.transform_point3(moved), to_sun, leaf)
                     .is_none())
     };
     let sun_at = |leaf: u32, p: Vec3| -> Option<bool> {
@@ -377,6 +416,13 @@ fn compare_with_model(
                 .any(|c| ray_leaf(centre + *c).map(|h| h.0) != Some(leaf))
             {
                 continue;
+            }
+            if leaf_shadows {
+                let (texel, size) = (texel_at(point), leaves.diameter(leaf as usize));
+                assert!(
+                    texel > 0.0 && texel <= LEAF_SHADOW_FINE * size,
+                    "the shader reads the map alone at the leaf only at texels up to {LEAF_SHADOW_FINE} of a leaf: texel {texel}, leaf {size}"
+                );
             }
             let Some(lit) = sun_at(leaf, point) else {
                 continue;
@@ -717,9 +763,10 @@ fn a_pruned_crown_keeps_its_light() {
 }
 
 /// The tree with the sun's shadows on: under a plate shading half its crown, in Bevy's default
-/// shadow cascades (texels of millimetres here: the shadow map resolves leaves), or alone in one
-/// coarse cascade (texels of metres, larger than a leaf: the baked blend, under the
-/// map read where the light enters the crown, which must not see the crown's own leaves).
+/// shadow cascades (texels under a sixteenth of a leaf here, which the comparison checks: the
+/// shadow map resolves leaves), or alone in one coarse cascade (texels of metres, larger than a
+/// leaf: the baked blend, under the map read where the light enters the crown, which must not
+/// see the crown's own leaves).
 fn sun_shadows(name: &str, coarse: bool) -> Option<Check> {
     let Scene {
         mut harness,
@@ -780,7 +827,7 @@ fn sun_shadows(name: &str, coarse: bool) -> Option<Check> {
             && o.dot(across).abs() <= half.x
             && o.dot(along).abs() <= half.z
     };
-    // Shadow edges, the leaves' and the plate's, blurred over a few millimetre texels.
+    // Shadow edges, the leaves' and the plate's, blurred over a texel or two (the bilinear lookup).
     let margin = 0.02 * radius;
     let check = compare_with_model(
         &mut harness,

@@ -9,6 +9,7 @@
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
 //!     [--images [--samples G] [--seen-points P] [--hotspot]] [--sun X,Y,Z]
+//!     [--leaf-shadow-offset T,S]
 //! ```
 //! `--sun X,Y,Z`: the direction towards the sun (0.5, 0.7, 0.3 by default; the eye looks from
 //! (0, 0.3, 1)) — the model's errors depend on the angle between the two.
@@ -20,10 +21,14 @@
 //! `lighting::seen_part`): on the sky and the sun, and the covered part's on the bounce;
 //! `--hotspot` adds rows with the crown's hotspot (`lighting::hotspot`, measured with
 //! `HotspotSettings::OFFLINE` from its own rays) on the sun and the bounce, and prints its
-//! factors.
+//! factors. The shadow map's row reads it as the leaf shaders do where they take it alone
+//! (texels of 1/16 of a leaf, one bilinear lookup at the point moved towards the sun by
+//! `T + S·tan θ` texels, θ the leaf's tilt from the sun: `--leaf-shadow-offset T,S`, by default
+//! the shaders' `sun_maps::LeafShadowOffset::SHADERS`, 1 and 0.5; also in the `--sun-maps`
+//! table).
 //!
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
-//! map at three texel sizes, the crown's extinction over its depth, eq. 5.3's foliage maps)
+//! map at three texel sizes read as the leaf shaders read it and with a 3×3 filter, the crown's extinction over its depth, eq. 5.3's foliage maps)
 //! against the tracer's shadow rays, beside the baked attenuations' blend
 //! (`lighting::sun_maps`).
 
@@ -54,6 +59,7 @@ fn main() {
     let mut samples = 128u32;
     let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
     let mut to_sun = Vec3::new(0.5, 0.7, 0.3).normalize();
+    let mut leaf_shadow = bevy_foliage::lighting::sun_maps::LeafShadowOffset::SHADERS;
     let mut i = 0;
     while i < args.len() {
         let value = |i: usize| -> usize {
@@ -72,6 +78,25 @@ fn main() {
             "--directions" => settings.directions = value(i) as u32,
             "--samples" => samples = value(i) as u32,
             "--seen-points" => seen_points = value(i) as u32,
+            "--leaf-shadow-offset" => {
+                let parts: Option<Vec<f32>> = args
+                    .get(i + 1)
+                    .and_then(|v| v.split(',').map(|c| c.trim().parse::<f32>().ok()).collect());
+                match parts.as_deref() {
+                    Some(&[texels, slope])
+                        if (0.0..=10.0).contains(&texels) && (0.0..=10.0).contains(&slope) =>
+                    {
+                        leaf_shadow.texels = texels;
+                        leaf_shadow.slope = slope;
+                    }
+                    _ => {
+                        eprintln!(
+                            "--leaf-shadow-offset takes T,S (texels and texels per tan θ, each in 0..=10)"
+                        );
+                        std::process::exit(2)
+                    }
+                }
+            }
             "--sun" => {
                 to_sun = args
                     .get(i + 1)
@@ -99,7 +124,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot]] [--sun x,y,z]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot]] [--sun x,y,z] [--leaf-shadow-offset T,S]"
                 );
                 std::process::exit(2)
             }
@@ -115,7 +140,14 @@ fn main() {
         sun: Vec3::new(3.2, 3.0, 2.7),
     };
     if sun_maps {
-        sun_map_table(leaves, stride, settings.points, light.to_sun, threads);
+        sun_map_table(
+            leaves,
+            stride,
+            settings.points,
+            light.to_sun,
+            leaf_shadow,
+            threads,
+        );
         return;
     }
     if images {
@@ -128,6 +160,7 @@ fn main() {
                 directions: settings.directions,
                 seen_points,
                 hotspot,
+                leaf_shadow,
                 ..Default::default()
             },
             &rays_per_bin,
@@ -246,23 +279,33 @@ fn main() {
 
 /// The `--sun-maps` table: for each procedural tree, the sun's share per leaf by each map
 /// against the tracer's shadow rays. Texel sides are in leaf sizes (the species' leaf length).
-fn sun_map_table(leaves: usize, stride: usize, points: u32, to_sun: Vec3, threads: usize) {
+fn sun_map_table(
+    leaves: usize,
+    stride: usize,
+    points: u32,
+    to_sun: Vec3,
+    leaf_shadow: bevy_foliage::lighting::sun_maps::LeafShadowOffset,
+    threads: usize,
+) {
     use bevy_foliage::lighting::sun_maps::sun_visibility_against_tracer;
     println!(
         "| tree | leaf size | estimate of the sun's share | mean relative error per leaf | mean error / mean light | error of the mean |"
     );
     println!("|---|---|---|---|---|---|");
     for species in TreeSpecies::thesis_trees() {
+        // The leaves' size at this count (fewer leaves are larger, `with_leaf_count`).
+        let species = species.with_leaf_count(leaves);
         let leaf = species.leaf_size;
-        let crown = generate(&species.clone().with_leaf_count(leaves)).leaves;
+        let crown = generate(&species).leaves;
         let rows = sun_visibility_against_tracer(
             &crown,
             to_sun,
             stride,
             points,
-            &[leaf * 0.25, leaf, leaf * 4.0],
+            &[leaf / 16.0, leaf / 8.0, leaf / 4.0, leaf],
             leaf * 4.0,
             leaf,
+            leaf_shadow,
             threads,
         );
         for r in rows {
@@ -299,10 +342,12 @@ fn image_table(
         uniform_ball(leaves, 1.5, 0.05, 5),
     )];
     for species in TreeSpecies::thesis_trees() {
+        // The leaves' size at this count (fewer leaves are larger, `with_leaf_count`).
+        let species = species.with_leaf_count(leaves);
         crowns.push((
             species.name.to_string(),
             species.leaf_size,
-            generate(&species.with_leaf_count(leaves)).leaves,
+            generate(&species).leaves,
         ));
     }
     let mut models = vec![(SunThroughCrown::BlendedAttenuation, BinEstimate::Neighbours)];
@@ -386,7 +431,7 @@ fn image_table(
             row(
                 &run.shadow_map_sun[size],
                 "sun direct",
-                "shadow map, quarter-leaf texels, 3×3 filter",
+                "shadow map, texels 1/16 of a leaf, one bilinear lookup (the leaf shaders')",
                 &run.shadow_map_sun[size].sun,
             );
             for (k, (_, errors)) in run.models.iter().enumerate() {

@@ -23,7 +23,7 @@ use super::path_trace::{
     luminance,
 };
 use super::seen_part::{DEFAULT_SEEN_POINTS, covered_gain, seen_gain, seen_part_gains_of};
-use super::sun_maps::{LightFrame, foliage_maps};
+use super::sun_maps::{LEAF_SHADOW_FINE, LeafShadowOffset, LightFrame, foliage_maps};
 use super::traced_bins::BinEstimate;
 use crate::pruning::leaves::LeafSet;
 use crate::rng::SplitMix64;
@@ -45,6 +45,9 @@ pub struct ImageSettings {
     /// Whether to measure the crown's hotspot ([`super::hotspot`], with another seed than the
     /// images') and render the last model with it.
     pub hotspot: bool,
+    /// How far towards the sun the shadow map's row moves each point before its lookup (the
+    /// leaf shaders' [`LeafShadowOffset::SHADERS`] by default).
+    pub leaf_shadow: LeafShadowOffset,
 }
 
 impl Default for ImageSettings {
@@ -56,6 +59,7 @@ impl Default for ImageSettings {
             seed: 1,
             seen_points: DEFAULT_SEEN_POINTS,
             hotspot: false,
+            leaf_shadow: LeafShadowOffset::SHADERS,
         }
     }
 }
@@ -81,8 +85,9 @@ pub struct ImageError {
 pub struct ImageComparison {
     /// Per model, in the order given, its errors per pixel size, and the crown's fitted τ.
     pub models: Vec<(f32, Vec<ImageError>)>,
-    /// The sun read at each eye ray's point from a shadow map of quarter-leaf texels with a
-    /// 3×3 filter (what the leaf shaders use for leaves near the eye), per pixel size; sky
+    /// The sun read at each eye ray's point from a shadow map of texels [`LEAF_SHADOW_FINE`] of
+    /// a leaf as the leaf shaders read it for leaves near the eye (one bilinear lookup, the point
+    /// moved towards the sun by [`ImageSettings::leaf_shadow`]), per pixel size; sky
     /// and bounce are those of the first model.
     pub shadow_map_sun: Vec<ImageError>,
     /// The tracer against itself (a second trace with another seed): its own noise per pixel
@@ -299,16 +304,17 @@ pub fn images_against_tracer(
         })
         .collect();
 
-    // The shadow map's sun at each eye ray's point, as a fragment shader reads it.
-    let texel = 0.25 * leaf_size.max(1e-6);
+    // The shadow map's sun at each eye ray's point, as the leaf shaders read it where they
+    // take it alone (texels of `LEAF_SHADOW_FINE` of a leaf).
+    let texel = LEAF_SHADOW_FINE * leaf_size.max(1e-6);
     let maps = foliage_maps(leaves, LightFrame::around(leaves, light.to_sun, texel));
-    let bias = maps.frame.texel.min(0.5 * leaf_size);
     let mapped_sun: Vec<f32> = samples
         .iter()
         .map(|s| {
             s.as_ref().map_or(0.0, |s| {
                 let n = scene.normal(s.leaf as usize);
-                let visible = maps.shadow_map(s.point, bias);
+                let bias = settings.leaf_shadow.texels_for(n, light.to_sun) * maps.frame.texel;
+                let visible = maps.shadow_map_bilinear(s.point, bias);
                 luminance(sun_radiance(
                     material,
                     n,

@@ -5,7 +5,10 @@
 //! (Beer–Lambert over the shadow map) — each measured leaf by leaf against the path tracer's
 //! shadow rays ([`sun_visibility_against_tracer`]), beside the eight baked attenuations' blend
 //! the tree lighting uses ([`super::model::sun_through_crown`]). What the leaf-on-leaf shadows of
-//! the leaf shaders should read is chosen from this measurement.
+//! the leaf shaders read, and up to which texel size, is chosen from this measurement: one
+//! comparison sampler's bilinear lookup ([`FoliageMaps::shadow_map_bilinear`]) at the point
+//! moved towards the sun by [`LeafShadowOffset::SHADERS`], trusted fully at texels up to
+//! [`LEAF_SHADOW_FINE`] of the leaf's size and not at all from [`LEAF_SHADOW_COARSE`].
 
 use super::envelope::{crown_envelope, proxies};
 use super::model::{SunThroughCrown, sun_through_crown};
@@ -14,6 +17,77 @@ use crate::pruning::leaves::LeafSet;
 use crate::pruning::visibility::rasterize_triangle;
 use crate::rng::SplitMix64;
 use bevy::math::{Vec2, Vec3};
+
+/// How far towards the sun the leaf shaders move a point of a leaf before they read the shadow
+/// map there, in the map's texels: `texels + slope · min(tan θ, max_slope)`, θ the leaf's tilt
+/// from the sun (a slope-scaled depth bias).
+///
+/// A shadow map cannot tell a leaf from its neighbour: too small an offset and a leaf tilted to
+/// the sun shades itself across the lookup's texels (its own depth changes by a texel times
+/// tan θ: stripes of shadow acne); too large and the leaf just in front of it lets the sun
+/// through. See [`LeafShadowOffset::SHADERS`] for the measurement.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LeafShadowOffset {
+    /// The offset of a leaf facing the sun, in texels.
+    pub texels: f32,
+    /// Texels more per unit of tan θ.
+    pub slope: f32,
+    /// The steepest tilt (its tangent) the slope term follows: leaves seen edge-on by the sun
+    /// would otherwise let everything in front of them through.
+    pub max_slope: f32,
+}
+
+impl LeafShadowOffset {
+    /// The leaf shaders' (`leaf_volume_fragment.wgsl`): a texel, half a texel more per unit of
+    /// tan θ up to tan θ = 4.
+    ///
+    /// Leaf by leaf against the tracer's shadow rays (`tree_lighting_error --sun-maps
+    /// --leaf-shadow-offset T,S`, the four procedural trees at 2,000 leaves, one bilinear
+    /// lookup, texels 1/16 of a leaf): a constant 0.5 texel is 20–25 % off, 1 texel 20–22 %,
+    /// 1.5 texels 20–25 %, 2 texels 22–30 %; 1 texel with slopes 0.25 and 0.5 is 21–23 % and
+    /// 20–31 %; a 3×3 filter with a texel's offset is 24–30 % off (it blurs the crown's
+    /// sunflecks into their shade). The constant texel is the most accurate on average but
+    /// shows acne on Bevy's shadow map: in the render test of a crown under millimetre
+    /// cascades 80 of 1,090 leaf pixels differ from shadow rays cast from the moved points by
+    /// more than 3/255 (worst 11.7/255, in stripes across steep leaves); with the slope term
+    /// 0.25 it is 37 of 1,097 (worst 6.7), with 0.5, 33 of 1,097 (worst 4.4).
+    pub const SHADERS: Self = Self {
+        texels: 1.0,
+        slope: 0.5,
+        max_slope: 4.0,
+    };
+
+    /// The offset, in texels, for a leaf with normal `n` (either side) under the sun towards
+    /// `to_sun` (unit).
+    pub fn texels_for(&self, n: Vec3, to_sun: Vec3) -> f32 {
+        let c = n.normalize_or_zero().dot(to_sun).abs().max(1e-3);
+        let tan = (1.0 - c * c).max(0.0).sqrt() / c;
+        self.texels + self.slope * tan.min(self.max_slope)
+    }
+}
+
+impl Default for LeafShadowOffset {
+    fn default() -> Self {
+        Self::SHADERS
+    }
+}
+
+/// The texel side, as a share of the leaf's size, up to which the leaf shaders take the sun's
+/// share at a leaf from the shadow map alone.
+///
+/// Leaf by leaf (`tree_lighting_error --sun-maps`, read as the shaders read it) the map is
+/// 20–31 % off at texels of 1/16 of a leaf, 35–66 % at 1/8, 67–124 % at 1/4 and 182–220 % at one
+/// leaf, where the eight baked attenuations' blend is 45–69 % (the offset, in texels, grows
+/// with them and lets ever more leaves in front through; a 3×3 filter is 24–30 %, 29–46 %,
+/// 46–74 % and 78–127 %). (The leaf's size is its length in these tables and its diameter in
+/// the shaders, about 1.1 times longer.)
+pub const LEAF_SHADOW_FINE: f32 = 1.0 / 16.0;
+
+/// The texel side, as a share of the leaf's size, from which the leaf shaders no longer read
+/// the shadow map at the leaf (the baked blend alone, under the map read where the sun's light
+/// enters the crown): where the map, read as the shaders read it, is no closer than the blend
+/// ([`LEAF_SHADOW_FINE`]'s table). Between the two sizes the two are blended smoothly.
+pub const LEAF_SHADOW_COARSE: f32 = 1.0 / 8.0;
 
 /// An orthographic frame looking down the sun's light over a crown.
 #[derive(Clone, Copy, Debug)]
@@ -127,6 +201,29 @@ impl FoliageMaps {
         lit / 9.0
     }
 
+    /// A shadow map read by a comparison sampler's bilinear lookup, what a GPU's filtered
+    /// `textureSampleCompare` returns: the four texels whose centres surround `p`, each lit where
+    /// its nearest leaf is no nearer the sun than `p` less `bias` (model units), weighted by
+    /// `p`'s place between their centres.
+    pub fn shadow_map_bilinear(&self, p: Vec3, bias: f32) -> f32 {
+        let (q, z) = self.frame.project(p);
+        let corner = q - Vec2::splat(0.5);
+        let (base, f) = (corner.floor(), corner - corner.floor());
+        [
+            (Vec2::new(0.5, 0.5), (1.0 - f.x) * (1.0 - f.y)),
+            (Vec2::new(1.5, 0.5), f.x * (1.0 - f.y)),
+            (Vec2::new(0.5, 1.5), (1.0 - f.x) * f.y),
+            (Vec2::new(1.5, 1.5), f.x * f.y),
+        ]
+        .into_iter()
+        .filter(|&(at, _)| {
+            self.texel_of(base + at)
+                .is_none_or(|i| z <= self.near[i] + bias)
+        })
+        .map(|(_, w)| w)
+        .sum()
+    }
+
     /// Eq. 5.3's self-shadowing at `p`: `1 − (Z_x − Z_n)/(Z_f − Z_n)`, the leaf's place between
     /// the nearest and the farthest leaf along the sun, in `[0, 1]`. (The equation also
     /// multiplies by the leaf's opacity α and the texel's leaf count N_c; taken literally that
@@ -202,11 +299,12 @@ fn errors(method: String, estimate: &[f32], traced: &[f32]) -> SunEstimateError 
 
 /// The share of every `stride`-th leaf of `leaves` the sun (towards `to_sun`) reaches, by the
 /// tracer's shadow rays from `points` points spread on the leaf, against: the eight baked
-/// attenuations' blend; a shadow map read with a 3×3 filter and the crown's extinction over its
-/// depth, at each texel side of `texels`; eq. 5.3 on foliage maps with texels of
-/// `foliage_texel`. The shadow map's depth bias is a texel, at most half of `leaf_size` (a
-/// leaf's own depth across a texel, without letting the leaves behind it through). Every
-/// estimate averages the same points on the leaf.
+/// attenuations' blend; at each texel side of `texels`, a shadow map read as the leaf shaders
+/// read it (one bilinear lookup at the point moved towards the sun by `offset`: the shaders'
+/// [`LeafShadowOffset::SHADERS`]), read with a 3×3 filter (its depth bias a texel, at most half of `leaf_size`: a
+/// leaf's own depth across a texel, without letting the leaves behind it through) and the
+/// crown's extinction over its depth; eq. 5.3 on foliage maps with texels of `foliage_texel`.
+/// Every estimate averages the same points on the leaf.
 #[allow(clippy::too_many_arguments)]
 pub fn sun_visibility_against_tracer(
     leaves: &LeafSet,
@@ -216,6 +314,7 @@ pub fn sun_visibility_against_tracer(
     texels: &[f32],
     foliage_texel: f32,
     leaf_size: f32,
+    offset: LeafShadowOffset,
     threads: usize,
 ) -> Vec<SunEstimateError> {
     let to_sun = to_sun.normalize();
@@ -228,7 +327,8 @@ pub fn sun_visibility_against_tracer(
         .collect();
     let coarse = foliage_maps(leaves, LightFrame::around(leaves, to_sun, foliage_texel));
     let picked: Vec<usize> = (0..scene.leaf_count()).step_by(stride.max(1)).collect();
-    // Per leaf: traced, baked blend, then per texel (shadow map, extinction), then eq. 5.3.
+    // Per leaf: traced, baked blend, then per texel (the shaders' lookup, 3×3, extinction),
+    // then eq. 5.3.
     let per_leaf: Vec<Vec<f32>> = picked
         .iter()
         .map(|&leaf| {
@@ -241,16 +341,18 @@ pub fn sun_visibility_against_tracer(
                 &e.s_max,
                 to_sun,
             );
-            let mut sums = vec![0.0f32; 2 + 2 * maps.len() + 1];
+            let offset_texels = offset.texels_for(scene.normal(leaf), to_sun);
+            let mut sums = vec![0.0f32; 2 + 3 * maps.len() + 1];
             for _ in 0..points.max(1) {
                 let x = scene.point_on(leaf, &mut rng);
                 sums[0] += scene.hit(x, to_sun, leaf as u32).is_none() as u32 as f32;
                 sums[1] += blend;
                 for (k, m) in maps.iter().enumerate() {
-                    sums[2 + 2 * k] += m.shadow_map(x, m.frame.texel.min(0.5 * leaf_size));
-                    sums[3 + 2 * k] += m.extinction(x, tau);
+                    sums[2 + 3 * k] += m.shadow_map_bilinear(x, offset_texels * m.frame.texel);
+                    sums[3 + 3 * k] += m.shadow_map(x, m.frame.texel.min(0.5 * leaf_size));
+                    sums[4 + 3 * k] += m.extinction(x, tau);
                 }
-                sums[2 + 2 * maps.len()] += coarse.relative_depth(x);
+                sums[2 + 3 * maps.len()] += coarse.relative_depth(x);
             }
             sums.iter().map(|s| s / points.max(1) as f32).collect()
         })
@@ -265,10 +367,18 @@ pub fn sun_visibility_against_tracer(
     for (k, m) in maps.iter().enumerate() {
         out.push(errors(
             format!(
+                "shadow map, one bilinear lookup {} + {}·tan θ texels towards the sun, texel {:.3} ({}²)",
+                offset.texels, offset.slope, m.frame.texel, m.frame.size
+            ),
+            &column(2 + 3 * k),
+            &traced,
+        ));
+        out.push(errors(
+            format!(
                 "shadow map, 3×3 filter, texel {:.3} ({}²)",
                 m.frame.texel, m.frame.size
             ),
-            &column(2 + 2 * k),
+            &column(3 + 3 * k),
             &traced,
         ));
         out.push(errors(
@@ -276,7 +386,7 @@ pub fn sun_visibility_against_tracer(
                 "extinction over the shadow map's depth, texel {:.3}",
                 m.frame.texel
             ),
-            &column(3 + 2 * k),
+            &column(4 + 3 * k),
             &traced,
         ));
     }
@@ -285,7 +395,7 @@ pub fn sun_visibility_against_tracer(
             "foliage maps, eq. 5.3, texel {:.3} ({}²)",
             coarse.frame.texel, coarse.frame.size
         ),
-        &column(2 + 2 * maps.len()),
+        &column(2 + 3 * maps.len()),
         &traced,
     ));
     out
@@ -330,9 +440,103 @@ mod tests {
     }
 
     #[test]
+    fn the_bilinear_lookup_blends_the_two_texels_across_a_shadow_edge() {
+        let leaves = stack();
+        let texel = 0.05;
+        let maps = foliage_maps(&leaves, LightFrame::around(&leaves, Vec3::Y, texel));
+        // Along x under the upper leaf's edge (x = 0.5): shade well inside, sun well outside,
+        // and between them a blend no wider than one texel, rising monotonically.
+        let at = |x: f32| maps.shadow_map_bilinear(Vec3::new(x, 0.0, 0.1), 0.05);
+        assert_eq!(at(0.4), 0.0);
+        assert_eq!(at(0.6), 1.0);
+        let xs: Vec<f32> = (0..=400).map(|k| 0.3 + 0.001 * k as f32).collect();
+        let values: Vec<f32> = xs.iter().map(|&x| at(x)).collect();
+        assert!(values.windows(2).all(|w| w[1] >= w[0] - 1e-6), "{values:?}");
+        let blended: Vec<f32> = xs
+            .iter()
+            .zip(&values)
+            .filter(|(_, v)| **v > 1e-4 && **v < 1.0 - 1e-4)
+            .map(|(x, _)| *x)
+            .collect();
+        assert!(!blended.is_empty(), "no blend across the edge: {values:?}");
+        let width = blended.last().unwrap() - blended.first().unwrap();
+        assert!(width <= texel + 0.002, "blend {width} wide");
+        // Halfway between the last shaded and the first lit texel centre, half and half.
+        let mid = 0.5 * (blended.first().unwrap() + blended.last().unwrap());
+        assert!((at(mid) - 0.5).abs() < 0.05, "{}", at(mid));
+    }
+
+    #[test]
+    fn the_leaf_shaders_bias_keeps_a_tilted_leaf_from_shading_itself() {
+        // One leaf at 45° to an overhead sun: across a texel its own depth changes by a texel,
+        // which a lookup without the offset takes for a leaf in front; the shaders' offset is
+        // a texel and a half there.
+        let mut leaves = LeafSet::default();
+        let normal = Vec3::new(1.0, 1.0, 0.0).normalize();
+        push_square_leaf(&mut leaves, Vec3::ZERO, 0.5, normal);
+        let diameter = leaves.diameter(0);
+        assert!((diameter - 2.0f32.sqrt()).abs() < 1e-5);
+        let texel = LEAF_SHADOW_FINE * diameter;
+        let maps = foliage_maps(&leaves, LightFrame::around(&leaves, Vec3::Y, texel));
+        let scene = LeafScene::new(&leaves);
+        let mut rng = SplitMix64::new(3);
+        let points: Vec<Vec3> = (0..400).map(|_| scene.point_on(0, &mut rng)).collect();
+        let lit = |bias: f32| {
+            points
+                .iter()
+                .map(|&p| maps.shadow_map_bilinear(p, bias))
+                .sum::<f32>()
+                / points.len() as f32
+        };
+        let offset = LeafShadowOffset::SHADERS.texels_for(normal, Vec3::Y);
+        assert!((offset - 1.5).abs() < 1e-4, "{offset}");
+        let biased = lit(offset * maps.frame.texel);
+        assert!(biased > 0.999, "{biased}");
+        assert!(lit(0.0) < 0.9, "{}", lit(0.0));
+        // The slope term: steeper leaves move further, up to the cap; a leaf facing the sun by
+        // the constant alone, from either side.
+        let at = |deg: f32| {
+            let t = deg.to_radians();
+            LeafShadowOffset::SHADERS.texels_for(Vec3::new(t.sin(), t.cos(), 0.0), Vec3::Y)
+        };
+        assert!((at(0.0) - 1.0).abs() < 1e-6 && (at(180.0) - 1.0).abs() < 1e-5);
+        assert!(at(30.0) < at(60.0) && at(60.0) < at(75.0));
+        assert!((at(89.9) - 3.0).abs() < 1e-4, "{}", at(89.9));
+    }
+
+    #[test]
+    fn the_leaf_shaders_read_the_map_as_measured_here() {
+        let wgsl = include_str!("../pruning/leaf_volume_fragment.wgsl");
+        let offset = LeafShadowOffset::SHADERS;
+        for (name, value) in [
+            ("LEAF_SHADOW_TEXELS", offset.texels),
+            ("LEAF_SHADOW_SLOPE", offset.slope),
+            ("LEAF_SHADOW_MAX_SLOPE", offset.max_slope),
+            ("LEAF_SHADOW_FINE", LEAF_SHADOW_FINE),
+            ("LEAF_SHADOW_COARSE", LEAF_SHADOW_COARSE),
+        ] {
+            let line = format!("const {name}: f32 = {value:?};");
+            assert!(
+                wgsl.contains(&line),
+                "leaf_volume_fragment.wgsl lacks `{line}`"
+            );
+        }
+    }
+
+    #[test]
     fn a_fine_shadow_map_agrees_with_the_tracer_on_a_simple_stack() {
         let leaves = stack();
-        let errors = sun_visibility_against_tracer(&leaves, Vec3::Y, 1, 64, &[0.01], 0.05, 0.5, 1);
+        let errors = sun_visibility_against_tracer(
+            &leaves,
+            Vec3::Y,
+            1,
+            64,
+            &[0.01],
+            0.05,
+            0.5,
+            LeafShadowOffset::SHADERS,
+            1,
+        );
         // The top leaf is lit, the bottom one shaded: the traced share has one leaf above the
         // floor, which a fine shadow map gets right.
         let fine = &errors[1];

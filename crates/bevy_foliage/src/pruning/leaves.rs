@@ -104,6 +104,17 @@ impl LeafSet {
         sum / vertices.len().max(1) as f32
     }
 
+    /// A leaf's diameter: twice its farthest vertex from its centroid (the leaf size the leaf
+    /// shaders take from the radius the vertex record carries).
+    pub fn diameter(&self, leaf: usize) -> f32 {
+        let c = self.centroid(leaf);
+        2.0 * self
+            .leaf_vertices(leaf)
+            .iter()
+            .map(|&v| self.positions[v as usize].distance(c))
+            .fold(0.0, f32::max)
+    }
+
     /// Surface area of a leaf.
     pub fn area(&self, leaf: usize) -> f32 {
         self.triangles(leaf)
