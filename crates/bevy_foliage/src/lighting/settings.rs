@@ -17,13 +17,14 @@ use bevy::prelude::*;
 /// neighbouring leaves (eq. 5.24). A leaf's reflectances and transmittances are `optics` times its
 /// material's base colour (linear), and its texture's colour multiplies the light it sends, so
 /// leaves keep their materials' colours. The sun's direct light on a leaf goes through Bevy's
-/// shadow map of the sun read at the leaf where the map's texels are at most a quarter of the
+/// shadow map of the sun read at the leaf where the map's texels are at most a sixteenth of the
 /// leaf (leaf-on-leaf shadows, measured closer to a path tracer than the baked attenuations:
-/// [`super::sun_maps`]); where they are a leaf or larger, through the crown's baked attenuations
-/// times the shadow map read on the plane touching the crown's bounding sphere on the sun's side
-/// (what stands outside the crown, its own leaves not counted twice); a smooth hand-over
-/// between. Screen-space soft shadows are not read in this mode, and an environment map light
-/// is not part of the sky. Prepasses and shadow maps are unchanged.
+/// [`super::sun_maps`]; the cascades nearest the eye, or a larger `DirectionalLightShadowMap`,
+/// reach that); where they are an eighth of a leaf or larger, through the crown's baked
+/// attenuations times the shadow map read on the plane touching the crown's bounding sphere on
+/// the sun's side (what stands outside the crown, its own leaves not counted twice); a smooth
+/// hand-over between. Screen-space soft shadows are not read in this mode, and an environment
+/// map light is not part of the sky. Prepasses and shadow maps are unchanged.
 #[derive(Resource, Clone, Debug, PartialEq, Reflect)]
 #[reflect(Resource, Default, Debug, PartialEq)]
 pub struct TreeLightingSettings {

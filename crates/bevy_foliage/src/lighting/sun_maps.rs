@@ -47,9 +47,9 @@ impl LeafShadowOffset {
     /// 1.5 texels 20–25 %, 2 texels 22–30 %; 1 texel with slopes 0.25 and 0.5 is 21–23 % and
     /// 20–31 %; a 3×3 filter with a texel's offset is 24–30 % off (it blurs the crown's
     /// sunflecks into their shade). The constant texel is the most accurate on average but
-    /// shows acne on Bevy's shadow map: in the render test of a crown under millimetre
-    /// cascades 80 of 1,090 leaf pixels differ from shadow rays cast from the moved points by
-    /// more than 3/255 (worst 11.7/255, in stripes across steep leaves); with the slope term
+    /// shows acne on Bevy's shadow map: in the render test of a crown under cascades of texels
+    /// under a sixteenth of a leaf, 80 of 1,090 leaf pixels differ from shadow rays cast from
+    /// the moved points by more than 3/255 (worst 11.7/255, in stripes across steep leaves); with the slope term
     /// 0.25 it is 37 of 1,097 (worst 6.7), with 0.5, 33 of 1,097 (worst 4.4).
     pub const SHADERS: Self = Self {
         texels: 1.0,
@@ -79,7 +79,7 @@ impl Default for LeafShadowOffset {
 /// 20–31 % off at texels of 1/16 of a leaf, 35–66 % at 1/8, 67–124 % at 1/4 and 182–220 % at one
 /// leaf, where the eight baked attenuations' blend is 45–69 % (the offset, in texels, grows
 /// with them and lets ever more leaves in front through; a 3×3 filter is 24–30 %, 29–46 %,
-/// 46–74 % and 78–127 %). (The leaf's size is its length in these tables and its diameter in
+/// 49–74 % and 78–127 %). (The leaf's size is its length in these tables and its diameter in
 /// the shaders, about 1.1 times longer.)
 pub const LEAF_SHADOW_FINE: f32 = 1.0 / 16.0;
 
