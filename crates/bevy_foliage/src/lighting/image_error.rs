@@ -94,8 +94,9 @@ pub struct ImageComparison {
     /// size, below which no model can be shown closer to it.
     pub noise: Vec<ImageError>,
     /// The last model with its sky and sun scaled by each leaf's seen-part gain towards the
-    /// eye (the sun's share capped at 1, as the leaf shaders cap it) and its bounce by the covered part's gain ([`super::seen_part`]), per pixel size;
-    /// empty when [`ImageSettings::seen_points`] is 0.
+    /// eye (the sun's share capped at 1, as the leaf shaders cap it) and its bounce by the
+    /// covered part's gain ([`super::seen_part`]), per pixel size; empty when
+    /// [`ImageSettings::seen_points`] is 0.
     pub seen: Vec<ImageError>,
     /// As `seen` (or the last model), the sun's term and the bounce scaled by the crown's
     /// hotspot at the image's phase angle; empty unless [`ImageSettings::hotspot`].

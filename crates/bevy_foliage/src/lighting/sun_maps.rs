@@ -49,8 +49,9 @@ impl LeafShadowOffset {
     /// sunflecks into their shade). The constant texel is the most accurate on average but
     /// shows acne on Bevy's shadow map: in the render test of a crown under cascades of texels
     /// under a sixteenth of a leaf, 80 of 1,090 leaf pixels differ from shadow rays cast from
-    /// the moved points by more than 3/255 (worst 11.7/255, in stripes across steep leaves); with the slope term
-    /// 0.25 it is 37 of 1,097 (worst 6.7), with 0.5, 33 of 1,097 (worst 4.4).
+    /// the moved points by more than 3/255 (worst 11.7/255, in stripes across steep leaves);
+    /// with the slope term 0.25 it is 37 of 1,097 (worst 6.7), with 0.5, 33 of 1,097 (worst
+    /// 4.4).
     pub const SHADERS: Self = Self {
         texels: 1.0,
         slope: 0.5,
@@ -301,10 +302,10 @@ fn errors(method: String, estimate: &[f32], traced: &[f32]) -> SunEstimateError 
 /// tracer's shadow rays from `points` points spread on the leaf, against: the eight baked
 /// attenuations' blend; at each texel side of `texels`, a shadow map read as the leaf shaders
 /// read it (one bilinear lookup at the point moved towards the sun by `offset`: the shaders'
-/// [`LeafShadowOffset::SHADERS`]), read with a 3×3 filter (its depth bias a texel, at most half of `leaf_size`: a
-/// leaf's own depth across a texel, without letting the leaves behind it through) and the
-/// crown's extinction over its depth; eq. 5.3 on foliage maps with texels of `foliage_texel`.
-/// Every estimate averages the same points on the leaf.
+/// [`LeafShadowOffset::SHADERS`]), read with a 3×3 filter (its depth bias a texel, at most half
+/// of `leaf_size`: a leaf's own depth across a texel, without letting the leaves behind it
+/// through) and the crown's extinction over its depth; eq. 5.3 on foliage maps with texels of
+/// `foliage_texel`. Every estimate averages the same points on the leaf.
 #[allow(clippy::too_many_arguments)]
 pub fn sun_visibility_against_tracer(
     leaves: &LeafSet,
