@@ -8,7 +8,7 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P] [--hotspot]] [--sun X,Y,Z]
+//!     [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R]] [--sun X,Y,Z]
 //!     [--leaf-shadow-offset T,S]
 //! ```
 //! `--sun X,Y,Z`: the direction towards the sun (0.5, 0.7, 0.3 by default; the eye looks from
@@ -21,7 +21,9 @@
 //! `lighting::seen_part`): on the sky and the sun, and the covered part's on the bounce;
 //! `--hotspot` adds rows with the crown's hotspot (`lighting::hotspot`, measured with
 //! `HotspotSettings::OFFLINE` from its own rays) on the sun and the bounce, and prints its
-//! factors. The shadow map's row reads it as the leaf shaders do where they take it alone
+//! factors; `--bounce-rays R` adds rows with the bounce gathered from each leaf's own
+//! neighbours by R rays (`lighting::gathered_bounce`: eq. 5.24 scaled by the gathered ratios
+//! blended from fourteen suns, and the gather for the image's own sun alone). The shadow map's row reads it as the leaf shaders do where they take it alone
 //! (texels of 1/16 of a leaf, one bilinear lookup at the point moved towards the sun by
 //! `T + S·tan θ` texels, θ the leaf's tilt from the sun: `--leaf-shadow-offset T,S`, by default
 //! the shaders' `sun_maps::LeafShadowOffset::SHADERS`, 1 and 0.5; also in the `--sun-maps`
@@ -57,6 +59,7 @@ fn main() {
     let hotspot = args.iter().any(|a| a == "--hotspot");
     args.retain(|a| a != "--sun-maps" && a != "--images" && a != "--hotspot");
     let mut samples = 128u32;
+    let mut bounce_rays = 0u32;
     let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
     let mut to_sun = Vec3::new(0.5, 0.7, 0.3).normalize();
     let mut leaf_shadow = bevy_foliage::lighting::sun_maps::LeafShadowOffset::SHADERS;
@@ -78,6 +81,7 @@ fn main() {
             "--directions" => settings.directions = value(i) as u32,
             "--samples" => samples = value(i) as u32,
             "--seen-points" => seen_points = value(i) as u32,
+            "--bounce-rays" => bounce_rays = value(i) as u32,
             "--leaf-shadow-offset" => {
                 let parts: Option<Vec<f32>> = args
                     .get(i + 1)
@@ -124,7 +128,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot]] [--sun x,y,z] [--leaf-shadow-offset T,S]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R]] [--sun x,y,z] [--leaf-shadow-offset T,S]"
                 );
                 std::process::exit(2)
             }
@@ -161,6 +165,7 @@ fn main() {
                 seen_points,
                 hotspot,
                 leaf_shadow,
+                bounce_rays,
                 ..Default::default()
             },
             &rays_per_bin,
@@ -461,6 +466,13 @@ fn image_table(
                     &spot.bounce,
                 );
             }
+            for (g, name) in run.gathered.iter().zip([
+                "eq. 5.24 × gathered ratios (14 suns blended), covered-part gain",
+                "gathered for this sun alone, covered-part gain",
+                "gathered for this sun alone, no gain",
+            ]) {
+                row(&g[size], "sun indirect (1 bounce)", name, &g[size].bounce);
+            }
             row(
                 &run.noise[size],
                 "sun indirect (1 bounce)",
@@ -470,6 +482,13 @@ fn image_table(
         }
         if let Some(h) = &run.hotspot_factors {
             eprintln!("{name}: hotspot sun {:.3?} bounce {:.3?}", h.sun, h.bounce);
+        }
+        if !run.gathered.is_empty() {
+            eprintln!(
+                "{name}: bounce ratios of {} leaves gathered in {:.2} s on {threads} threads",
+                crown.len(),
+                run.gathered_seconds
+            );
         }
         eprintln!("{name}: {:.1} s", started.elapsed().as_secs_f32());
     }

@@ -48,6 +48,9 @@ pub struct ImageSettings {
     /// How far towards the sun the shadow map's row moves each point before its lookup (the
     /// leaf shaders' [`LeafShadowOffset::SHADERS`] by default).
     pub leaf_shadow: LeafShadowOffset,
+    /// Rays per leaf for the bounce gathered from the neighbours ([`super::gathered_bounce`];
+    /// 0: not measured).
+    pub bounce_rays: u32,
 }
 
 impl Default for ImageSettings {
@@ -60,6 +63,7 @@ impl Default for ImageSettings {
             seen_points: DEFAULT_SEEN_POINTS,
             hotspot: false,
             leaf_shadow: LeafShadowOffset::SHADERS,
+            bounce_rays: 0,
         }
     }
 }
@@ -101,6 +105,14 @@ pub struct ImageComparison {
     /// As `seen` (or the last model), the sun's term and the bounce scaled by the crown's
     /// hotspot at the image's phase angle; empty unless [`ImageSettings::hotspot`].
     pub hotspot: Vec<ImageError>,
+    /// As `seen` (or the last model) with the bounce from the leaves' own neighbours
+    /// ([`super::gathered_bounce`]): eq. 5.24 scaled by each leaf's gathered ratios blended
+    /// towards the sun, then the gather for the sun's own direction alone (what no blend
+    /// beats); both scaled by the covered part's gain where the gains were measured; then the
+    /// sun's own gather without that gain. Empty unless [`ImageSettings::bounce_rays`].
+    pub gathered: Vec<Vec<ImageError>>,
+    /// Seconds the ratios of every leaf took to gather (on the threads given), when measured.
+    pub gathered_seconds: f32,
     /// The hotspot measured, when it was.
     pub hotspot_factors: Option<super::hotspot::Hotspot>,
     /// Eye rays that hit a leaf.
@@ -352,6 +364,116 @@ pub fn images_against_tracer(
         )),
         _ => None,
     };
+    let mut gathered_seconds = 0.0;
+    let gathered = match (&last_model, settings.bounce_rays) {
+        (Some(([sky, sun, _], envelope)), rays) if rays > 0 => {
+            use super::gathered_bounce::{
+                bounce_ratios_of, gather_irradiance, ratio_towards, scaled_bounce_radiance,
+            };
+            let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
+            let tau = envelope.tau;
+            let started = std::time::Instant::now();
+            let ratios = bounce_ratios_of(
+                &scene,
+                material,
+                &all,
+                &envelope.leaves,
+                tau,
+                rays,
+                &|_| 1.0,
+                threads,
+            );
+            gathered_seconds = started.elapsed().as_secs_f32();
+            // The same gather for the sun's own direction: what no blend over directions beats.
+            let exact: Vec<[f32; 2]> = {
+                let chunk = all.len().div_ceil(threads.max(1)).max(1);
+                let scene = &scene;
+                std::thread::scope(|s| {
+                    let handles: Vec<_> = all
+                        .chunks(chunk)
+                        .map(|part| {
+                            s.spawn(move || {
+                                part.iter()
+                                    .map(|&leaf| {
+                                        let seed = 0xB0B1_u64
+                                            ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                                        gather_irradiance(
+                                            scene,
+                                            material,
+                                            leaf as usize,
+                                            rays,
+                                            &[light.to_sun],
+                                            &|_| 1.0,
+                                            seed,
+                                        )[0]
+                                    })
+                                    .collect::<Vec<_>>()
+                            })
+                        })
+                        .collect();
+                    handles
+                        .into_iter()
+                        .flat_map(|h| h.join().expect("bounce gather thread"))
+                        .collect()
+                })
+            };
+            let here = SunBounce::new(material, light.to_sun, tau);
+            // The image with the gains (where measured) and the bounce `bounce(leaf, n)`,
+            // scaled by the covered part's gain when `covered`.
+            let image = |bounce_of: &dyn Fn(usize, Vec3) -> f32, covered: bool| {
+                let (mut sky, mut sun) = (sky.clone(), sun.clone());
+                let mut bounce = vec![0.0; samples.len()];
+                for (k, s) in samples.iter().enumerate() {
+                    if let Some(s) = s {
+                        let leaf = s.leaf as usize;
+                        let e = &envelope.leaves[leaf];
+                        let n = scene.normal(leaf);
+                        let mut b = bounce_of(leaf, n);
+                        if let Some(g) = &gains {
+                            let gain = seen_gain(&g[leaf], view);
+                            let old = lobe_blend(&e.attenuation, light.to_sun, 1.0);
+                            sun[k] *= if old > 0.0 {
+                                (old * gain).min(1.0) / old
+                            } else {
+                                1.0
+                            };
+                            sky[k] *= gain;
+                            if covered {
+                                b *= covered_gain(gain, open_share(n, &e.attenuation));
+                            }
+                        }
+                        bounce[k] = b;
+                    }
+                }
+                measure(&[sky, sun, bounce])
+            };
+            let scaled = |leaf: usize, n: Vec3| {
+                let e = &envelope.leaves[leaf];
+                let through = lobe_blend(&e.attenuation, light.to_sun, 1.0);
+                luminance(scaled_bounce_radiance(
+                    material,
+                    n,
+                    view,
+                    &here,
+                    through,
+                    &e.s_max,
+                    light.sun,
+                    ratio_towards(&ratios[leaf], light.to_sun),
+                ))
+            };
+            let own = |leaf: usize, n: Vec3| {
+                luminance(super::gathered_bounce::gathered_bounce_radiance(
+                    material,
+                    n,
+                    view,
+                    exact[leaf],
+                    light.sun,
+                ))
+            };
+            vec![image(&scaled, true), image(&own, true), image(&own, false)]
+        }
+        _ => Vec::new(),
+    };
     let (seen, hotspot) = match last_model {
         Some(([sky, sun, bounce], envelope)) => {
             // The image with the gains (where measured), the sun through the crown as
@@ -399,6 +521,8 @@ pub fn images_against_tracer(
         models,
         seen,
         hotspot,
+        gathered,
+        gathered_seconds,
         hotspot_factors,
         shadow_map_sun,
         noise,
