@@ -44,6 +44,7 @@ use super::leaf_scene::LeafScene;
 use super::model::{
     LeafMaterial, SunBounce, SunThroughCrown, bounce_sample, bsdf, sun_through_crown,
 };
+use super::path_trace::{cosine_direction, luminance};
 use crate::rng::SplitMix64;
 use bevy::math::Vec3;
 use std::f32::consts::PI;
@@ -86,21 +87,6 @@ pub fn basis_weights(to_sun: Vec3) -> [f32; 14] {
         w = [1.0 / 14.0; 14];
     }
     w
-}
-
-/// The luminance the irradiances are measured in.
-fn luminance(c: Vec3) -> f32 {
-    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
-}
-
-/// A direction around `axis` (unit) with density `cos θ / π` over its hemisphere.
-fn cosine_direction(axis: Vec3, rng: &mut SplitMix64) -> Vec3 {
-    let (u, v) = axis.any_orthonormal_pair();
-    let r2 = rng.next_f32();
-    let phi = rng.next_f32() * 2.0 * PI;
-    let r = r2.sqrt();
-    (u * (r * phi.cos()) + v * (r * phi.sin()) + axis * (1.0 - r2).max(0.0).sqrt())
-        .normalize_or(axis)
 }
 
 /// The irradiance one bounce brings to the front face (the side of its normal) and the back
@@ -270,33 +256,15 @@ pub fn bounce_ratios_of(
     threads: usize,
 ) -> Vec<BounceRatios> {
     let bounces = basis_bounces(material, tau);
-    let bounces = &bounces;
-    let chunk = leaves.len().div_ceil(threads.max(1)).max(1);
-    std::thread::scope(|s| {
-        let handles: Vec<_> = leaves
-            .chunks(chunk)
-            .map(|part| {
-                s.spawn(move || {
-                    part.iter()
-                        .map(|&leaf| {
-                            let l = leaf as usize;
-                            let Some(envelope) = envelopes.get(l) else {
-                                return BounceRatios::default();
-                            };
-                            let seed =
-                                0xB0B1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-                            bounce_ratios(
-                                scene, material, l, envelope, tau, bounces, rays, opacity, seed,
-                            )
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("bounce gather thread"))
-            .collect()
+    super::par_map(leaves, threads, |&leaf| {
+        let l = leaf as usize;
+        let Some(envelope) = envelopes.get(l) else {
+            return BounceRatios::default();
+        };
+        let seed = 0xB0B1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        bounce_ratios(
+            scene, material, l, envelope, tau, &bounces, rays, opacity, seed,
+        )
     })
 }
 

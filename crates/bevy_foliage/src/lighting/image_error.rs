@@ -385,38 +385,18 @@ pub fn images_against_tracer(
             );
             gathered_seconds = started.elapsed().as_secs_f32();
             // The same gather for the sun's own direction: what no blend over directions beats.
-            let exact: Vec<[f32; 2]> = {
-                let chunk = all.len().div_ceil(threads.max(1)).max(1);
-                let scene = &scene;
-                std::thread::scope(|s| {
-                    let handles: Vec<_> = all
-                        .chunks(chunk)
-                        .map(|part| {
-                            s.spawn(move || {
-                                part.iter()
-                                    .map(|&leaf| {
-                                        let seed = 0xB0B1_u64
-                                            ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-                                        gather_irradiance(
-                                            scene,
-                                            material,
-                                            leaf as usize,
-                                            rays,
-                                            &[light.to_sun],
-                                            &|_| 1.0,
-                                            seed,
-                                        )[0]
-                                    })
-                                    .collect::<Vec<_>>()
-                            })
-                        })
-                        .collect();
-                    handles
-                        .into_iter()
-                        .flat_map(|h| h.join().expect("bounce gather thread"))
-                        .collect()
-                })
-            };
+            let exact: Vec<[f32; 2]> = super::par_map(&all, threads, |&leaf| {
+                let seed = 0xB0B1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                gather_irradiance(
+                    &scene,
+                    material,
+                    leaf as usize,
+                    rays,
+                    &[light.to_sun],
+                    &|_| 1.0,
+                    seed,
+                )[0]
+            });
             let here = SunBounce::new(material, light.to_sun, tau);
             // The image with the gains (where measured) and the bounce `bounce(leaf, n)`,
             // scaled by the covered part's gain when `covered`.

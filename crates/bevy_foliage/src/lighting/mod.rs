@@ -29,3 +29,24 @@ pub mod seen_part;
 pub mod settings;
 pub mod sun_maps;
 pub mod traced_bins;
+
+/// `f` of each of `items`, in order, on up to `threads` scoped threads (the bakes' and the
+/// measurements' per-leaf loops).
+pub(crate) fn par_map<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
+    let chunk = items.len().div_ceil(threads.max(1)).max(1);
+    let f = &f;
+    std::thread::scope(|s| {
+        let handles: Vec<_> = items
+            .chunks(chunk)
+            .map(|part| s.spawn(move || part.iter().map(f).collect::<Vec<_>>()))
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("lighting worker thread"))
+            .collect()
+    })
+}

@@ -119,7 +119,7 @@ fn sun_out(
 pub const SUN_RAYS_PER_POINT: u32 = 16;
 
 /// A direction around `axis` (unit) with density `cos θ / π` over its hemisphere.
-fn cosine_direction(axis: Vec3, rng: &mut SplitMix64) -> Vec3 {
+pub(crate) fn cosine_direction(axis: Vec3, rng: &mut SplitMix64) -> Vec3 {
     let (u, v) = axis.any_orthonormal_pair();
     let r2 = rng.next_f32();
     let phi = rng.next_f32() * 2.0 * PI;
@@ -355,20 +355,9 @@ fn trace_leaves(
     settings: &TraceSettings,
     threads: usize,
 ) -> Vec<TracedLeaf> {
-    let work = |&leaf: &usize| {
+    super::par_map(picked, threads, |&leaf| {
         let wo = (eye - scene.centre(leaf)).normalize_or(Vec3::Y);
         trace_leaf(scene, material, light, leaf, wo, settings)
-    };
-    let chunk = picked.len().div_ceil(threads.max(1)).max(1);
-    std::thread::scope(|s| {
-        let handles: Vec<_> = picked
-            .chunks(chunk)
-            .map(|part| s.spawn(move || part.iter().map(work).collect::<Vec<_>>()))
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("tracer thread"))
-            .collect()
     })
 }
 
