@@ -19,7 +19,7 @@
 //! ([`gather_irradiance`]), divided by what eq. 5.24 brings each face for that sun
 //! ([`closed_form_irradiance`]) — the leaf's [`BounceRatios`]. For a sun anywhere the ratios
 //! are blended by sharpened cosine lobes ([`basis_weights`]) and scale eq. 5.24's bins on each
-//! face ([`scaled_bounce_radiance`]): the closed form keeps what it gets right (the sun's exact
+//! face ([`super::model::bounce_radiance_by_face`]): the closed form keeps what it gets right (the sun's exact
 //! direction in G1–G3, the BSDF's colours on each side), the gather supplies what the crown's
 //! real neighbours do.
 //!
@@ -280,34 +280,6 @@ pub fn ratio_towards(ratios: &BounceRatios, to_sun: Vec3) -> [f32; 2] {
     [blend(&ratios.front), blend(&ratios.back)]
 }
 
-/// Eq. 5.11 with eq. 5.24 ([`super::model::bounce_radiance`]) with the bins that light the
-/// leaf's front face scaled by `ratio[0]` and those lighting its back by `ratio[1]`
-/// ([`ratio_towards`]).
-#[allow(clippy::too_many_arguments)]
-pub fn scaled_bounce_radiance(
-    material: &LeafMaterial,
-    n: Vec3,
-    wo: Vec3,
-    bounce: &SunBounce,
-    through: f32,
-    s_max: &[f32; 8],
-    e_sun: Vec3,
-    ratio: [f32; 2],
-) -> Vec3 {
-    (0..8)
-        .map(|j| {
-            let r = if n.dot(DIRECTIONS[j]) >= 0.0 {
-                ratio[0]
-            } else {
-                ratio[1]
-            };
-            bsdf(material, n, wo, DIRECTIONS[j])
-                * bounce_sample(bounce, through, s_max[j], j, e_sun)
-                * r
-        })
-        .sum()
-}
-
 /// The bounce a leaf of normal `n` and `material` sends towards `wo` when its faces get
 /// `irradiance` (front, back; [`gather_irradiance`]'s units) under a sun of irradiance `e_sun`:
 /// eq. 5.4's two sides, the neighbours' light in the colour of the mean albedo.
@@ -332,7 +304,7 @@ pub fn gathered_bounce_radiance(
 mod tests {
     use super::*;
     use crate::lighting::bins::proxies;
-    use crate::lighting::model::bounce_radiance;
+    use crate::lighting::model::{bounce_radiance, bounce_radiance_by_face};
     use crate::lighting::path_trace::{
         TraceSettings, push_square_leaf, test_light, trace_leaf, uniform_ball,
     };
@@ -477,9 +449,9 @@ mod tests {
         let through = 0.6;
         let plain = bounce_radiance(&mat, n, wo, &bounce, through, &e.s_max, Vec3::ONE);
         let ones =
-            scaled_bounce_radiance(&mat, n, wo, &bounce, through, &e.s_max, Vec3::ONE, [1.0; 2]);
+            bounce_radiance_by_face(&mat, n, wo, &bounce, through, &e.s_max, Vec3::ONE, [1.0; 2]);
         assert!((plain - ones).length() < 1e-6);
-        let front = scaled_bounce_radiance(
+        let front = bounce_radiance_by_face(
             &mat,
             n,
             wo,
@@ -489,7 +461,7 @@ mod tests {
             Vec3::ONE,
             [1.0, 0.0],
         );
-        let back = scaled_bounce_radiance(
+        let back = bounce_radiance_by_face(
             &mat,
             n,
             wo,

@@ -367,9 +367,8 @@ pub fn images_against_tracer(
     let mut gathered_seconds = 0.0;
     let gathered = match (&last_model, settings.bounce_rays) {
         (Some(([sky, sun, _], envelope)), rays) if rays > 0 => {
-            use super::gathered_bounce::{
-                bounce_ratios_of, gather_irradiance, ratio_towards, scaled_bounce_radiance,
-            };
+            use super::gathered_bounce::{bounce_ratios_of, gather_irradiance, ratio_towards};
+            use super::model::bounce_radiance_by_face;
             let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
             let tau = envelope.tau;
             let started = std::time::Instant::now();
@@ -430,7 +429,7 @@ pub fn images_against_tracer(
             let scaled = |leaf: usize, n: Vec3| {
                 let e = &envelope.leaves[leaf];
                 let through = lobe_blend(&e.attenuation, light.to_sun, 1.0);
-                luminance(scaled_bounce_radiance(
+                luminance(bounce_radiance_by_face(
                     material,
                     n,
                     view,

@@ -350,10 +350,29 @@ pub fn bounce_radiance(
     s_max: &[f32; 8],
     e_sun: Vec3,
 ) -> Vec3 {
+    bounce_radiance_by_face(material, n, wo, bounce, through, s_max, e_sun, [1.0; 2])
+}
+
+/// [`bounce_radiance`] with the bins that light the leaf's front face (the side of its normal)
+/// scaled by `scale[0]` and those lighting its back by `scale[1]` (the gathered ratios of
+/// [`super::gathered_bounce`]).
+#[allow(clippy::too_many_arguments)]
+pub fn bounce_radiance_by_face(
+    material: &LeafMaterial,
+    n: Vec3,
+    wo: Vec3,
+    bounce: &SunBounce,
+    through: f32,
+    s_max: &[f32; 8],
+    e_sun: Vec3,
+    scale: [f32; 2],
+) -> Vec3 {
     (0..8)
         .map(|j| {
+            let face = if n.dot(DIRECTIONS[j]) >= 0.0 { 0 } else { 1 };
             bsdf(material, n, wo, DIRECTIONS[j])
                 * bounce_sample(bounce, through, s_max[j], j, e_sun)
+                * scale[face]
         })
         .sum()
 }
