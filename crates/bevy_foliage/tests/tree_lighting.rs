@@ -8,10 +8,11 @@ use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::light::{CascadeShadowConfig, CascadeShadowConfigBuilder, Cascades};
 use bevy::prelude::*;
 use bevy_foliage::lighting::bins::{DARKEST_LIGHT, light_of};
+use bevy_foliage::lighting::gathered_bounce::{BounceRatios, ratio_towards};
 use bevy_foliage::lighting::hotspot::{HOTSPOT_NODES, Hotspot};
 use bevy_foliage::lighting::model::{
-    SkyLight, SunBounce, SunThroughCrown, bounce_radiance, open_share, sky_radiance, sun_radiance,
-    sun_through_crown,
+    SkyLight, SunBounce, SunThroughCrown, bounce_radiance, bounce_radiance_by_face, open_share,
+    sky_radiance, sun_radiance, sun_through_crown,
 };
 use bevy_foliage::lighting::path_trace::LeafScene;
 use bevy_foliage::lighting::seen_part::{covered_gain, gain_of, quantize_gain, seen_gain};
@@ -157,6 +158,7 @@ fn scene(name: &str, sun_shadows: bool) -> Option<Scene> {
         ground_albedo: Vec3::new(0.3, 0.25, 0.2),
         sun_through_crown: SunThroughCrown::BlendedAttenuation,
         bounce: true,
+        gathered_bounce: true,
         seen_part: true,
     };
     lit_app(&mut harness, &lighting);
@@ -242,6 +244,8 @@ struct Check {
     bounce_visible: u32,
     /// Compared pixels the covered part's gain on the bounce moves by more than 3/255.
     covered_visible: u32,
+    /// Compared pixels the leaves' gathered bounce ratios move by more than 3/255.
+    ratios_visible: u32,
     /// Compared pixels the crown's hotspot moves by more than 3/255, and those its exponent on
     /// the sun alone moves so.
     hotspot_visible: u32,
@@ -322,6 +326,7 @@ fn compare_with_model(
                     bounce_on: bool,
                     covered_on: bool,
                     hotspot_on: bool,
+                    ratios_on: bool,
                     outside: f32,
                     at_leaf: Option<f32>|
      -> Vec3 {
@@ -353,7 +358,14 @@ fn compare_with_model(
             } else {
                 1.0
             };
-            bounce_radiance(&optics, n, wo, &bounce, baked_through, &s_max, e_sun)
+            // Each face's bins by the leaf's gathered ratios towards the sun.
+            let faces = match baked.leaf_bounce.get(leaf as usize) {
+                Some(r) if lighting.gathered_bounce && ratios_on => {
+                    ratio_towards(&BounceRatios::from_stored(r), to_sun)
+                }
+                _ => [1.0; 2],
+            };
+            bounce_radiance_by_face(&optics, n, wo, &bounce, baked_through, &s_max, e_sun, faces)
                 * (covered * outside * spot.bounce_at(wo, to_sun))
         } else {
             Vec3::ZERO
@@ -392,6 +404,7 @@ fn compare_with_model(
         worst: 0.0,
         bounce_visible: 0,
         covered_visible: 0,
+        ratios_visible: 0,
         hotspot_visible: 0,
         hotspot_sun_visible: 0,
         sunlit: 0,
@@ -436,16 +449,17 @@ fn compare_with_model(
             }
             // The pixel the model gives with the bounce, the covered part's gain and the
             // hotspot each on or off, in 255ths of sRGB.
-            let pixel = |bounce: bool, covered: bool, hotspot: bool| {
-                expected(leaf, bounce, covered, hotspot, outside, at_leaf)
+            let pixel = |bounce: bool, covered: bool, hotspot: bool, ratios: bool| {
+                expected(leaf, bounce, covered, hotspot, ratios, outside, at_leaf)
                     .to_array()
                     .map(|c| srgb(c) * 255.0)
             };
-            let want = pixel(true, true, true);
-            let plain = pixel(false, true, true);
-            let uncovered = pixel(true, false, true);
-            let no_hotspot = pixel(true, true, false);
-            let plain_no_hotspot = pixel(false, true, false);
+            let want = pixel(true, true, true, true);
+            let plain = pixel(false, true, true, true);
+            let uncovered = pixel(true, false, true, true);
+            let no_hotspot = pixel(true, true, false, true);
+            let plain_no_hotspot = pixel(false, true, false, true);
+            let no_ratios = pixel(true, true, true, false);
             let got = image.pixel(x, y);
             let [r, g, b] = want.map(|c| c.round() as u8);
             check.reference.set_pixel(x, y, [r, g, b, 255]);
@@ -462,6 +476,9 @@ fn compare_with_model(
             }
             if (0..3).any(|c| (want[c] - uncovered[c]).abs() > 3.0) {
                 check.covered_visible += 1;
+            }
+            if (0..3).any(|c| (want[c] - no_ratios[c]).abs() > 3.0) {
+                check.ratios_visible += 1;
             }
             if (0..3).any(|c| (want[c] - no_hotspot[c]).abs() > 3.0) {
                 check.hotspot_visible += 1;
@@ -510,8 +527,12 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         within,
         worst,
         bounce_visible,
+        ratios_visible,
         ..
     } = check;
+    println!(
+        "the bake's own bounce ratios move {ratios_visible} of {compared} leaf pixels by > 3/255"
+    );
     println!(
         "tree lighting: {compared} pixels inside leaves compared, {within} within 3/255, worst {worst:.1}/255; the bounce moves {bounce_visible} of them by > 6/255; the crown's hotspot {:?}",
         baked.hotspot
@@ -525,9 +546,11 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         "{within} of {compared} leaf pixels within 3/255 of the CPU model (worst {worst:.1})"
     );
 
-    // Without the seen-part gains the leaves show the model without them, and many pixels move.
+    // Without the seen-part gains and the gathered ratios the leaves show the model without
+    // them (eq. 5.24 as it is), and many pixels move.
     let without = TreeLightingSettings {
         seen_part: false,
+        gathered_bounce: false,
         ..lighting.clone()
     };
     harness.world_mut().insert_resource(without.clone());
@@ -553,7 +576,7 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         })
         .count();
     println!(
-        "without the seen-part gains: {} of {} within 3/255 of the model without them, worst {:.1}/255; {moved} pixels moved by > 3/255",
+        "without the seen-part gains and the bounce ratios: {} of {} within 3/255 of the model without them, worst {:.1}/255; {moved} pixels moved by > 3/255",
         plain.within, plain.compared, plain.worst
     );
     assert!(
@@ -566,8 +589,8 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         moved * 4 >= compared as usize,
         "the gains move only {moved} pixels"
     );
-    // The bounce is a visible part of what is checked: here, where the gains and the crown's
-    // hotspot (which at this view's angle to the sun dim it) leave it whole.
+    // The bounce is a visible part of what is checked: here, where the gains, the ratios (on
+    // this crown below 1 on average) and the crown's hotspot leave it whole.
     println!(
         "without them the bounce moves {} of {} by > 6/255",
         plain.bounce_visible, plain.compared
@@ -585,8 +608,16 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
     harness.world_mut().insert_resource(lighting.clone());
     // And a strong hotspot: the blended sun raised to 1/3 (brighter) and the bounce doubled,
     // which the model with them must follow too.
+    // And strong bounce ratios, different on each face and for each basis sun (so a shader
+    // that reads them out of order, or blends them towards the wrong sun, fails).
+    let strong_ratios = BounceRatios {
+        front: std::array::from_fn(|k| 0.5 + 0.1 * k as f32),
+        back: std::array::from_fn(|k| 6.0 + 0.3 * k as f32),
+    }
+    .quantized();
     let strong = BakedFoliage {
         leaf_seen: vec![[quantize_gain(STRONG_GAIN); 8]; baked.leaf_count()],
+        leaf_bounce: vec![strong_ratios; baked.leaf_count()],
         hotspot: Hotspot {
             sun: [STRONG_HOTSPOT.0; HOTSPOT_NODES],
             bounce: [STRONG_HOTSPOT.1; HOTSPOT_NODES],
@@ -637,6 +668,16 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         covered.covered_visible * 4 >= covered.compared,
         "the covered part's gain shows in too few pixels ({} of {}) for the test to see it",
         covered.covered_visible,
+        covered.compared
+    );
+    println!(
+        "the strong bounce ratios move {} of {} by > 3/255",
+        covered.ratios_visible, covered.compared
+    );
+    assert!(
+        covered.ratios_visible * 4 >= covered.compared,
+        "the bounce ratios show in too few pixels ({} of {}) for the test to see it",
+        covered.ratios_visible,
         covered.compared
     );
     println!(
@@ -1032,6 +1073,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
         ground_albedo: Vec3::new(0.3, 0.25, 0.2),
         sun_through_crown: SunThroughCrown::BlendedAttenuation,
         bounce: true,
+        gathered_bounce: true,
         seen_part: true,
     };
     lit_app(&mut harness, &lighting);

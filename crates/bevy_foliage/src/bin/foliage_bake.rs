@@ -3,7 +3,7 @@
 //! ```text
 //! cargo run -p bevy_foliage --bin foliage_bake -- [--out DIR] [--resolution N] [--depth D]
 //!     [--leaf-material NAME ...] [--rays-per-bin R | --neighbour-bins] [--seen-points P]
-//!     [--no-hotspot] [TREE | FILE.gltf | FILE.glb ...]
+//!     [--bounce-rays R] [--no-hotspot] [TREE | FILE.gltf | FILE.glb ...]
 //! ```
 //! TREE is one of `olea`, `fraxinus`, `quercus`, `cedrus` (the thesis' test trees; default: all);
 //! a glTF file is split into leaves as `bevy_foliage::pruning::gltf` documents.
@@ -12,11 +12,15 @@
 //! `--neighbour-bins`: §5.6's estimate from the neighbours instead.
 //! `--seen-points`: points per leaf for the gains from a leaf's mean light to the part of it
 //! in view (`lighting::seen_part`; default 32, twice a bake at load time's; 0 for none); their time is the envelope stage's.
+//! `--bounce-rays`: rays per leaf for the bounce gathered from its neighbours
+//! (`lighting::gathered_bounce`; default 64, twice a bake at load time's; 0 for none: eq. 5.24
+//! alone); the envelope stage's time too.
 //! `--no-hotspot`: leave the crown's hotspot (`lighting::hotspot`) unmeasured, its factors at 1
 //! (measured by default with `HotspotSettings::OFFLINE`; its time is the envelope stage's too).
 //! Prints progress on stderr and one JSON object per tree on stdout (bake time per stage, leaf
 //! count, GPU bytes).
 
+use bevy_foliage::lighting::gathered_bounce::OFFLINE_BOUNCE_RAYS;
 use bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
 use bevy_foliage::lighting::traced_bins::{BinEstimate, OFFLINE_RAYS_PER_BIN};
 use bevy_foliage::pruning::bake::{BakeProgress, BakeSettings, BakeStage, CellCount, bake_masked};
@@ -36,6 +40,7 @@ fn main() {
             rays_per_bin: OFFLINE_RAYS_PER_BIN,
         },
         seen_points: OFFLINE_SEEN_POINTS,
+        bounce_rays: OFFLINE_BOUNCE_RAYS,
         hotspot: bevy_foliage::lighting::hotspot::HotspotSettings::OFFLINE,
         ..BakeSettings::default()
     };
@@ -77,9 +82,12 @@ fn main() {
             "--seen-points" => {
                 settings.seen_points = value("--seen-points").parse().expect("--seen-points P")
             }
+            "--bounce-rays" => {
+                settings.bounce_rays = value("--bounce-rays").parse().expect("--bounce-rays R")
+            }
             "--help" | "-h" => {
                 eprintln!(
-                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [--seen-points P] [--no-hotspot] [olea|fraxinus|quercus|cedrus ...]"
+                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [--seen-points P] [--bounce-rays R] [--no-hotspot] [olea|fraxinus|quercus|cedrus ...]"
                 );
                 return;
             }

@@ -471,6 +471,8 @@ fn image_table(
                 "eq. 5.24 × gathered ratios (14 suns blended), covered-part gain",
                 "gathered for this sun alone, covered-part gain",
                 "gathered for this sun alone, no gain",
+                "eq. 5.24 × gathered ratios, no gain",
+                "eq. 5.24 × gathered ratios, covered-part gain, hotspot measured with them (as the leaf shaders draw it)",
             ]) {
                 row(&g[size], "sun indirect (1 bounce)", name, &g[size].bounce);
             }

@@ -295,6 +295,7 @@ impl ImpostorSource {
             &scene,
             &envelope,
             &vec![seen; self.leaves.len()],
+            &[],
             &|l| Some(l as usize),
             &crate::lighting::settings::TreeLightingSettings::default().optics,
             &opacity,

@@ -102,6 +102,8 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
             lights,
             params.smooth_envelope != 0u,
             params.bounce != 0u,
+            // A texel stands for many leaves: eq. 5.24 as it is.
+            vec2(1.0),
         );
         // The leaves in view are more open than their mean (`lighting::seen_part`): the crown's
         // gain towards the eye on the sky and the blended sun, as the leaves have their own,

@@ -1,7 +1,10 @@
 //! One bounce of sunlight gathered from a leaf's own neighbours, for the sun from fourteen
-//! directions, as ratios to the closed form of Boulanger 2008, eq. 5.24. Measured against the
-//! path tracer (`tree_lighting_error --images --bounce-rays R`); not yet part of the bake, the
-//! `.foliage` file or the leaf shaders, which still take eq. 5.24 alone.
+//! directions, as ratios to the closed form of Boulanger 2008, eq. 5.24. Baked with the bins
+//! (`BakeSettings::bounce_rays`), stored 28 bytes a leaf ([`BounceRatios::quantized`]) in the
+//! `.foliage` file and the leaves' light buffer, and blended towards the sun by the leaf vertex
+//! shader (`tree_lighting.wgsl`'s `ratio_towards`), which scales eq. 5.24's bins face by face;
+//! measured against the path tracer by `tree_lighting_error --images --bounce-rays R`.
+//! Billboard clouds keep eq. 5.24 alone.
 //!
 //! Eq. 5.24 integrates the light of the neighbours along each bin in closed form by assuming a
 //! crown of uniform density and random leaf orientations (§5.2.1), each neighbour lit by the
@@ -38,7 +41,8 @@
 //! 4.3–6.5 % at every sun (the thesis reports 6 % on such a crown).
 //!
 //! Cost: 0.7–1.3 s for a 2,000-leaf crown at 64 rays a leaf on two threads (about 0.6 ms a
-//! leaf, some 3.5× the 32-ray traced bins).
+//! leaf, some 3.5× the 32-ray traced bins); a bake made while an app runs gathers
+//! [`DEFAULT_BOUNCE_RAYS`], `foliage_bake` [`OFFLINE_BOUNCE_RAYS`].
 //!
 //! Plain Rust, no render types.
 
@@ -75,6 +79,16 @@ pub const SUN_BASIS: [Vec3; 14] = {
 /// The power the blend raises each basis direction's cosine lobe to ([`basis_weights`]):
 /// eq. 5.7's plain cosine spreads a sun over directions up to 90° away.
 pub const BASIS_LOBE_POWER: f32 = 4.0;
+
+/// Rays per leaf a bake made while an app runs gathers for its ratios
+/// ([`crate::pruning::bake::BakeSettings::bounce_rays`]).
+pub const DEFAULT_BOUNCE_RAYS: u32 = 32;
+
+/// Rays per leaf `foliage_bake` gathers (a bake kept on disk).
+pub const OFFLINE_BOUNCE_RAYS: u32 = 64;
+
+/// The most rays per leaf a bake accepts.
+pub const MAX_BOUNCE_RAYS: u32 = 4096;
 
 /// The most a ratio is taken as: a leaf eq. 5.24 puts in deep shade may see lit neighbours.
 pub const RATIO_MAX: f32 = 16.0;
@@ -246,8 +260,8 @@ pub fn bounce_ratios(
     out
 }
 
-/// [`bounce_ratios`] of each of `leaves` (indices into `scene` and `envelopes`) on up to
-/// `threads` threads.
+/// [`bounce_ratios`] of each of `leaves` (indices into `scene`; `envelopes[i]` the envelope of
+/// `leaves[i]`) on up to `threads` threads.
 #[allow(clippy::too_many_arguments)]
 pub fn bounce_ratios_of(
     scene: &LeafScene,
@@ -260,9 +274,14 @@ pub fn bounce_ratios_of(
     threads: usize,
 ) -> Vec<BounceRatios> {
     let bounces = basis_bounces(material, tau);
-    super::par_map(leaves, threads, |&leaf| {
+    let jobs: Vec<(u32, Option<&LeafEnvelope>)> = leaves
+        .iter()
+        .enumerate()
+        .map(|(i, &leaf)| (leaf, envelopes.get(i)))
+        .collect();
+    super::par_map(&jobs, threads, |&(leaf, envelope)| {
         let l = leaf as usize;
-        let Some(envelope) = envelopes.get(l) else {
+        let Some(envelope) = envelope else {
             return BounceRatios::default();
         };
         let seed = 0xB0B1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
@@ -270,6 +289,57 @@ pub fn bounce_ratios_of(
             scene, material, l, envelope, tau, &bounces, rays, opacity, seed,
         )
     })
+}
+
+/// Bytes a leaf's [`BounceRatios`] take as a bake stores them ([`BounceRatios::quantized`]):
+/// the front face's fourteen then the back face's.
+pub const STORED_RATIOS: usize = 28;
+
+/// Steps of the stored ratios' logarithm: codes 1–255 span `log2` from −4 to +4 ([1/16, 16],
+/// each step 2.2 % of the ratio); code 0 is a ratio of 0 (a face that sees no lit neighbour).
+const RATIO_LOG2_STEPS: f32 = 254.0;
+
+/// A ratio as a bake stores it: 0 below 1/32, else its base-2 logarithm over [−4, 4] in
+/// [`RATIO_LOG2_STEPS`] steps (1 is stored exactly, as code 128); not finite: 1.
+pub fn quantize_ratio(ratio: f32) -> u8 {
+    let r = if ratio.is_finite() { ratio } else { 1.0 };
+    let log2_max = RATIO_MAX.log2();
+    if r < 1.0 / (2.0 * RATIO_MAX) {
+        return 0;
+    }
+    let x = (r.clamp(1.0 / RATIO_MAX, RATIO_MAX).log2() + log2_max) / (2.0 * log2_max);
+    1 + (x * RATIO_LOG2_STEPS).round() as u8
+}
+
+/// The ratio a stored byte holds ([`quantize_ratio`]'s inverse).
+pub fn ratio_of(q: u8) -> f32 {
+    if q == 0 {
+        return 0.0;
+    }
+    let log2_max = RATIO_MAX.log2();
+    ((q - 1) as f32 / RATIO_LOG2_STEPS * 2.0 * log2_max - log2_max).exp2()
+}
+
+impl BounceRatios {
+    /// The ratios as a bake stores them: the front face's fourteen, then the back face's,
+    /// each by [`quantize_ratio`].
+    pub fn quantized(&self) -> [u8; STORED_RATIOS] {
+        std::array::from_fn(|i| {
+            quantize_ratio(if i < 14 {
+                self.front[i]
+            } else {
+                self.back[i - 14]
+            })
+        })
+    }
+
+    /// The ratios a bake stored ([`BounceRatios::quantized`]'s inverse).
+    pub fn from_stored(stored: &[u8; STORED_RATIOS]) -> Self {
+        Self {
+            front: std::array::from_fn(|k| ratio_of(stored[k])),
+            back: std::array::from_fn(|k| ratio_of(stored[14 + k])),
+        }
+    }
 }
 
 /// A leaf's ratios for the sun towards `to_sun` (unit): front and back, blended by
@@ -425,11 +495,12 @@ mod tests {
         let env =
             crown_envelope_traced(&proxies(&leaves), &scene, &order, &|_| 1.0, 32, 2, &|_| {});
         let picked: Vec<u32> = (0..leaves.len() as u32).step_by(25).collect();
+        let picked_envelopes: Vec<_> = picked.iter().map(|&l| env.leaves[l as usize]).collect();
         let ratios = bounce_ratios_of(
             &scene,
             &mat,
             &picked,
-            &env.leaves,
+            &picked_envelopes,
             env.tau,
             128,
             &|_| 1.0,
@@ -507,5 +578,38 @@ mod tests {
             .map(|d| d.dot(Vec3::Y))
             .fold(-1.0, f32::max);
         assert!(eight < 0.58);
+    }
+
+    /// Stored ratios: 1 exactly, 0 as 0, every ratio in [1/16, 16] within 1.15 % (half a step
+    /// of the logarithm), monotone; the rest clamped.
+    #[test]
+    fn stored_ratios_keep_their_value_within_half_a_step() {
+        assert_eq!(ratio_of(quantize_ratio(1.0)), 1.0);
+        assert_eq!(quantize_ratio(1.0), 128);
+        assert_eq!(ratio_of(quantize_ratio(0.0)), 0.0);
+        assert_eq!(ratio_of(quantize_ratio(f32::NAN)), 1.0);
+        assert_eq!(ratio_of(quantize_ratio(1e9)), RATIO_MAX);
+        assert_eq!(ratio_of(quantize_ratio(0.05)), 1.0 / RATIO_MAX);
+        let mut last = 0u8;
+        for i in 0..=4000 {
+            let r = (-4.0 + 8.0 * i as f32 / 4000.0).exp2();
+            let q = quantize_ratio(r);
+            assert!(q >= last);
+            last = q;
+            assert!(
+                (ratio_of(q) / r - 1.0).abs() < 0.0115,
+                "{r} stored as {}",
+                ratio_of(q)
+            );
+        }
+        let r = BounceRatios {
+            front: std::array::from_fn(|k| 0.5 + k as f32 * 0.25),
+            back: std::array::from_fn(|k| 4.0 - k as f32 * 0.2),
+        };
+        let back = BounceRatios::from_stored(&r.quantized());
+        for k in 0..14 {
+            assert!((back.front[k] / r.front[k] - 1.0).abs() < 0.0115);
+            assert!((back.back[k] / r.back[k] - 1.0).abs() < 0.0115);
+        }
     }
 }

@@ -30,8 +30,9 @@
 //! not say (a low sun crosses more of a tall crown than a high one at the same angle).
 
 use super::envelope::CrownEnvelope;
+use super::gathered_bounce::{BounceRatios, ratio_towards};
 use super::leaf_scene::{LeafScene, uniform_direction};
-use super::model::{LeafMaterial, SunBounce, bounce_radiance, lobe_blend, open_share};
+use super::model::{LeafMaterial, SunBounce, bounce_radiance_by_face, lobe_blend, open_share};
 use super::path_trace::{TraceLight, TraceSettings, gather, luminance};
 use super::seen_part::{covered_gain, seen_gain};
 use crate::rng::SplitMix64;
@@ -231,8 +232,9 @@ fn at_angle(axis: Vec3, alpha: f32, rng: &mut SplitMix64) -> Vec3 {
     (axis * alpha.cos() + (u * phi.cos() + v * phi.sin()) * alpha.sin()).normalize_or(axis)
 }
 
-/// The hotspot of the crown of `scene`, whose leaves' envelope `envelope` and seen-part gains
-/// `gains` (empty: no gains) are what its shaders read — `stored(l)` the index in both of the
+/// The hotspot of the crown of `scene`, whose leaves' envelope `envelope`, seen-part gains
+/// `gains` (empty: no gains) and gathered bounce ratios `ratios`
+/// ([`super::gathered_bounce`]; empty: eq. 5.24 alone) are what its shaders read — `stored(l)` the index in both of the
 /// scene's leaf `l` (`None`: a leaf not drawn, which still casts shade) — lit through leaves
 /// of `material` (the ratio does not change when the material is scaled), `opacity(l)` the
 /// share of leaf `l`'s area that stops light; on up to `threads` threads. A node at which no
@@ -242,6 +244,7 @@ pub fn crown_hotspot(
     scene: &LeafScene,
     envelope: &CrownEnvelope,
     gains: &[[f32; 8]],
+    ratios: &[BounceRatios],
     stored: &(dyn Fn(u32) -> Option<usize> + Sync),
     material: &LeafMaterial,
     opacity: &(impl Fn(u32) -> f32 + Sync),
@@ -315,7 +318,7 @@ pub fn crown_hotspot(
                 scene.transmittance(x, to_sun, leaf, opacity),
             ]);
             // The bounce: the neighbours' sunlight gathered at the point, against eq. 5.24
-            // with the covered part's gain.
+            // scaled by the leaf's gathered ratios (where baked) with the covered part's gain.
             let traced = gather(
                 scene,
                 material,
@@ -326,9 +329,17 @@ pub fn crown_hotspot(
                 &mut rng,
                 &mut |_| x,
             );
-            let modelled =
-                bounce_radiance(material, n, to_eye, &bounce, through, &e.s_max, Vec3::ONE)
-                    * covered_gain(gain, open_share(n, &e.attenuation));
+            let faces = ratios.get(i).map_or([1.0; 2], |r| ratio_towards(r, to_sun));
+            let modelled = bounce_radiance_by_face(
+                material,
+                n,
+                to_eye,
+                &bounce,
+                through,
+                &e.s_max,
+                Vec3::ONE,
+                faces,
+            ) * covered_gain(gain, open_share(n, &e.attenuation));
             sums[0] += weight as f64 * luminance(traced.bounce) as f64;
             sums[1] += weight as f64 * luminance(modelled) as f64;
         }
@@ -414,6 +425,7 @@ mod tests {
         crown_hotspot(
             &scene,
             &envelope,
+            &[],
             &[],
             &|l| Some(l as usize),
             &LeafMaterial::default(),

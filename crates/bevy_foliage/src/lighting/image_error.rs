@@ -109,7 +109,10 @@ pub struct ImageComparison {
     /// ([`super::gathered_bounce`]): eq. 5.24 scaled by each leaf's gathered ratios blended
     /// towards the sun, then the gather for the sun's own direction alone (what no blend
     /// beats); both scaled by the covered part's gain where the gains were measured; then the
-    /// sun's own gather without that gain. Empty unless [`ImageSettings::bounce_rays`].
+    /// sun's own gather without that gain; the ratios without it; and, with
+    /// [`ImageSettings::hotspot`], the ratios with the gain and the crown's hotspot measured
+    /// against them — what the leaf shaders draw. The ratios as a bake stores them. Empty
+    /// unless [`ImageSettings::bounce_rays`].
     pub gathered: Vec<Vec<ImageError>>,
     /// Seconds the ratios of every leaf took to gather (on the threads given), when measured.
     pub gathered_seconds: f32,
@@ -356,6 +359,7 @@ pub fn images_against_tracer(
             &scene,
             envelope,
             gains.as_deref().unwrap_or(&[]),
+            &[],
             &|l| Some(l as usize),
             material,
             &|_| 1.0,
@@ -383,6 +387,26 @@ pub fn images_against_tracer(
                 threads,
             );
             gathered_seconds = started.elapsed().as_secs_f32();
+            // As a bake stores them.
+            let ratios: Vec<_> = ratios
+                .iter()
+                .map(|r| super::gathered_bounce::BounceRatios::from_stored(&r.quantized()))
+                .collect();
+            // The crown's hotspot measured against the bounce with the ratios, as a bake
+            // measures it when it stores them.
+            let spot = settings.hotspot.then(|| {
+                super::hotspot::crown_hotspot(
+                    &scene,
+                    envelope,
+                    gains.as_deref().unwrap_or(&[]),
+                    &ratios,
+                    &|l| Some(l as usize),
+                    material,
+                    &|_| 1.0,
+                    &super::hotspot::HotspotSettings::OFFLINE,
+                    threads,
+                )
+            });
             // The same gather for the sun's own direction: what no blend over directions beats.
             let exact: Vec<[f32; 2]> = super::par_map(&all, threads, |&leaf| {
                 let seed = 0xB0B1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
@@ -398,8 +422,11 @@ pub fn images_against_tracer(
             });
             let here = SunBounce::new(material, light.to_sun, tau);
             // The image with the gains (where measured) and the bounce `bounce(leaf, n)`,
-            // scaled by the covered part's gain when `covered`.
-            let image = |bounce_of: &dyn Fn(usize, Vec3) -> f32, covered: bool| {
+            // scaled by the covered part's gain when `covered`, both by the hotspot `spot`
+            // where given.
+            let image_with = |bounce_of: &dyn Fn(usize, Vec3) -> f32,
+                              covered: bool,
+                              spot: Option<&super::hotspot::Hotspot>| {
                 let (mut sky, mut sun) = (sky.clone(), sun.clone());
                 let mut bounce = vec![0.0; samples.len()];
                 for (k, s) in samples.iter().enumerate() {
@@ -411,20 +438,26 @@ pub fn images_against_tracer(
                         if let Some(g) = &gains {
                             let gain = seen_gain(&g[leaf], view);
                             let old = lobe_blend(&e.attenuation, light.to_sun, 1.0);
-                            sun[k] *= if old > 0.0 {
-                                (old * gain).min(1.0) / old
-                            } else {
-                                1.0
+                            let new = match spot {
+                                Some(h) => h.sun_through((old * gain).min(1.0), view, light.to_sun),
+                                None => (old * gain).min(1.0),
                             };
+                            sun[k] *= if old > 0.0 { new / old } else { 1.0 };
                             sky[k] *= gain;
                             if covered {
                                 b *= covered_gain(gain, open_share(n, &e.attenuation));
                             }
                         }
+                        if let Some(h) = spot {
+                            b *= h.bounce_at(view, light.to_sun);
+                        }
                         bounce[k] = b;
                     }
                 }
                 measure(&[sky, sun, bounce])
+            };
+            let image = |bounce_of: &dyn Fn(usize, Vec3) -> f32, covered: bool| {
+                image_with(bounce_of, covered, None)
             };
             let scaled = |leaf: usize, n: Vec3| {
                 let e = &envelope.leaves[leaf];
@@ -449,7 +482,16 @@ pub fn images_against_tracer(
                     light.sun,
                 ))
             };
-            vec![image(&scaled, true), image(&own, true), image(&own, false)]
+            let mut rows = vec![
+                image(&scaled, true),
+                image(&own, true),
+                image(&own, false),
+                image(&scaled, false),
+            ];
+            if let Some(h) = &spot {
+                rows.push(image_with(&scaled, true, Some(h)));
+            }
+            rows
         }
         _ => Vec::new(),
     };

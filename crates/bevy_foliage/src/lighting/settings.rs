@@ -40,6 +40,10 @@ pub struct TreeLightingSettings {
     pub sun_through_crown: SunThroughCrown,
     /// Add one bounce of sunlight off the neighbouring leaves (eq. 5.24).
     pub bounce: bool,
+    /// Scale the bounce on each face of a leaf by its baked ratios of the bounce gathered from
+    /// its own neighbours to eq. 5.24's ([`crate::lighting::gathered_bounce`]; a bake without
+    /// them leaves eq. 5.24 as it is).
+    pub gathered_bounce: bool,
     /// Scale each leaf's sky and blended sun by its baked gain towards the eye, and its bounce
     /// by the covered part's gain: the part of a leaf in view is more open than the leaf's mean
     /// ([`crate::lighting::seen_part`]); and apply the crown's hotspot by the angle between
@@ -60,6 +64,7 @@ impl Default for TreeLightingSettings {
             ground_albedo: Vec3::new(0.2, 0.25, 0.15),
             sun_through_crown: SunThroughCrown::default(),
             bounce: true,
+            gathered_bounce: true,
             seen_part: true,
         }
     }

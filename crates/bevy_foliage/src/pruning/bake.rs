@@ -93,6 +93,11 @@ pub struct BakeSettings {
     /// Points per leaf for the gains from a leaf's mean light to the part of it the eye sees
     /// ([`crate::lighting::seen_part`]); 0 leaves every gain at 1 (the thesis' model as it is).
     pub seen_points: u32,
+    /// Rays per leaf for the bounce gathered from the leaf's own neighbours
+    /// ([`crate::lighting::gathered_bounce`]): per leaf and face, for fourteen suns, the ratio
+    /// of the gathered bounce to eq. 5.24's; 0 stores none (eq. 5.24 as it is). Where the bake
+    /// traces through the leaves.
+    pub bounce_rays: u32,
     /// How the crown's hotspot is measured — how what the eye sees of the crown's sun and
     /// bounce depends on the angle between the eye and the sun ([`crate::lighting::hotspot`])
     /// — where the bake traces through the leaves (traced bins or seen-part gains);
@@ -111,6 +116,7 @@ impl Default for BakeSettings {
             threads: 0,
             bins: BinEstimate::default(),
             seen_points: crate::lighting::seen_part::DEFAULT_SEEN_POINTS,
+            bounce_rays: crate::lighting::gathered_bounce::DEFAULT_BOUNCE_RAYS,
             hotspot: Default::default(),
         }
     }
@@ -222,6 +228,11 @@ pub struct BakedFoliage {
     /// of the eight octants ([`crate::lighting::seen_part`]), quantised by
     /// [`quantize_gain`](crate::lighting::seen_part::quantize_gain); empty: all 1.
     pub leaf_seen: Vec<[u16; 8]>,
+    /// Per stored leaf, its bounce ratios: the bounce gathered from its neighbours over eq.
+    /// 5.24's, per face and sun direction ([`crate::lighting::gathered_bounce`]), as
+    /// [`BounceRatios::quantized`](crate::lighting::gathered_bounce::BounceRatios::quantized)
+    /// stores them; empty: eq. 5.24 alone.
+    pub leaf_bounce: Vec<[u8; crate::lighting::gathered_bounce::STORED_RATIOS]>,
     /// The crown's hotspot: factors on the sun's term and the bounce by the angle between the
     /// eye and the sun ([`crate::lighting::hotspot`]), as stored (quantised); all 1 when not
     /// measured.
@@ -369,6 +380,13 @@ pub fn bake_masked(
             crate::lighting::seen_part::MAX_SEEN_POINTS
         )));
     }
+    if settings.bounce_rays > crate::lighting::gathered_bounce::MAX_BOUNCE_RAYS {
+        return Err(BakeError::Settings(format!(
+            "bounce_rays {} not in 0..={}",
+            settings.bounce_rays,
+            crate::lighting::gathered_bounce::MAX_BOUNCE_RAYS
+        )));
+    }
     settings.hotspot.checked().map_err(BakeError::Settings)?;
     let (leaves, skipped) = leaves.sanitized();
     if leaves.is_empty() {
@@ -432,6 +450,7 @@ pub fn bake_masked(
         centroid_offsets: Vec::new(),
         leaf_light: Vec::new(),
         leaf_seen: Vec::new(),
+        leaf_bounce: Vec::new(),
         hotspot: Default::default(),
         extinction: 0.0,
         skipped,
@@ -543,8 +562,9 @@ pub fn bake_masked(
             proxy
         })
         .collect();
-    let needs_scene =
-        settings.seen_points > 0 || matches!(settings.bins, BinEstimate::Traced { .. });
+    let needs_scene = settings.seen_points > 0
+        || settings.bounce_rays > 0
+        || matches!(settings.bins, BinEstimate::Traced { .. });
     let scene = needs_scene.then(|| crate::lighting::leaf_scene::LeafScene::new(&leaves));
     let envelope = match (settings.bins, &scene) {
         (BinEstimate::Traced { rays_per_bin }, Some(scene)) => {
@@ -585,21 +605,45 @@ pub fn bake_masked(
         .map(|g| g.map(quantize_gain))
         .collect();
     }
+    // The leaves' optics the gathered ratios and the hotspot are measured with: the settings'
+    // default (both are ratios, unchanged by the base colour that scales the optics).
+    let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
+    if let (Some(scene), true) = (&scene, settings.bounce_rays > 0) {
+        use crate::lighting::gathered_bounce::bounce_ratios_of;
+        baked.leaf_bounce = bounce_ratios_of(
+            scene,
+            &optics,
+            &stored_leaves,
+            &envelope.leaves,
+            envelope.tau,
+            settings.bounce_rays,
+            &|_| opaque,
+            threads,
+        )
+        .iter()
+        .map(|r| r.quantized())
+        .collect();
+    }
     if let Some(scene) = &scene {
+        use crate::lighting::gathered_bounce::BounceRatios;
         use crate::lighting::hotspot::crown_hotspot;
         use crate::lighting::seen_part::gain_of;
-        // What the shaders read: the stored gains, and the settings' default optics (the
-        // factors are ratios, unchanged by the base colour that scales them).
+        // What the shaders read: the stored gains and ratios.
         let gains: Vec<[f32; 8]> = baked.leaf_seen.iter().map(|g| g.map(gain_of)).collect();
+        let ratios: Vec<BounceRatios> = baked
+            .leaf_bounce
+            .iter()
+            .map(BounceRatios::from_stored)
+            .collect();
         let mut stored_of = vec![None; leaves.len()];
         for (i, &l) in stored_leaves.iter().enumerate() {
             stored_of[l as usize] = Some(i);
         }
-        let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
         baked.hotspot = crown_hotspot(
             scene,
             &envelope,
             &gains,
+            &ratios,
             &|l| stored_of.get(l as usize).copied().flatten(),
             &optics,
             &|_| opaque,
@@ -745,6 +789,73 @@ mod tests {
             let mean = want.iter().map(|g| g[j]).sum::<f32>() / want.len() as f32;
             assert!(mean > 1.02, "octant {j}: {mean}");
         }
+
+        // The bounce ratios: those the leaf at that place gets from the original crown by the
+        // same rays (its own seed), against the envelope the stored leaves give — which the
+        // bake's matches to within quantisation, so nearly every stored ratio is the one
+        // wanted within a step or two of its logarithm.
+        use crate::lighting::gathered_bounce::{
+            BounceRatios, DEFAULT_BOUNCE_RAYS, bounce_ratios_of,
+        };
+        assert_eq!(b.leaf_bounce.len(), b.leaf_count());
+        let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
+        let want = bounce_ratios_of(
+            &original_scene,
+            &optics,
+            &original_of,
+            &envelope.leaves,
+            envelope.tau,
+            DEFAULT_BOUNCE_RAYS,
+            &|_| 1.0,
+            2,
+        );
+        let (mut close, mut moved) = (0, 0);
+        for (stored, want) in b.leaf_bounce.iter().zip(&want) {
+            let got = BounceRatios::from_stored(stored);
+            for (g, w) in got
+                .front
+                .iter()
+                .chain(&got.back)
+                .zip(want.front.iter().chain(&want.back))
+            {
+                close += ((g.max(1e-3) / w.max(1e-3)).ln().abs() < 0.05) as usize;
+                moved += ((w - 1.0).abs() > 0.1) as usize;
+            }
+        }
+        let values = b.leaf_count() * 28;
+        assert!(
+            close * 100 >= values * 98,
+            "{close} of {values} ratios as wanted"
+        );
+        // And they are not eq. 5.24's all-1: a real crown's neighbours differ from its model.
+        assert!(
+            moved * 2 >= values,
+            "only {moved} of {values} ratios away from 1"
+        );
+    }
+
+    /// With no rays for the bounce ratios, the bake stores none (eq. 5.24 as the thesis has
+    /// it); an absurd count is refused.
+    #[test]
+    fn bounce_ratios_can_be_left_out() {
+        let tree = generate(&TreeSpecies::olea().with_leaf_count(300));
+        let settings = BakeSettings {
+            cells: CellCount::Depth(3),
+            resolution: 32,
+            bounce_rays: 0,
+            ..default()
+        };
+        let (baked, _) = bake(&tree.leaves, &settings, &|_| {}).unwrap();
+        assert!(baked.leaf_bounce.is_empty());
+        assert!(!baked.leaf_seen.is_empty());
+        let absurd = BakeSettings {
+            bounce_rays: u32::MAX,
+            ..settings
+        };
+        assert!(matches!(
+            bake(&tree.leaves, &absurd, &|_| {}),
+            Err(BakeError::Settings(_))
+        ));
     }
 
     /// With no points for the seen-part gains, the bake stores none (the leaves' mean light as

@@ -22,7 +22,7 @@ use std::path::Path;
 /// File signature.
 pub const MAGIC: &[u8; 8] = b"BNFOLIAG";
 /// Current format version; bump on any layout change.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 
 /// Why a baked foliage file could not be read.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -90,6 +90,10 @@ impl Writer {
         self.count(v.len());
         v.iter().for_each(|&x| self.u32(x));
     }
+    fn u8s(&mut self, v: &[u8]) {
+        self.count(v.len());
+        self.0.extend_from_slice(v);
+    }
     fn u16s(&mut self, v: &[u16]) {
         self.count(v.len());
         v.iter()
@@ -142,6 +146,10 @@ impl Reader<'_> {
         let n = self.count(4)?;
         (0..n).map(|_| self.u32()).collect()
     }
+    fn u8s(&mut self) -> Result<Vec<u8>, FormatError> {
+        let n = self.count(1)?;
+        Ok(self.take(n)?.to_vec())
+    }
     fn u16s(&mut self) -> Result<Vec<u16>, FormatError> {
         let n = self.count(2)?;
         (0..n)
@@ -192,6 +200,8 @@ pub fn encode(baked: &BakedFoliage) -> Vec<u8> {
     w.u16s(&light);
     let seen: Vec<u16> = baked.leaf_seen.iter().flatten().copied().collect();
     w.u16s(&seen);
+    let bounce: Vec<u8> = baked.leaf_bounce.iter().flatten().copied().collect();
+    w.u8s(&bounce);
     w.u32s(&baked.hotspot.packed());
     w.u32s(&[baked.extinction.to_bits()]);
     let s = baked.skipped;
@@ -257,6 +267,7 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
     let centroid_offsets = r.vec3s()?;
     let light = r.u16s()?;
     let seen = r.u16s()?;
+    let bounce = r.u8s()?;
     let hotspot = r.u32s()?;
     let extinction = r.u32s()?;
     let hotspot = match <[u32; crate::lighting::hotspot::HOTSPOT_WORDS]>::try_from(hotspot) {
@@ -272,6 +283,14 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
         .collect();
     let leaf_seen = seen
         .chunks_exact(8)
+        .map(|c| std::array::from_fn(|j| c[j]))
+        .collect();
+    use crate::lighting::gathered_bounce::STORED_RATIOS;
+    if bounce.len() % STORED_RATIOS != 0 {
+        return Err(FormatError::Invalid("bounce ratio section".into()));
+    }
+    let leaf_bounce = bounce
+        .chunks_exact(STORED_RATIOS)
         .map(|c| std::array::from_fn(|j| c[j]))
         .collect();
     let skipped = r.u32s()?;
@@ -291,6 +310,7 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
         centroid_offsets,
         leaf_light,
         leaf_seen,
+        leaf_bounce,
         hotspot,
         extinction: f32::from_bits(extinction[0]),
         skipped: SkippedLeaves {
@@ -363,6 +383,13 @@ pub fn validate(b: &BakedFoliage) -> Result<(), FormatError> {
         return bad(format!(
             "seen-part gains for {} leaves, file has {}",
             b.leaf_seen.len(),
+            b.leaf_count()
+        ));
+    }
+    if !b.leaf_bounce.is_empty() && b.leaf_bounce.len() != b.leaf_count() {
+        return bad(format!(
+            "bounce ratios for {} leaves, file has {}",
+            b.leaf_bounce.len(),
             b.leaf_count()
         ));
     }
@@ -463,6 +490,17 @@ pub(crate) mod tests {
         let mut no_seen = sample();
         no_seen.leaf_seen.clear();
         assert_eq!(decode(&encode(&no_seen)), Ok(no_seen));
+        // Bounce ratios likewise: none (eq. 5.24 alone) or one set a leaf, kept byte for byte.
+        let mut short_bounce = sample();
+        assert!(!short_bounce.leaf_bounce.is_empty());
+        short_bounce.leaf_bounce.pop();
+        assert!(matches!(
+            decode(&encode(&short_bounce)),
+            Err(FormatError::Invalid(_))
+        ));
+        let mut no_bounce = sample();
+        no_bounce.leaf_bounce.clear();
+        assert_eq!(decode(&encode(&no_bounce)), Ok(no_bounce));
         // The hotspot: measured in a bake (not the all-1 default), kept through a file, and
         // a factor out of range refused.
         let measured = sample();

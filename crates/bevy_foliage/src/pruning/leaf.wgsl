@@ -6,8 +6,8 @@
 #import bevy_foliage::leaf_pulling::{SlotVertex, pull_leaf_vertex}
 #ifdef TREE_LIGHTING
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
-#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_params, leaf_seen_gains}
-#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, seen_gain}
+#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_bounce_ratios, leaf_params, leaf_seen_gains}
+#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, seen_gain}
 
 // The tree instance's frame, read once per vertex: world directions into the model's frame
 // (the transpose undoes a rotation and, once normalised, a uniform scale), the instance's scale
@@ -35,6 +35,12 @@ fn tree_frame(instance_index: u32) -> TreeFrame {
 fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
     let to_eye = normalize(frame.local_from_world * (view.world_position - leaf.world_position.xyz));
     let albedo = leaf_params.albedo.rgb;
+    // Eq. 5.24 on each face scaled by what the leaf's own neighbours bring it
+    // (`lighting::gathered_bounce`), blended towards the sun.
+    var bounce_faces = vec2(1.0);
+    if leaf_params.bounce != 0u && leaf_params.gathered_bounce != 0u {
+        bounce_faces = ratio_towards(leaf_bounce_ratios(leaf.leaf), frame.to_sun);
+    }
     var light = leaf_radiance(
         optics_of(leaf_params.lights, albedo),
         normalize(leaf.local_normal),
@@ -44,6 +50,7 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
         lights_of(leaf_params.lights, frame.to_sun),
         leaf_params.smooth_envelope != 0u,
         leaf_params.bounce != 0u,
+        bounce_faces,
     );
     // The part of the leaf in view is more open than its mean (`lighting::seen_part`): its sky,
     // and the sun where the crown's blend stands for it, scaled by the gain towards the eye;

@@ -39,7 +39,8 @@ struct LeafParams {
     // Projected diameters (pixels) where the fade starts and where leaves are fully solid.
     fade_start: f32,
     fade_end: f32,
-    pad_x: u32,
+    // 1: the bounce on each leaf face scaled by the leaf's gathered ratios.
+    gathered_bounce: u32,
     pad_y: u32,
     // The tree lighting (`lighting::settings::TreeLightingSettings`, `tree_lighting.wgsl`): on,
     // the sun through the crown by eq. 5.7's envelope blend (else the attenuations' blend), the
@@ -60,8 +61,8 @@ struct LeafParams {
 // Per (instance, cell): kept index count, output offset, LoD(cell), 0.
 @group(#{MATERIAL_BIND_GROUP}) @binding(103) var<storage, read> cell_offsets: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var<storage, read> leaf_vertices: array<LeafVertex>;
-// Per leaf, its eight attenuations then its eight seen-part gains, as u16 pairs
-// (`store::LEAF_LIGHT_WORDS`).
+// Per leaf, its eight attenuations then its eight seen-part gains, as u16 pairs, then its 28
+// bounce ratios as bytes and a word of padding (`store::LEAF_LIGHT_WORDS`).
 @group(#{MATERIAL_BIND_GROUP}) @binding(105) var<storage, read> leaf_light: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(106) var<uniform> leaf_params: LeafParams;
 
@@ -161,12 +162,12 @@ fn unpack_eight(words: vec4<u32>) -> array<f32, 8> {
 
 // The eight attenuations of leaf `leaf` (`lighting::bins::light_of` of the stored u16s).
 fn leaf_attenuation(leaf: u32) -> array<f32, 8> {
-    return unpack_eight(leaf_light[2u * leaf]);
+    return unpack_eight(leaf_light[4u * leaf]);
 }
 
 // The eight seen-part gains of leaf `leaf` (`lighting::seen_part::gain_of` of the stored u16s).
 fn leaf_seen_gains(leaf: u32) -> array<f32, 8> {
-    var g = unpack_eight(leaf_light[2u * leaf + 1u]);
+    var g = unpack_eight(leaf_light[4u * leaf + 1u]);
     for (var j = 0u; j < 8u; j += 1u) {
         g[j] *= SEEN_GAIN_MAX;
     }
@@ -175,3 +176,16 @@ fn leaf_seen_gains(leaf: u32) -> array<f32, 8> {
 
 // The largest gain a bake stores (`lighting::seen_part::GAIN_RANGE`).
 const SEEN_GAIN_MAX: f32 = 4.0;
+
+// The bounce ratios of leaf `leaf`, the front face's fourteen then the back face's
+// (`lighting::gathered_bounce::BounceRatios::from_stored`): code 0 is 0, codes 1–255 the
+// ratio's base-2 logarithm from −4 to 4.
+fn leaf_bounce_ratios(leaf: u32) -> array<f32, 28> {
+    var words = array<vec4<u32>, 2>(leaf_light[4u * leaf + 2u], leaf_light[4u * leaf + 3u]);
+    var r: array<f32, 28>;
+    for (var i = 0u; i < 28u; i += 1u) {
+        let q = (words[i / 16u][(i / 4u) % 4u] >> (8u * (i % 4u))) & 0xffu;
+        r[i] = select(0.0, exp2(f32(q - 1u) / 254.0 * 8.0 - 4.0), q != 0u);
+    }
+    return r;
+}

@@ -34,8 +34,9 @@ pub struct LeafParams {
     pub fade_start: f32,
     /// Projected diameter (pixels) where leaves are fully solid.
     pub fade_end: f32,
-    /// Padding.
-    pub pad_x: u32,
+    /// 1 to scale the bounce on each leaf face by the leaf's gathered ratios
+    /// ([`crate::lighting::gathered_bounce`]).
+    pub gathered_bounce: u32,
     /// Padding.
     pub pad_y: u32,
     /// 1 to light the leaves as a volume ([`TreeLightingSettings`](crate::TreeLightingSettings)) instead of by Bevy's PBR.
@@ -105,7 +106,7 @@ impl Default for LeafParams {
             opaque_fraction: 1.0,
             fade_start: s.fade_start_pixels,
             fade_end: s.fade_end_pixels,
-            pad_x: 0,
+            gathered_bounce: 1,
             pad_y: 0,
             tree_lighting: 0,
             smooth_envelope: 0,

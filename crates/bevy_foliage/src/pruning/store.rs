@@ -6,6 +6,7 @@
 
 use super::bake::BakedFoliage;
 use super::components::{FoliageShadowLight, PrunedFoliage, PruningParams};
+use crate::lighting::gathered_bounce::BounceRatios;
 use crate::settings::FoliagePruningSettings;
 use bevy::asset::{AssetId, RenderAssetUsages};
 use bevy::platform::collections::HashMap;
@@ -83,8 +84,9 @@ pub const LEAF_VERTEX_WORDS: usize = 16;
 
 /// Words per leaf in the `leaf_light` buffer: its eight attenuations (`BakedFoliage::leaf_light`),
 /// then its eight seen-part gains (`BakedFoliage::leaf_seen`), two `u16` a word, direction `2k`
-/// in the low half of word `k` of each four.
-pub const LEAF_LIGHT_WORDS: usize = 8;
+/// in the low half of word `k` of each four; then its 28 bounce ratios
+/// (`BakedFoliage::leaf_bounce`), four bytes a word, low byte first, and a word of padding.
+pub const LEAF_LIGHT_WORDS: usize = 16;
 
 /// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf_pulling.wgsl`).
 pub const INSTANCE_WORDS: usize = 28;
@@ -225,6 +227,17 @@ pub fn update_foliage_store(
                     .copied()
                     .unwrap_or([crate::lighting::seen_part::quantize_gain(1.0); 8]);
                 light.extend((0..4).map(|k| g[2 * k] as u32 | (g[2 * k + 1] as u32) << 16));
+                // A bake without ratios: eq. 5.24 as it is.
+                let r = tree
+                    .leaf_bounce
+                    .get(leaf)
+                    .copied()
+                    .unwrap_or_else(|| BounceRatios::default().quantized());
+                light.extend(
+                    r.chunks_exact(4)
+                        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                );
+                light.push(0);
             }
             cfl.extend_from_slice(&tree.cell_first_leaf);
             vis.extend(tree.visibility.iter().map(|&v| v as u32));

@@ -164,6 +164,41 @@ fn covered_gain(gain: f32, open: f32) -> f32 {
     return clamp((1.0 - gain * o) / (1.0 - o), 0.0, COVERED_GAIN_MAX);
 }
 
+// Sun direction `k` of the bounce ratios' basis (`lighting::gathered_bounce::SUN_BASIS`): the
+// eight sampling directions, then +x, −x, +y, −y, +z, −z.
+fn sun_basis(k: u32) -> vec3<f32> {
+    if k < 8u {
+        return direction(k);
+    }
+    let axis = (k - 8u) / 2u;
+    let s = select(1.0, -1.0, (k % 2u) == 1u);
+    return vec3(select(0.0, s, axis == 0u), select(0.0, s, axis == 1u), select(0.0, s, axis == 2u));
+}
+
+// A leaf's bounce ratios (front face's fourteen, then the back's) for the sun towards
+// `to_sun`, blended by the basis directions' cosine lobes to the fourth, normalised
+// (`lighting::gathered_bounce::ratio_towards`): the factors on eq. 5.24's bins on the leaf's
+// front and back faces.
+fn ratio_towards(ratios: array<f32, 28>, to_sun: vec3<f32>) -> vec2<f32> {
+    var sum = 0.0;
+    var blended = vec2(0.0);
+    for (var k = 0u; k < 14u; k += 1u) {
+        let c = max(dot(to_sun, sun_basis(k)), 0.0);
+        let c2 = c * c;
+        let w = c2 * c2;
+        sum += w;
+        blended += w * vec2(ratios[k], ratios[14u + k]);
+    }
+    if sum > 0.0 {
+        return blended / sum;
+    }
+    var mean = vec2(0.0);
+    for (var k = 0u; k < 14u; k += 1u) {
+        mean += vec2(ratios[k], ratios[14u + k]);
+    }
+    return mean / 14.0;
+}
+
 // Node `k` of eight u8 nodes packed four to a word, low byte first, in 64ths.
 fn hotspot_node(nodes: vec2<u32>, k: u32) -> f32 {
     return f32((nodes[k / 4u] >> (8u * (k % 4u))) & 0xffu) / 64.0;
@@ -182,7 +217,9 @@ fn hotspot_at(nodes: vec2<u32>, cos_alpha: f32) -> f32 {
 // directions let `attenuation` through, in a crown of extinction `tau` (`model::leaf_radiance`).
 // `smooth_envelope` picks eq. 5.7's blend of envelope distances for the sun through the crown
 // (`SunThroughCrown::SmoothEnvelope`) over the blend of attenuations (`BlendedAttenuation`);
-// `bounce` adds eq. 5.24's bounce. The per-tree constants of the bounce (A·G1, G2, G3 of eq.
+// `bounce` adds eq. 5.24's bounce, its bins on the leaf's front and back faces scaled by
+// `bounce_faces` (the leaf's gathered ratios, `ratio_towards`; 1, 1 for eq. 5.24 as it is;
+// `model::bounce_radiance_by_face`). The per-tree constants of the bounce (A·G1, G2, G3 of eq.
 // 5.18, 5.25, 5.26: `model::SunBounce`) depend on the sun's direction in the tree's frame, which
 // differs between instances turned differently, so they are computed here from it.
 fn leaf_radiance(
@@ -194,6 +231,7 @@ fn leaf_radiance(
     lights: TreeLights,
     smooth_envelope: bool,
     bounce: bool,
+    bounce_faces: vec2<f32>,
 ) -> LeafLight {
     var attenuation = attenuation_in;
     let seen_front = dot(n, to_eye) >= 0.0;
@@ -260,7 +298,7 @@ fn leaf_radiance(
     if !bounce {
         return out;
     }
-    // Eq. 5.11 with eq. 5.24 (`model::bounce_radiance`), A·G1 with A·ρ = 2τ.
+    // Eq. 5.11 with eq. 5.24 (`model::bounce_radiance_by_face`), A·G1 with A·ρ = 2τ.
     let rho_bar = optics.reflectance_front + optics.reflectance_back
         + optics.transmittance_front + optics.transmittance_back;
     let crossing = optics.transmittance_front + optics.transmittance_back;
@@ -273,7 +311,8 @@ fn leaf_radiance(
             * (4.0 * tau / (3.0 * PI * 8.0));
         let g3 = tau * (1.0 - dot(d, lobe_mean));
         let sample = a_g1 * lights.sun * through * one_minus_exp_over(g3, s_max[j]);
-        bounced += bsdf(optics, n, seen_front, d) * sample;
+        let face = select(bounce_faces.y, bounce_faces.x, dot(n, d) >= 0.0);
+        bounced += bsdf(optics, n, seen_front, d) * (sample * face);
     }
     out.bounce = bounced;
     return out;
