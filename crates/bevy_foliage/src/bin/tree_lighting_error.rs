@@ -23,7 +23,9 @@
 //! `HotspotSettings::OFFLINE` from its own rays) on the sun and the bounce, and prints its
 //! factors; `--bounce-rays R` adds rows with the bounce gathered from each leaf's own
 //! neighbours by R rays (`lighting::gathered_bounce`: eq. 5.24 scaled by the gathered ratios
-//! blended from fourteen suns, and the gather for the image's own sun alone). The shadow
+//! blended from fourteen suns, with and without the covered part's gain, and the gather for
+//! the image's own sun alone; with `--hotspot` also the ratios with the gain and a hotspot
+//! measured against them, as the leaf shaders draw the bounce). The shadow
 //! map's row reads it as the leaf shaders do where they take it alone (texels of 1/16 of a
 //! leaf, one bilinear lookup at the point moved towards the sun by
 //! `T + S·tan θ` texels, θ the leaf's tilt from the sun: `--leaf-shadow-offset T,S`, by default

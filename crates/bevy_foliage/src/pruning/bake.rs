@@ -294,14 +294,17 @@ impl BakedFoliage {
         }
     }
 
-    /// Bytes the GPU holds for this tree type: vertex data (position, normal, uv, offset),
-    /// the stored index list, per-leaf index starts, per-cell leaf starts and visibility.
+    /// Bytes the GPU holds for this tree type: the packed leaf vertices, the stored index
+    /// list, per-leaf index starts, per-cell leaf starts and visibility, and each leaf's
+    /// light (attenuations, seen-part gains, bounce ratios; `store::LEAF_LIGHT_WORDS`).
     pub fn gpu_bytes(&self) -> usize {
-        self.positions.len() * (12 + 12 + 8 + 12)
+        // 16 words a vertex and 16 a leaf (`store::LEAF_VERTEX_WORDS`, `LEAF_LIGHT_WORDS`).
+        self.positions.len() * 16 * 4
             + self.indices.len() * 4
             + self.leaf_index_start.len() * 4
             + self.cell_first_leaf.len() * 4
             + self.visibility.len() * 2
+            + self.leaf_count() * 16 * 4
     }
 }
 

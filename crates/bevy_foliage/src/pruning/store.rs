@@ -88,6 +88,9 @@ pub const LEAF_VERTEX_WORDS: usize = 16;
 /// (`BakedFoliage::leaf_bounce`), four bytes a word, low byte first, and a word of padding.
 pub const LEAF_LIGHT_WORDS: usize = 16;
 
+// `BakedFoliage::gpu_bytes` counts these sizes.
+const _: () = assert!(LEAF_VERTEX_WORDS == 16 && LEAF_LIGHT_WORDS == 16);
+
 /// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf_pulling.wgsl`).
 pub const INSTANCE_WORDS: usize = 28;
 
