@@ -354,6 +354,7 @@ fn fuzz_billboard_cloud_cache_decoder() {
         ],
         extinction: 0.8,
         seen_gains: [1.0; 8],
+        bounce_ratios: Default::default(),
         hotspot: Default::default(),
         source_hash: 0xDEAD_BEEF,
         bake_ms: 12.5,

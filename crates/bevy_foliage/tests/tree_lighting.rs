@@ -1029,6 +1029,7 @@ fn block_cloud() -> (
         light,
         extinction: 1.3,
         seen_gains: CLOUD_SEEN_GAINS,
+        bounce_ratios: cloud_bounce_ratios(),
         hotspot: CLOUD_HOTSPOT,
         source_hash: 1,
         bake_ms: 0.0,
@@ -1047,6 +1048,8 @@ struct CloudCheck {
     leaves_unlike_pbr: u32,
     /// Compared leaf pixels the covered part's gain on the bounce moves by more than 3/255.
     covered_visible: u32,
+    /// Compared leaf pixels the crown's bounce ratios move by more than 3/255.
+    ratios_visible: u32,
     bark: u32,
     bark_same: u32,
 }
@@ -1213,6 +1216,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
     let (mut compared, mut within, mut worst) = (0u32, 0u32, 0.0f32);
     let (mut bark, mut bark_same, mut leaves_unlike_pbr) = (0u32, 0u32, 0u32);
     let mut covered_visible = 0u32;
+    let mut ratios_visible = 0u32;
     let (mut sunlit, mut shaded) = (0u32, 0u32);
     // The sun's light enters the crown on the plane touching its bounding sphere on the sun's
     // side; the plate's shadow edge is blurred over a few texels.
@@ -1305,7 +1309,16 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
             } else {
                 (1.0, 1.0, Hotspot::default())
             };
-            let bounced = bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun)
+            // The crown's mean bounce ratios on each face, towards the sun.
+            let faces = if lighting.gathered_bounce {
+                ratio_towards(&cloud_bounce_ratios(), to_sun)
+            } else {
+                [1.0; 2]
+            };
+            let bounced =
+                bounce_radiance_by_face(&optics, n, wo, &bounce, through, &s_max, e_sun, faces)
+                    * (outside * spot.bounce_at(wo, to_sun));
+            let unratioed = bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun)
                 * (outside * spot.bounce_at(wo, to_sun));
             let radiance = sky_radiance(&optics, n, wo, &a, &sky) * seen
                 + sun_radiance(
@@ -1322,6 +1335,10 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
                 .to_array()
                 .map(|c| srgb(c) * 255.0);
             covered_visible += (0..3).any(|c| (want[c] - uncovered[c]).abs() > 3.0) as u32;
+            let without_ratios = (radiance + (unratioed - bounced) * covered)
+                .to_array()
+                .map(|c| srgb(c) * 255.0);
+            ratios_visible += (0..3).any(|c| (want[c] - without_ratios[c]).abs() > 3.0) as u32;
             reference.set_pixel(x, y, [want[0] as u8, want[1] as u8, want[2] as u8, 255]);
             let off = (0..3)
                 .map(|c| (got[c] as f32 - want[c]).abs())
@@ -1339,7 +1356,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
     reference.save_png(dir.join(format!("{name}_cpu.png"))).ok();
     pbr.save_png(dir.join(format!("{name}_pbr.png"))).ok();
     eprintln!(
-        "{name}: leaf pixels {within} of {compared} within 3/255 (worst {worst:.1}; {sunlit} sunlit, {shaded} shaded), {leaves_unlike_pbr} unlike Bevy's PBR, {covered_visible} moved by > 3/255 by the covered part's gain on the bounce; bark pixels: {bark_same} of {bark} as Bevy's PBR"
+        "{name}: leaf pixels {within} of {compared} within 3/255 (worst {worst:.1}; {sunlit} sunlit, {shaded} shaded), {leaves_unlike_pbr} unlike Bevy's PBR, {covered_visible} moved by > 3/255 by the covered part's gain on the bounce, {ratios_visible} by the crown's bounce ratios; bark pixels: {bark_same} of {bark} as Bevy's PBR"
     );
     Some(CloudCheck {
         compared,
@@ -1349,6 +1366,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
         shaded,
         leaves_unlike_pbr,
         covered_visible,
+        ratios_visible,
         bark,
         bark_same,
     })
@@ -1368,6 +1386,13 @@ fn a_tree_lit_billboard_cloud_lights_each_leaf_texel_as_the_model_does() {
         c.covered_visible * 4 >= c.compared,
         "the covered part's gain shows in {} of {} pixels",
         c.covered_visible,
+        c.compared
+    );
+    // So are the crown's bounce ratios.
+    assert!(
+        c.ratios_visible * 4 >= c.compared,
+        "the bounce ratios show in {} of {} pixels",
+        c.ratios_visible,
         c.compared
     );
     assert!(c.bark > 300, "{} bark pixels", c.bark);
@@ -1605,6 +1630,15 @@ fn a_tree_lit_crown_keeps_its_light_when_its_billboard_cloud_takes_over() {
 /// (above 1 then) lifts it by more than the tolerance in most leaf pixels, where gains above 1
 /// would saturate the sky first.
 const CLOUD_SEEN_GAINS: [f32; 8] = [0.3, 0.4, 0.25, 0.35, 0.45, 0.3, 0.4, 0.35];
+
+/// The test cloud's crown mean bounce ratios: distinct per face and per basis sun, so a shader
+/// that skips them, swaps the faces or misreads their order shows.
+fn cloud_bounce_ratios() -> BounceRatios {
+    BounceRatios {
+        front: std::array::from_fn(|k| 2.0 + 0.15 * k as f32),
+        back: std::array::from_fn(|k| 0.3 + 0.05 * k as f32),
+    }
+}
 
 /// The test cloud's hotspot: distinct nodes, none 1, so a shader that skips or misreads it
 /// shows.

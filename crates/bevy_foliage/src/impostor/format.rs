@@ -26,7 +26,7 @@ pub const MAGIC: &[u8; 8] = b"BNBBCLOU";
 ///
 /// Version 2 added the tree lighting's light atlases and the crown's extinction, version 3 the
 /// crown's seen-part gains, version 4 the crown's hotspot; an older cache is re-baked.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 
 /// Light atlases of a billboard cloud: three, of three values a texel each (see
 /// `impostor::texture`).
@@ -75,6 +75,9 @@ pub struct ImpostorData {
     /// The crown's mean seen-part gain per eye octant (`lighting::seen_part`), by which the
     /// tree lighting scales the leaf texels' sky and blended sun.
     pub seen_gains: [f32; 8],
+    /// The crown's mean bounce ratios (`lighting::gathered_bounce`), by which the tree
+    /// lighting scales the leaf texels' bounce face by face.
+    pub bounce_ratios: crate::lighting::gathered_bounce::BounceRatios,
     /// The crown's hotspot (`lighting::hotspot`), by which the tree lighting raises the leaf
     /// texels' blended sun and scales their bounce by the eye's angle to the sun.
     pub hotspot: crate::lighting::hotspot::Hotspot,
@@ -175,6 +178,8 @@ pub fn encode(data: &ImpostorData) -> Vec<u8> {
     p.extend_from_slice(&data.normal);
     put_f32s(&mut p, &[data.extinction]);
     put_f32s(&mut p, &data.seen_gains);
+    put_f32s(&mut p, &data.bounce_ratios.front);
+    put_f32s(&mut p, &data.bounce_ratios.back);
     for word in data.hotspot.packed() {
         p.extend_from_slice(&word.to_le_bytes());
     }
@@ -330,6 +335,25 @@ pub fn decode(bytes: &[u8]) -> Result<ImpostorData, ImpostorFormatError> {
             "seen-part gains {seen_gains:?} outside {low}..={high}"
         )));
     }
+    let mut bounce_ratios = crate::lighting::gathered_bounce::BounceRatios::default();
+    for ratio in bounce_ratios
+        .front
+        .iter_mut()
+        .chain(bounce_ratios.back.iter_mut())
+    {
+        *ratio = r.f32()?;
+    }
+    let max = crate::lighting::gathered_bounce::RATIO_MAX;
+    if bounce_ratios
+        .front
+        .iter()
+        .chain(&bounce_ratios.back)
+        .any(|r| !(0.0..=max).contains(r))
+    {
+        return Err(ImpostorFormatError::Invalid(format!(
+            "bounce ratios {bounce_ratios:?} outside 0..={max}"
+        )));
+    }
     let mut words = [0u32; crate::lighting::hotspot::HOTSPOT_WORDS];
     for w in &mut words {
         *w = r.u32()?;
@@ -366,6 +390,7 @@ pub fn decode(bytes: &[u8]) -> Result<ImpostorData, ImpostorFormatError> {
         light,
         extinction,
         seen_gains,
+        bounce_ratios,
         hotspot,
         source_hash,
         bake_ms,
@@ -425,6 +450,10 @@ pub(crate) mod tests {
             ],
             extinction: 1.5,
             seen_gains: [1.0, 1.1, 1.2, 1.3, 0.9, 1.0, 1.05, 1.15],
+            bounce_ratios: crate::lighting::gathered_bounce::BounceRatios {
+                front: std::array::from_fn(|k| 0.5 + 0.1 * k as f32),
+                back: std::array::from_fn(|k| 3.0 - 0.2 * k as f32),
+            },
             hotspot: crate::lighting::hotspot::Hotspot {
                 sun: [0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0],
                 bounce: [1.0, 0.875, 0.75, 0.625, 0.5, 0.375, 0.25, 0.125],
@@ -486,6 +515,14 @@ pub(crate) mod tests {
             decode(&encode(&bad)),
             Err(ImpostorFormatError::Invalid(_))
         ));
+        for ratio in [f32::NAN, -0.5, 17.0] {
+            let mut bad = sample();
+            bad.bounce_ratios.back[5] = ratio;
+            assert!(matches!(
+                decode(&encode(&bad)),
+                Err(ImpostorFormatError::Invalid(_))
+            ));
+        }
         for gain in [f32::NAN, 0.0, 9.0] {
             let mut bad = sample();
             bad.seen_gains[3] = gain;

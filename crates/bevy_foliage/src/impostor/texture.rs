@@ -23,6 +23,9 @@ use super::format::ImpostorPlane;
 pub use super::format::LIGHT_ATLASES;
 use crate::lighting::bins::{LeafProxy, proxies};
 use crate::lighting::envelope::crown_envelope;
+use crate::lighting::gathered_bounce::{
+    BounceRatios, DEFAULT_BOUNCE_RAYS, bounce_ratios_of, crown_mean_ratios,
+};
 use crate::lighting::hotspot::{Hotspot, HotspotSettings, crown_hotspot};
 use crate::lighting::leaf_scene::LeafScene;
 use crate::lighting::seen_part::{DEFAULT_SEEN_POINTS, crown_mean_gains, seen_part_gains_of};
@@ -146,8 +149,11 @@ pub struct SourceLight {
     /// ([`crate::lighting::seen_part`]): an impostor texel's light atlases have no room for the
     /// leaf's own, so the cloud scales its leaf texels by the crown's.
     pub seen: [f32; 8],
+    /// The crown's mean of its leaves' bounce ratios ([`crate::lighting::gathered_bounce`]),
+    /// by which the cloud scales its leaf texels' bounce face by face, as the leaves their own.
+    pub bounce: BounceRatios,
     /// The crown's hotspot ([`crate::lighting::hotspot`]) measured against the cloud's own
-    /// model (every leaf texel with the crown's mean gains).
+    /// model (every leaf texel with the crown's mean gains and ratios).
     pub hotspot: Hotspot,
 }
 
@@ -157,6 +163,7 @@ impl Default for SourceLight {
             attenuation: Vec::new(),
             extinction: 0.0,
             seen: [1.0; 8],
+            bounce: BounceRatios::default(),
             hotspot: Hotspot::default(),
         }
     }
@@ -291,13 +298,26 @@ impl ImpostorSource {
         let all: Vec<u32> = (0..self.leaves.len() as u32).collect();
         let gains = seen_part_gains_of(&scene, &all, DEFAULT_SEEN_POINTS, &opacity, threads);
         let seen = crown_mean_gains(&gains);
+        let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
+        let ratios = bounce_ratios_of(
+            &scene,
+            &optics,
+            &all,
+            &envelope.leaves,
+            envelope.tau,
+            DEFAULT_BOUNCE_RAYS,
+            &opacity,
+            threads,
+        );
+        // As the cloud file stores them.
+        let bounce = BounceRatios::from_stored(&crown_mean_ratios(&ratios).quantized());
         let hotspot = crown_hotspot(
             &scene,
             &envelope,
             &vec![seen; self.leaves.len()],
-            &[],
+            &vec![bounce; self.leaves.len()],
             &|l| Some(l as usize),
-            &crate::lighting::settings::TreeLightingSettings::default().optics,
+            &optics,
             &opacity,
             &HotspotSettings::default(),
             threads,
@@ -308,6 +328,7 @@ impl ImpostorSource {
             attenuation: envelope.leaves.iter().map(|e| e.attenuation).collect(),
             extinction: envelope.tau,
             seen,
+            bounce,
             hotspot,
         }
     }
@@ -800,6 +821,7 @@ mod tests {
             ],
             extinction: 1.0,
             seen: [1.0; 8],
+            bounce: BounceRatios::default(),
             hotspot: Hotspot::default(),
         };
         let atlases = bake_reference(&source, &cloud, &layout, &light);

@@ -61,6 +61,11 @@ pub struct TreeLitImpostorParams {
     /// The crown's hotspot packed (`lighting::hotspot::Hotspot::packed`): the sun's exponent
     /// nodes, then the bounce's.
     pub hotspot: UVec4,
+    /// The crown's mean bounce ratios (`lighting::gathered_bounce`), the front face's fourteen
+    /// then the back face's, four a vector.
+    pub bounce_ratios: [Vec4; 7],
+    /// 1: the bounce scaled by them (`TreeLightingSettings::gathered_bounce`).
+    pub gathered_bounce: u32,
 }
 
 impl TreeLitImpostorParams {
@@ -77,6 +82,8 @@ impl TreeLitImpostorParams {
             seen_part: leaves.seen_part,
             seen_gains: own.seen_gains,
             hotspot: own.hotspot,
+            bounce_ratios: own.bounce_ratios,
+            gathered_bounce: leaves.gathered_bounce,
         }
     }
 }

@@ -19,7 +19,7 @@
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
     shadows::fetch_directional_shadow,
 }
-#import bevy_foliage::tree_lighting::{TreeLightUniform, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, seen_gain}
+#import bevy_foliage::tree_lighting::{TreeLightUniform, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, seen_gain}
 
 struct TreeLitImpostorParams {
     lights: TreeLightUniform,
@@ -33,6 +33,10 @@ struct TreeLitImpostorParams {
     seen_gains: array<vec4<f32>, 2>,
     // The crown's hotspot (`lighting::hotspot`): the sun's exponent nodes, the bounce's.
     hotspot: vec4<u32>,
+    // The crown's mean bounce ratios (`lighting::gathered_bounce`), front face's fourteen then
+    // the back's, and whether the bounce takes them.
+    bounce_ratios: array<vec4<f32>, 7>,
+    gathered_bounce: u32,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> params: TreeLitImpostorParams;
@@ -93,6 +97,16 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
         let lights = lights_of(
             params.lights, normalize(local_from_world * params.lights.to_sun.xyz));
         let attenuation = array<f32, 8>(l0.x, l0.y, l0.z, l1.x, l1.y, l1.z, l2.x, l2.y);
+        // Eq. 5.24 on each face by the crown's mean gathered ratios, towards the sun (a texel
+        // has no room for its leaf's own).
+        var bounce_faces = vec2(1.0);
+        if params.bounce != 0u && params.gathered_bounce != 0u {
+            var ratios: array<f32, 28>;
+            for (var i = 0u; i < 28u; i += 1u) {
+                ratios[i] = params.bounce_ratios[i / 4u][i % 4u];
+            }
+            bounce_faces = ratio_towards(ratios, lights.to_sun);
+        }
         let light = leaf_radiance(
             optics_of(params.lights, base.rgb),
             normalize(local_from_world * pbr_input.N),
@@ -102,8 +116,7 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
             lights,
             params.smooth_envelope != 0u,
             params.bounce != 0u,
-            // A texel stands for many leaves: eq. 5.24 as it is.
-            vec2(1.0),
+            bounce_faces,
         );
         // The leaves in view are more open than their mean (`lighting::seen_part`): the crown's
         // gain towards the eye on the sky and the blended sun, as the leaves have their own,

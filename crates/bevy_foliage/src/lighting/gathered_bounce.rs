@@ -4,7 +4,8 @@
 //! `.foliage` file and the leaves' light buffer, and blended towards the sun by the leaf vertex
 //! shader (`tree_lighting.wgsl`'s `ratio_towards`), which scales eq. 5.24's bins face by face;
 //! measured against the path tracer by `tree_lighting_error --images --bounce-rays R`.
-//! Billboard clouds keep eq. 5.24 alone.
+//! Billboard clouds, whose texels have no room for their leaves' own, take the crown's mean
+//! ([`crown_mean_ratios`]).
 //!
 //! Eq. 5.24 integrates the light of the neighbours along each bin in closed form by assuming a
 //! crown of uniform density and random leaf orientations (§5.2.1), each neighbour lit by the
@@ -339,6 +340,19 @@ impl BounceRatios {
             front: std::array::from_fn(|k| ratio_of(stored[k])),
             back: std::array::from_fn(|k| ratio_of(stored[14 + k])),
         }
+    }
+}
+
+/// The crown's mean ratios over its leaves' (each face and sun direction its own mean), for
+/// a billboard cloud, whose texels have no room for their leaves' own; none: all 1.
+pub fn crown_mean_ratios(ratios: &[BounceRatios]) -> BounceRatios {
+    if ratios.is_empty() {
+        return BounceRatios::default();
+    }
+    let n = ratios.len() as f32;
+    BounceRatios {
+        front: std::array::from_fn(|k| ratios.iter().map(|r| r.front[k]).sum::<f32>() / n),
+        back: std::array::from_fn(|k| ratios.iter().map(|r| r.back[k]).sum::<f32>() / n),
     }
 }
 

@@ -233,9 +233,9 @@ fn at_angle(axis: Vec3, alpha: f32, rng: &mut SplitMix64) -> Vec3 {
 }
 
 /// The hotspot of the crown of `scene`, whose leaves' envelope `envelope`, seen-part gains
-/// `gains` (empty: no gains) and gathered bounce ratios `ratios`
-/// ([`super::gathered_bounce`]; empty: eq. 5.24 alone) are what its shaders read — `stored(l)` the index in both of the
-/// scene's leaf `l` (`None`: a leaf not drawn, which still casts shade) — lit through leaves
+/// `gains` (empty: no gains) and gathered bounce ratios `ratios` ([`super::gathered_bounce`];
+/// empty: eq. 5.24 alone) are what its shaders read — `stored(l)` the index in all three of
+/// the scene's leaf `l` (`None`: a leaf not drawn, which still casts shade) — lit through leaves
 /// of `material` (the ratio does not change when the material is scaled), `opacity(l)` the
 /// share of leaf `l`'s area that stops light; on up to `threads` threads. A node at which no
 /// eye ray reached a drawn leaf keeps 1.
