@@ -25,7 +25,8 @@ pub const MAGIC: &[u8; 8] = b"BNBBCLOU";
 /// Current format version; bump on any layout change.
 ///
 /// Version 2 added the tree lighting's light atlases and the crown's extinction, version 3 the
-/// crown's seen-part gains, version 4 the crown's hotspot; an older cache is re-baked.
+/// crown's seen-part gains, version 4 the crown's hotspot, version 5 the crown's mean bounce
+/// ratios; an older cache is re-baked.
 pub const FORMAT_VERSION: u32 = 5;
 
 /// Light atlases of a billboard cloud: three, of three values a texel each (see
