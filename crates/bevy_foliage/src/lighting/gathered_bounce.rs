@@ -626,4 +626,24 @@ mod tests {
             assert!((back.back[k] / r.back[k] - 1.0).abs() < 0.0115);
         }
     }
+
+    /// A crown's mean ratios are each face's and sun's own mean over the leaves; no leaves
+    /// leave eq. 5.24 as it is.
+    #[test]
+    fn the_crown_mean_keeps_faces_and_suns_apart() {
+        assert_eq!(crown_mean_ratios(&[]), BounceRatios::default());
+        let a = BounceRatios {
+            front: std::array::from_fn(|k| k as f32),
+            back: [2.0; 14],
+        };
+        let b = BounceRatios {
+            front: std::array::from_fn(|k| 3.0 * k as f32),
+            back: [0.0; 14],
+        };
+        let mean = crown_mean_ratios(&[a, b]);
+        for k in 0..14 {
+            assert_eq!(mean.front[k], 2.0 * k as f32);
+            assert_eq!(mean.back[k], 1.0);
+        }
+    }
 }
