@@ -16,7 +16,7 @@ use bevy_foliage::lighting::model::{
 };
 use bevy_foliage::lighting::path_trace::LeafScene;
 use bevy_foliage::lighting::seen_part::{covered_gain, gain_of, quantize_gain, seen_gain};
-use bevy_foliage::lighting::sun_maps::{LEAF_SHADOW_FINE, LeafShadowOffset};
+use bevy_foliage::lighting::sun_maps::{LEAF_SHADOW_FINE, LeafShadowPlane};
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::{PrunedFoliage, PruningParams};
 use bevy_foliage::pruning::extract::kept_index_total;
@@ -253,6 +253,14 @@ struct Check {
     /// Compared pixels the sun reaches from outside the crown, and those it does not.
     sunlit: u32,
     shaded: u32,
+    /// The compared pixels' shadow-map texels as shares of their leaf's size (with leaf
+    /// shadows): the smallest and the largest.
+    texel_in_leaves: (f32, f32),
+    /// Compared pixels shaded only by leaves at most three texels of their cascade away along
+    /// the sun (with leaf shadows: where a depth offset growing with the texel lets the sun
+    /// through), and those of them within 3/255 of the model.
+    close_shaded: u32,
+    close_within: u32,
     image: RgbaImage,
     reference: RgbaImage,
 }
@@ -375,21 +383,38 @@ fn compare_with_model(
             + bounced
     };
     // Whether the sun reaches world point p on `leaf`: nothing outside and, with leaf shadows,
-    // no other leaf in the way from where the shaders read the shadow map (the point moved
-    // towards the sun by `LeafShadowOffset::SHADERS` texels of its cascade); `None` near the
-    // edge of a shadow.
+    // no other leaf in the way from the point (moved towards the sun by the receiver-plane
+    // comparison's slack, `LeafShadowPlane::SHADERS`, in texels of its cascade: what lies
+    // within it counts as the leaf itself); `None` near the edge of a shadow.
     let (across_a, across_b) = to_sun_world.any_orthonormal_pair();
     let texel_at = cascade_texels(harness.world_mut(), &camera_transform);
     let leaves = stored_leaves(baked);
     let reaches = |leaf: u32, p: Vec3| -> bool {
-        let n = instance.rotation * scene.normal(leaf as usize);
-        let offset = LeafShadowOffset::SHADERS.texels_for(n, to_sun_world);
-        let moved = p + to_sun_world * (offset * texel_at(p));
+        let moved = p + to_sun_world * (LeafShadowPlane::SHADERS.slack_texels * texel_at(p));
         !outside_blocked(p)
             && (!leaf_shadows
                 || scene
                     .hit(from_world.transform_point3(moved), to_sun, leaf)
                     .is_none())
+    };
+    // Whether every leaf that shades p (with leaf shadows) lies within three texels of it
+    // along the sun: the shadow map's nearest leaf there is then one just in front of p.
+    let shaded_close = |leaf: u32, p: Vec3| -> bool {
+        let moved = p + to_sun_world * (LeafShadowPlane::SHADERS.slack_texels * texel_at(p));
+        let (mut origin, mut skip) = (from_world.transform_point3(moved), leaf);
+        let mut outermost = None;
+        for _ in 0..256 {
+            let Some((t, hit)) = scene.hit(origin, to_sun, skip) else {
+                break;
+            };
+            origin += to_sun * t;
+            skip = hit;
+            outermost = Some(origin);
+        }
+        leaf_shadows
+            && outermost.is_some_and(|o| {
+                instance.transform_point(o).distance(moved) <= 3.0 * texel_at(p)
+            })
     };
     let sun_at = |leaf: u32, p: Vec3| -> Option<bool> {
         let here = reaches(leaf, p);
@@ -409,6 +434,9 @@ fn compare_with_model(
         hotspot_sun_visible: 0,
         sunlit: 0,
         shaded: 0,
+        texel_in_leaves: (f32::INFINITY, 0.0),
+        close_shaded: 0,
+        close_within: 0,
         image: RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]),
         reference: RgbaImage::filled(SIZE, SIZE, [0, 0, 0, 255]),
     };
@@ -435,6 +463,11 @@ fn compare_with_model(
                 assert!(
                     texel > 0.0 && texel <= LEAF_SHADOW_FINE * size,
                     "the shader reads the map alone at the leaf only at texels up to {LEAF_SHADOW_FINE} of a leaf: texel {texel}, leaf {size}"
+                );
+                let share = texel / size;
+                check.texel_in_leaves = (
+                    check.texel_in_leaves.0.min(share),
+                    check.texel_in_leaves.1.max(share),
                 );
             }
             let Some(lit) = sun_at(leaf, point) else {
@@ -469,6 +502,10 @@ fn compare_with_model(
             check.compared += 1;
             if error <= 3.0 {
                 check.within += 1;
+            }
+            if !lit && shaded_close(leaf, point) {
+                check.close_shaded += 1;
+                check.close_within += (error <= 3.0) as u32;
             }
             check.worst = check.worst.max(error);
             if (0..3).any(|c| (want[c] - plain[c]).abs() > 6.0) {
@@ -803,12 +840,24 @@ fn a_pruned_crown_keeps_its_light() {
     );
 }
 
-/// The tree with the sun's shadows on: under a plate shading half its crown, in Bevy's default
-/// shadow cascades (texels under a sixteenth of a leaf here, which the comparison checks: the
-/// shadow map resolves leaves), or alone in one coarse cascade (texels of metres, larger than a
-/// leaf: the baked blend, under the map read where the light enters the crown, which must not
-/// see the crown's own leaves).
-fn sun_shadows(name: &str, coarse: bool) -> Option<Check> {
+/// The sun's shadow cascades of a [`sun_shadows`] scene.
+#[derive(Clone, Copy, PartialEq)]
+enum SunCascades {
+    /// Bevy's default cascades: texels under a sixteenth of a leaf here.
+    Default,
+    /// One cascade whose texels are about this share of the leaves' median diameter (at most
+    /// `LEAF_SHADOW_FINE` of every leaf: the shader still reads the map alone at the leaf).
+    LeafShare(f32),
+    /// One cascade of texels of metres, larger than a leaf: the baked blend alone.
+    Coarse,
+}
+
+/// The tree with the sun's shadows on: under a plate shading half its crown, in `cascades`
+/// (Bevy's default ones, texels under a sixteenth of a leaf here, or one cascade of texels a
+/// given share of a leaf, which the comparison checks: the shadow map read at the leaf), or
+/// alone in one coarse cascade (texels of metres, larger than a leaf: the baked blend, under
+/// the map read where the light enters the crown, which must not see the crown's own leaves).
+fn sun_shadows(name: &str, cascades: SunCascades) -> Option<Check> {
     let Scene {
         mut harness,
         baked,
@@ -819,7 +868,8 @@ fn sun_shadows(name: &str, coarse: bool) -> Option<Check> {
         radius,
         ..
     } = scene(name, true)?;
-    if coarse {
+    let coarse = cascades == SunCascades::Coarse;
+    let one_cascade = |harness: &mut RenderHarness, distance: f32| {
         let world = harness.world_mut();
         let sun = world
             .query_filtered::<Entity, With<DirectionalLight>>()
@@ -828,12 +878,40 @@ fn sun_shadows(name: &str, coarse: bool) -> Option<Check> {
         world.entity_mut(sun).insert(
             CascadeShadowConfigBuilder {
                 num_cascades: 1,
-                first_cascade_far_bound: 5000.0,
-                maximum_distance: 5000.0,
+                first_cascade_far_bound: distance,
+                maximum_distance: distance,
                 ..default()
             }
             .build(),
         );
+    };
+    match cascades {
+        SunCascades::Default => {}
+        SunCascades::Coarse => one_cascade(&mut harness, 5000.0),
+        SunCascades::LeafShare(share) => {
+            // The cascade's texel grows with its far bound (the bounding sphere of the view
+            // frustum's slice over the map's texels): set a far bound, read the texel Bevy
+            // made, and scale the bound to the texel wanted, twice.
+            let leaves = stored_leaves(&baked);
+            let mut diameters: Vec<f32> =
+                (0..leaves.len()).map(|l| leaves.diameter(l)).collect();
+            diameters.sort_by(f32::total_cmp);
+            let wanted = share * diameters[diameters.len() / 2];
+            let camera = Transform::from_translation(eye)
+                .looking_at(instance.transform_point(baked.crown_center()), Vec3::Y);
+            let mut distance = 50.0;
+            for _ in 0..2 {
+                one_cascade(&mut harness, distance);
+                for _ in 0..3 {
+                    harness.step();
+                }
+                let texel = cascade_texels(harness.world_mut(), &GlobalTransform::from(camera))(
+                    instance.transform_point(baked.crown_center()),
+                );
+                assert!(texel > 0.0, "no cascade texel read back");
+                distance *= wanted / texel;
+            }
+        }
     }
     // A thin plate across the sun's light above the crown, shading the half of it on one side
     // of a plane through the crown's centre.
@@ -869,7 +947,17 @@ fn sun_shadows(name: &str, coarse: bool) -> Option<Check> {
             && o.dot(along).abs() <= half.z
     };
     // Shadow edges, the leaves' and the plate's, blurred over a texel or two (the bilinear lookup).
-    let margin = 0.02 * radius;
+    let margin = match cascades {
+        SunCascades::LeafShare(_) => {
+            let camera = Transform::from_translation(eye)
+                .looking_at(instance.transform_point(baked.crown_center()), Vec3::Y);
+            let texel = cascade_texels(harness.world_mut(), &GlobalTransform::from(camera))(
+                instance.transform_point(baked.crown_center()),
+            );
+            (1.5 * texel).max(0.02 * radius)
+        }
+        _ => 0.02 * radius,
+    };
     let check = compare_with_model(
         &mut harness,
         &baked,
@@ -883,15 +971,23 @@ fn sun_shadows(name: &str, coarse: bool) -> Option<Check> {
     );
     check.save(name);
     println!(
-        "{name}: {} leaf pixels compared ({} sunlit, {} shaded), {} within 3/255 of the CPU model (worst {:.1}/255)",
-        check.compared, check.sunlit, check.shaded, check.within, check.worst
+        "{name}: {} leaf pixels compared ({} sunlit, {} shaded), {} within 3/255 of the CPU model (worst {:.1}/255); shadow-map texels {:.3}–{:.3} of a leaf; shaded by a leaf within three texels: {}, {} of them within 3/255",
+        check.compared,
+        check.sunlit,
+        check.shaded,
+        check.within,
+        check.worst,
+        check.texel_in_leaves.0,
+        check.texel_in_leaves.1,
+        check.close_shaded,
+        check.close_within
     );
     Some(check)
 }
 
 #[test]
 fn coarse_shadow_texels_leave_the_sun_to_the_baked_blend() {
-    let Some(check) = sun_shadows("tree_lighting_coarse_cascade", true) else {
+    let Some(check) = sun_shadows("tree_lighting_coarse_cascade", SunCascades::Coarse) else {
         return;
     };
     assert!(
@@ -912,11 +1008,55 @@ fn coarse_shadow_texels_leave_the_sun_to_the_baked_blend() {
 fn a_fine_shadow_map_gives_each_leaf_the_sun_its_shadow_ray_finds() {
     // Texels far under a leaf: the sun's share at each leaf point from the shadow map, which
     // the CPU answers with a shadow ray through the leaves and past the plate.
-    let Some(check) = sun_shadows("tree_lighting_plate", false) else {
+    let Some(check) = sun_shadows("tree_lighting_plate", SunCascades::Default) else {
         return;
     };
     assert!(
         check.sunlit >= 150 && check.shaded >= 150,
+        "leaves and the plate should shade part of the crown: {} sunlit, {} shaded pixels",
+        check.sunlit,
+        check.shaded
+    );
+    assert!(
+        check.within as f32 >= 0.95 * check.compared as f32,
+        "{} of {} leaf pixels within 3/255 of the CPU model with the leaves' and the plate's shadows (worst {:.1})",
+        check.within,
+        check.compared,
+        check.worst
+    );
+}
+
+#[test]
+fn the_shadow_map_resolves_leaves_in_cascades_of_texels_a_quarter_of_a_leaf() {
+    // Texels about a quarter of a leaf wide (where a depth offset that grows with the texel
+    // lets the leaves just in front through, and a comparison with the point's own depth
+    // shades a tilted leaf with its own texels): the shader's receiver-plane comparison still
+    // gives each leaf the sun its shadow ray finds, away from shadow edges (a texel and a half).
+    let Some(check) = sun_shadows("tree_lighting_quarter_leaf_texels", SunCascades::LeafShare(0.25))
+    else {
+        return;
+    };
+    assert!(
+        check.texel_in_leaves.1 > 0.125,
+        "the cascade's texels should be coarser than an eighth of a leaf: {:?}",
+        check.texel_in_leaves
+    );
+    // Shaded by a leaf just in front (within three texels along the sun): what a depth
+    // offset growing with the texel gets wrong.
+    assert!(
+        check.close_shaded >= 40,
+        "too few pixels shaded by a leaf within three texels: {}",
+        check.close_shaded
+    );
+    assert!(
+        check.close_within as f32 >= 0.9 * check.close_shaded as f32,
+        "{} of {} pixels shaded by a leaf within three texels are within 3/255 of the CPU model",
+        check.close_within,
+        check.close_shaded
+    );
+    // The sunlit pixels a texel and a half from any shadow edge are few (55 when written).
+    assert!(
+        check.sunlit >= 40 && check.shaded >= 300,
         "leaves and the plate should shade part of the crown: {} sunlit, {} shaded pixels",
         check.sunlit,
         check.shaded

@@ -9,7 +9,7 @@
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
 //!     [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R]] [--sun X,Y,Z]
-//!     [--leaf-shadow-offset T,S]
+//!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
 //! `--sun X,Y,Z`: the direction towards the sun (0.5, 0.7, 0.3 by default; the eye looks from
 //! (0, 0.3, 1)) — the model's errors depend on the angle between the two.
@@ -26,11 +26,14 @@
 //! blended from fourteen suns, with and without the covered part's gain, and the gather for
 //! the image's own sun alone; with `--hotspot` also the ratios with the gain and a hotspot
 //! measured against them, as the leaf shaders draw the bounce). The shadow
-//! map's row reads it as the leaf shaders do where they take it alone (texels of 1/16 of a
-//! leaf, one bilinear lookup at the point moved towards the sun by
-//! `T + S·tan θ` texels, θ the leaf's tilt from the sun: `--leaf-shadow-offset T,S`, by default
-//! the shaders' `sun_maps::LeafShadowOffset::SHADERS`, 1 and 0.5; also in the `--sun-maps`
-//! table).
+//! map's row reads it as the leaf shaders do at the leaf (texels of `LEAF_SHADOW_FINE` of a
+//! leaf, up to which they take it alone; `--shadow-texel F[,F…]` for a row per share of the
+//! leaf's size, and with `--hotspot` a row of the sun as drawn for each share where the
+//! shaders blend the map with the baked attenuations): by default the shaders'
+//! receiver-plane comparison (`sun_maps::LeafShadowPlane::SHADERS`, `--leaf-shadow-slack S`
+//! for another slack in texels), or with `--leaf-shadow-offset T,S` one bilinear lookup at the
+//! point moved towards the sun by `T + S·tan θ` texels, θ the leaf's tilt from the sun
+//! (`sun_maps::LeafShadowOffset`); also in the `--sun-maps` table.
 //!
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
 //! map at three texel sizes read as the leaf shaders read it and with a 3×3 filter, the crown's extinction over its depth, eq. 5.3's foliage maps)
@@ -65,7 +68,11 @@ fn main() {
     let mut bounce_rays = 0u32;
     let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
     let mut to_sun = Vec3::new(0.5, 0.7, 0.3).normalize();
-    let mut leaf_shadow = bevy_foliage::lighting::sun_maps::LeafShadowOffset::SHADERS;
+    use bevy_foliage::lighting::sun_maps::{
+        LEAF_SHADOW_FINE, LeafShadowLookup, LeafShadowOffset, LeafShadowPlane,
+    };
+    let mut leaf_shadow = LeafShadowLookup::SHADERS;
+    let mut shadow_texels = vec![LEAF_SHADOW_FINE];
     let mut i = 0;
     while i < args.len() {
         let value = |i: usize| -> usize {
@@ -93,12 +100,55 @@ fn main() {
                     Some(&[texels, slope])
                         if (0.0..=10.0).contains(&texels) && (0.0..=10.0).contains(&slope) =>
                     {
-                        leaf_shadow.texels = texels;
-                        leaf_shadow.slope = slope;
+                        leaf_shadow = LeafShadowLookup::Offset(LeafShadowOffset {
+                            texels,
+                            slope,
+                            ..LeafShadowOffset::SLOPE_SCALED
+                        });
                     }
                     _ => {
                         eprintln!(
                             "--leaf-shadow-offset takes T,S (texels and texels per tan θ, each in 0..=10)"
+                        );
+                        std::process::exit(2)
+                    }
+                }
+            }
+            "--leaf-shadow-slack" => {
+                match args.get(i + 1).and_then(|v| v.parse::<f32>().ok()) {
+                    Some(slack) if (0.0..=10.0).contains(&slack) => {
+                        let plane = match leaf_shadow {
+                            LeafShadowLookup::ReceiverPlane(plane) => plane,
+                            LeafShadowLookup::Offset(_) => LeafShadowPlane::SHADERS,
+                        };
+                        leaf_shadow = LeafShadowLookup::ReceiverPlane(LeafShadowPlane {
+                            slack_texels: slack,
+                            ..plane
+                        });
+                    }
+                    _ => {
+                        eprintln!("--leaf-shadow-slack takes texels in 0..=10");
+                        std::process::exit(2)
+                    }
+                }
+            }
+            "--shadow-texel" => {
+                let shares: Option<Vec<f32>> = args.get(i + 1).map(|v| {
+                    v.split(',')
+                        .filter_map(|x| x.parse::<f32>().ok())
+                        .filter(|share| (1.0 / 256.0..=4.0).contains(share))
+                        .collect()
+                });
+                match shares {
+                    Some(shares)
+                        if !shares.is_empty()
+                            && shares.len() == args[i + 1].split(',').count() =>
+                    {
+                        shadow_texels = shares
+                    }
+                    _ => {
+                        eprintln!(
+                            "--shadow-texel takes shares of the leaf's size in 1/256..=4, separated by commas"
                         );
                         std::process::exit(2)
                     }
@@ -131,7 +181,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R]] [--sun x,y,z] [--leaf-shadow-offset T,S]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R]] [--sun x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -168,6 +218,7 @@ fn main() {
                 seen_points,
                 hotspot,
                 leaf_shadow,
+                shadow_texels: shadow_texels.clone(),
                 bounce_rays,
                 ..Default::default()
             },
@@ -292,7 +343,7 @@ fn sun_map_table(
     stride: usize,
     points: u32,
     to_sun: Vec3,
-    leaf_shadow: bevy_foliage::lighting::sun_maps::LeafShadowOffset,
+    leaf_shadow: bevy_foliage::lighting::sun_maps::LeafShadowLookup,
     threads: usize,
 ) {
     use bevy_foliage::lighting::sun_maps::sun_visibility_against_tracer;
@@ -310,7 +361,7 @@ fn sun_map_table(
             to_sun,
             stride,
             points,
-            &[leaf / 16.0, leaf / 8.0, leaf / 4.0, leaf],
+            &[leaf / 16.0, leaf / 8.0, leaf / 4.0, leaf / 2.0, leaf],
             leaf * 4.0,
             leaf,
             leaf_shadow,
@@ -436,12 +487,34 @@ fn image_table(
             if let Some(spot) = run.hotspot.get(size) {
                 row(spot, "sun direct", &hotspot_label, &spot.sun);
             }
-            row(
-                &run.shadow_map_sun[size],
-                "sun direct",
-                "shadow map, texels 1/16 of a leaf, one bilinear lookup (the leaf shaders')",
-                &run.shadow_map_sun[size].sun,
-            );
+            for (share, errors) in &run.shadow_map_sun {
+                row(
+                    &errors[size],
+                    "sun direct",
+                    &format!(
+                        "shadow map, texels {share} of a leaf, {}{}",
+                        settings.leaf_shadow.describe(),
+                        if settings.leaf_shadow
+                            == bevy_foliage::lighting::sun_maps::LeafShadowLookup::SHADERS
+                        {
+                            " (the leaf shaders')"
+                        } else {
+                            ""
+                        }
+                    ),
+                    &errors[size].sun,
+                );
+            }
+            for (share, trust, errors) in &run.drawn {
+                row(
+                    &errors[size],
+                    "sun direct",
+                    &format!(
+                        "as drawn under texels {share} of a leaf: the hotspot's blend moved {trust:.2} of the way to the shadow map"
+                    ),
+                    &errors[size].sun,
+                );
+            }
             for (k, (_, errors)) in run.models.iter().enumerate() {
                 row(
                     &errors[size],

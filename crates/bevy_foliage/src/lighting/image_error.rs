@@ -23,14 +23,16 @@ use super::path_trace::{
     luminance,
 };
 use super::seen_part::{DEFAULT_SEEN_POINTS, covered_gain, seen_gain, seen_part_gains_of};
-use super::sun_maps::{LEAF_SHADOW_FINE, LeafShadowOffset, LightFrame, foliage_maps};
+use super::sun_maps::{
+    LEAF_SHADOW_FINE, LeafShadowLookup, LightFrame, foliage_maps, shadow_map_trust,
+};
 use super::traced_bins::BinEstimate;
 use crate::pruning::leaves::LeafSet;
 use crate::rng::SplitMix64;
 use bevy::math::Vec3;
 
 /// How the crown is rendered and traced.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct ImageSettings {
     /// Eye rays a side over the crown's square: the pixels of the finest image.
     pub samples: u32,
@@ -45,9 +47,12 @@ pub struct ImageSettings {
     /// Whether to measure the crown's hotspot ([`super::hotspot`], with another seed than the
     /// images') and render the last model with it.
     pub hotspot: bool,
-    /// How far towards the sun the shadow map's row moves each point before its lookup (the
-    /// leaf shaders' [`LeafShadowOffset::SHADERS`] by default).
-    pub leaf_shadow: LeafShadowOffset,
+    /// How the shadow map's row compares each point with the map (the leaf shaders'
+    /// [`LeafShadowLookup::SHADERS`] by default).
+    pub leaf_shadow: LeafShadowLookup,
+    /// The shadow map's texel sides for its rows, as shares of the leaf's size (by default
+    /// [`LEAF_SHADOW_FINE`] alone, up to which the leaf shaders take the map alone).
+    pub shadow_texels: Vec<f32>,
     /// Rays per leaf for the bounce gathered from the neighbours ([`super::gathered_bounce`];
     /// 0: not measured).
     pub bounce_rays: u32,
@@ -62,7 +67,8 @@ impl Default for ImageSettings {
             seed: 1,
             seen_points: DEFAULT_SEEN_POINTS,
             hotspot: false,
-            leaf_shadow: LeafShadowOffset::SHADERS,
+            leaf_shadow: LeafShadowLookup::SHADERS,
+            shadow_texels: vec![LEAF_SHADOW_FINE],
             bounce_rays: 0,
         }
     }
@@ -89,11 +95,11 @@ pub struct ImageError {
 pub struct ImageComparison {
     /// Per model, in the order given, its errors per pixel size, and the crown's fitted τ.
     pub models: Vec<(f32, Vec<ImageError>)>,
-    /// The sun read at each eye ray's point from a shadow map of texels [`LEAF_SHADOW_FINE`] of
-    /// a leaf as the leaf shaders read it for leaves near the eye (one bilinear lookup, the point
-    /// moved towards the sun by [`ImageSettings::leaf_shadow`]), per pixel size; sky
-    /// and bounce are those of the first model.
-    pub shadow_map_sun: Vec<ImageError>,
+    /// Per texel side of [`ImageSettings::shadow_texels`] (a share of the leaf's size), the sun
+    /// read at each eye ray's point from a shadow map of such texels as the leaf shaders read
+    /// it at the leaf ([`ImageSettings::leaf_shadow`]), per pixel size; sky and bounce are
+    /// those of the first model.
+    pub shadow_map_sun: Vec<(f32, Vec<ImageError>)>,
     /// The tracer against itself (a second trace with another seed): its own noise per pixel
     /// size, below which no model can be shown closer to it.
     pub noise: Vec<ImageError>,
@@ -116,6 +122,13 @@ pub struct ImageComparison {
     pub gathered: Vec<Vec<ImageError>>,
     /// Seconds the ratios of every leaf took to gather (on the threads given), when measured.
     pub gathered_seconds: f32,
+    /// The sun as the leaf shaders draw it under a shadow map of each texel side of
+    /// `shadow_map_sun` that lies between [`super::sun_maps::LEAF_SHADOW_FINE`] and
+    /// [`super::sun_maps::LEAF_SHADOW_COARSE`] of a leaf: `hotspot`'s sun (the baked blend)
+    /// moved towards that map's by the shaders' trust in it
+    /// ([`super::sun_maps::shadow_map_trust`]), sky and bounce `hotspot`'s; per texel side
+    /// (with the trust), per pixel size. Empty unless [`ImageSettings::hotspot`].
+    pub drawn: Vec<(f32, f32, Vec<ImageError>)>,
     /// The hotspot measured, when it was.
     pub hotspot_factors: Option<super::hotspot::Hotspot>,
     /// Eye rays that hit a leaf.
@@ -320,36 +333,50 @@ pub fn images_against_tracer(
         })
         .collect();
 
-    // The shadow map's sun at each eye ray's point, as the leaf shaders read it where they
-    // take it alone (texels of `LEAF_SHADOW_FINE` of a leaf).
-    let texel = LEAF_SHADOW_FINE * leaf_size.max(1e-6);
-    let maps = foliage_maps(leaves, LightFrame::around(leaves, light.to_sun, texel));
-    let mapped_sun: Vec<f32> = samples
+    // The shadow map's sun at each eye ray's point, as the leaf shaders read it at the leaf,
+    // at each texel side asked for (by default `LEAF_SHADOW_FINE` of a leaf alone).
+    let mapped_suns: Vec<(f32, Vec<f32>)> = settings
+        .shadow_texels
         .iter()
-        .map(|s| {
-            s.as_ref().map_or(0.0, |s| {
-                let n = scene.normal(s.leaf as usize);
-                let bias = settings.leaf_shadow.texels_for(n, light.to_sun) * maps.frame.texel;
-                let visible = maps.shadow_map_bilinear(s.point, bias);
-                luminance(sun_radiance(
-                    material,
-                    n,
-                    view,
-                    light.to_sun,
-                    visible,
-                    light.sun,
-                ))
-            })
+        .map(|&share| {
+            let texel = share.max(1e-3) * leaf_size.max(1e-6);
+            let maps = foliage_maps(leaves, LightFrame::around(leaves, light.to_sun, texel));
+            let mapped: Vec<f32> = samples
+                .iter()
+                .map(|s| {
+                    s.as_ref().map_or(0.0, |s| {
+                        let n = scene.normal(s.leaf as usize);
+                        let visible = settings.leaf_shadow.visible(&maps, s.point, n);
+                        luminance(sun_radiance(
+                            material,
+                            n,
+                            view,
+                            light.to_sun,
+                            visible,
+                            light.sun,
+                        ))
+                    })
+                })
+                .collect();
+            (share, mapped)
         })
         .collect();
     let [model_sky, _, model_bounce] = first_model.unwrap_or_else(|| {
         [
             reference[0].clone(),
-            mapped_sun.clone(),
+            reference[1].clone(),
             reference[2].clone(),
         ]
     });
-    let shadow_map_sun = measure(&[model_sky, mapped_sun, model_bounce]);
+    let shadow_map_sun: Vec<(f32, Vec<ImageError>)> = mapped_suns
+        .iter()
+        .map(|(share, mapped)| {
+            (
+                *share,
+                measure(&[model_sky.clone(), mapped.clone(), model_bounce.clone()]),
+            )
+        })
+        .collect();
     let gains = (settings.seen_points > 0).then(|| {
         let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
         seen_part_gains_of(&scene, &all, settings.seen_points, &|_| 1.0, threads)
@@ -495,9 +522,9 @@ pub fn images_against_tracer(
         }
         _ => Vec::new(),
     };
-    let (seen, hotspot) = match last_model {
+    let (seen, hotspot, drawn) = match last_model {
         Some(([sky, sun, bounce], envelope)) => {
-            // The image with the gains (where measured), the sun through the crown as
+            // The images with the gains (where measured), the sun through the crown as
             // `through(leaf, blend, gain)` makes the leaf's share of it (the gain applied), and
             // the bounce scaled by `bounce_factor`.
             let with = |through: &dyn Fn(usize, f32, f32) -> f32, bounce_factor: f32| {
@@ -520,28 +547,52 @@ pub fn images_against_tracer(
                         }
                     }
                 }
-                measure(&[sky, sun, bounce])
+                [sky, sun, bounce]
             };
             let seen = if gains.is_some() {
-                with(&|_, old, gain| (old * gain).min(1.0), 1.0)
+                measure(&with(&|_, old, gain| (old * gain).min(1.0), 1.0))
             } else {
                 Vec::new()
             };
-            let hotspot = match &hotspot_factors {
-                Some(h) => with(
-                    &|_, old, gain| h.sun_through((old * gain).min(1.0), view, light.to_sun),
-                    h.bounce_at(view, light.to_sun),
-                ),
-                None => Vec::new(),
+            let (hotspot, drawn) = match &hotspot_factors {
+                Some(h) => {
+                    let [sky, sun, bounce] = with(
+                        &|_, old, gain| h.sun_through((old * gain).min(1.0), view, light.to_sun),
+                        h.bounce_at(view, light.to_sun),
+                    );
+                    // The leaf shaders' hand-over between the baked blend (with the hotspot)
+                    // and the shadow map at the leaf, at each texel side where they blend.
+                    let drawn = mapped_suns
+                        .iter()
+                        .filter_map(|(share, mapped)| {
+                            let trust = shadow_map_trust(*share);
+                            (trust > 0.0 && trust < 1.0).then(|| {
+                                let mixed: Vec<f32> = sun
+                                    .iter()
+                                    .zip(mapped)
+                                    .map(|(b, m)| b + trust * (m - b))
+                                    .collect();
+                                (
+                                    *share,
+                                    trust,
+                                    measure(&[sky.clone(), mixed, bounce.clone()]),
+                                )
+                            })
+                        })
+                        .collect();
+                    (measure(&[sky, sun, bounce]), drawn)
+                }
+                None => (Vec::new(), Vec::new()),
             };
-            (seen, hotspot)
+            (seen, hotspot, drawn)
         }
-        _ => (Vec::new(), Vec::new()),
+        _ => (Vec::new(), Vec::new(), Vec::new()),
     };
     ImageComparison {
         models,
         seen,
         hotspot,
+        drawn,
         gathered,
         gathered_seconds,
         hotspot_factors,
@@ -598,7 +649,8 @@ mod tests {
             assert!(model.sun.mean_absolute < 1e-4, "{model:?}");
             assert!(model.sun.share > 0.3);
         }
-        for mapped in &run.shadow_map_sun {
+        assert_eq!(run.shadow_map_sun.len(), 1);
+        for mapped in &run.shadow_map_sun[0].1 {
             assert!(mapped.sun.mean_absolute < 1e-4, "{mapped:?}");
         }
         assert_eq!(
@@ -661,7 +713,7 @@ mod tests {
         assert!(errors[1].sky.mean_absolute < 0.06, "{:?}", errors[1].sky);
         assert!(errors[2].sky.mean_absolute < 0.03, "{:?}", errors[2].sky);
         // Finer than the model, the shadow map's sun at each point is closer at every size.
-        for (mapped, model) in run.shadow_map_sun.iter().zip(errors) {
+        for (mapped, model) in run.shadow_map_sun[0].1.iter().zip(errors) {
             eprintln!("shadow map {:?}", mapped.sun);
             assert!(mapped.sun.mean_absolute < model.sun.mean_absolute);
         }

@@ -17,10 +17,12 @@ use bevy::prelude::*;
 /// neighbouring leaves (eq. 5.24). A leaf's reflectances and transmittances are `optics` times its
 /// material's base colour (linear), and its texture's colour multiplies the light it sends, so
 /// leaves keep their materials' colours. The sun's direct light on a leaf goes through Bevy's
-/// shadow map of the sun read at the leaf where the map's texels are at most a sixteenth of the
-/// leaf (leaf-on-leaf shadows, measured closer to a path tracer than the baked attenuations:
-/// [`super::sun_maps`]; the cascades nearest the eye, or a larger `DirectionalLightShadowMap`,
-/// reach that); where they are an eighth of a leaf or larger, through the crown's baked
+/// shadow map of the sun read at the leaf where the map's texels are at most half the leaf
+/// (leaf-on-leaf shadows; each of the four texels compared with the depth of the leaf's own
+/// plane there, so a leaf never shades itself and the leaf in front is never let through;
+/// measured closer to a path tracer than the baked attenuations: [`super::sun_maps`]; the
+/// cascades nearer the eye, or a larger `DirectionalLightShadowMap`, reach that); where they
+/// are a leaf or larger, through the crown's baked
 /// attenuations times the shadow map read on the plane touching the crown's bounding sphere on
 /// the sun's side (what stands outside the crown, its own leaves not counted twice); a smooth
 /// hand-over between. Screen-space soft shadows are not read in this mode, and an environment
