@@ -412,9 +412,8 @@ fn compare_with_model(
             outermost = Some(origin);
         }
         leaf_shadows
-            && outermost.is_some_and(|o| {
-                instance.transform_point(o).distance(moved) <= 3.0 * texel_at(p)
-            })
+            && outermost
+                .is_some_and(|o| instance.transform_point(o).distance(moved) <= 3.0 * texel_at(p))
     };
     let sun_at = |leaf: u32, p: Vec3| -> Option<bool> {
         let here = reaches(leaf, p);
@@ -893,8 +892,7 @@ fn sun_shadows(name: &str, cascades: SunCascades) -> Option<Check> {
             // frustum's slice over the map's texels): set a far bound, read the texel Bevy
             // made, and scale the bound to the texel wanted, twice.
             let leaves = stored_leaves(&baked);
-            let mut diameters: Vec<f32> =
-                (0..leaves.len()).map(|l| leaves.diameter(l)).collect();
+            let mut diameters: Vec<f32> = (0..leaves.len()).map(|l| leaves.diameter(l)).collect();
             diameters.sort_by(f32::total_cmp);
             let wanted = share * diameters[diameters.len() / 2];
             let camera = Transform::from_translation(eye)
@@ -1032,8 +1030,10 @@ fn the_shadow_map_resolves_leaves_in_cascades_of_texels_a_quarter_of_a_leaf() {
     // lets the leaves just in front through, and a comparison with the point's own depth
     // shades a tilted leaf with its own texels): the shader's receiver-plane comparison still
     // gives each leaf the sun its shadow ray finds, away from shadow edges (a texel and a half).
-    let Some(check) = sun_shadows("tree_lighting_quarter_leaf_texels", SunCascades::LeafShare(0.25))
-    else {
+    let Some(check) = sun_shadows(
+        "tree_lighting_quarter_leaf_texels",
+        SunCascades::LeafShare(0.25),
+    ) else {
         return;
     };
     assert!(

@@ -36,7 +36,7 @@
 //! (`sun_maps::LeafShadowOffset`); also in the `--sun-maps` table.
 //!
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
-//! map at three texel sizes read as the leaf shaders read it and with a 3×3 filter, the crown's extinction over its depth, eq. 5.3's foliage maps)
+//! map at five texel sizes, 1/16 to one leaf, read as the leaf shaders read it and with a 3×3 filter, the crown's extinction over its depth, eq. 5.3's foliage maps)
 //! against the tracer's shadow rays, beside the baked attenuations' blend
 //! (`lighting::sun_maps`).
 
@@ -114,24 +114,22 @@ fn main() {
                     }
                 }
             }
-            "--leaf-shadow-slack" => {
-                match args.get(i + 1).and_then(|v| v.parse::<f32>().ok()) {
-                    Some(slack) if (0.0..=10.0).contains(&slack) => {
-                        let plane = match leaf_shadow {
-                            LeafShadowLookup::ReceiverPlane(plane) => plane,
-                            LeafShadowLookup::Offset(_) => LeafShadowPlane::SHADERS,
-                        };
-                        leaf_shadow = LeafShadowLookup::ReceiverPlane(LeafShadowPlane {
-                            slack_texels: slack,
-                            ..plane
-                        });
-                    }
-                    _ => {
-                        eprintln!("--leaf-shadow-slack takes texels in 0..=10");
-                        std::process::exit(2)
-                    }
+            "--leaf-shadow-slack" => match args.get(i + 1).and_then(|v| v.parse::<f32>().ok()) {
+                Some(slack) if (0.0..=10.0).contains(&slack) => {
+                    let plane = match leaf_shadow {
+                        LeafShadowLookup::ReceiverPlane(plane) => plane,
+                        LeafShadowLookup::Offset(_) => LeafShadowPlane::SHADERS,
+                    };
+                    leaf_shadow = LeafShadowLookup::ReceiverPlane(LeafShadowPlane {
+                        slack_texels: slack,
+                        ..plane
+                    });
                 }
-            }
+                _ => {
+                    eprintln!("--leaf-shadow-slack takes texels in 0..=10");
+                    std::process::exit(2)
+                }
+            },
             "--shadow-texel" => {
                 let shares: Option<Vec<f32>> = args.get(i + 1).map(|v| {
                     v.split(',')
@@ -141,8 +139,7 @@ fn main() {
                 });
                 match shares {
                     Some(shares)
-                        if !shares.is_empty()
-                            && shares.len() == args[i + 1].split(',').count() =>
+                        if !shares.is_empty() && shares.len() == args[i + 1].split(',').count() =>
                     {
                         shadow_texels = shares
                     }

@@ -18,9 +18,9 @@ use super::path_trace::LeafScene;
 use crate::pruning::leaves::LeafSet;
 use crate::pruning::visibility::rasterize_triangle;
 use crate::rng::SplitMix64;
-use bevy::math::{Vec2, Vec3};
 #[cfg(test)]
 use bevy::math::Quat;
+use bevy::math::{Vec2, Vec3};
 
 /// A slope-scaled depth bias: the point of a leaf moved towards the sun by
 /// `texels + slope · min(tan θ, max_slope)` texels of the map before one bilinear comparison, θ
@@ -132,7 +132,11 @@ impl LeafShadowPlane {
         let n = n.normalize_or_zero();
         let nl = n.dot(frame.to_sun);
         // Edge-on to the sun: the steepest plane the cap allows, along the normal's side.
-        let nl = if nl.abs() < 1e-4 { 1e-4f32.copysign(nl) } else { nl };
+        let nl = if nl.abs() < 1e-4 {
+            1e-4f32.copysign(nl)
+        } else {
+            nl
+        };
         let g = Vec2::new(n.dot(frame.u), n.dot(frame.v)) / nl;
         let length = g.length();
         if length > self.max_slope && length.is_finite() {
@@ -237,7 +241,8 @@ pub fn shadow_map_trust(texel_share: f32) -> f32 {
     if texel_share.is_nan() {
         return 0.0;
     }
-    let t = ((texel_share - LEAF_SHADOW_FINE) / (LEAF_SHADOW_COARSE - LEAF_SHADOW_FINE)).clamp(0.0, 1.0);
+    let t = ((texel_share - LEAF_SHADOW_FINE) / (LEAF_SHADOW_COARSE - LEAF_SHADOW_FINE))
+        .clamp(0.0, 1.0);
     1.0 - t * t * (3.0 - 2.0 * t)
 }
 
@@ -753,7 +758,10 @@ mod tests {
         assert!(front > 0.999, "the leaf in front: {front}");
         let offset = LeafShadowLookup::Offset(LeafShadowOffset::SLOPE_SCALED);
         let moved = mean_on_leaf(&near, 1, |p| offset.visible(&maps, p, normal));
-        assert!(moved > 0.9, "the offset lets the sun through to the leaf behind: {moved}");
+        assert!(
+            moved > 0.9,
+            "the offset lets the sun through to the leaf behind: {moved}"
+        );
     }
 
     #[test]
@@ -769,7 +777,11 @@ mod tests {
         let t = n.any_orthonormal_vector() * 0.3;
         let ((q0, z0), (q1, z1)) = (frame.project(Vec3::ZERO), frame.project(t));
         let predicted = g.dot((q1 - q0) * frame.texel);
-        assert!((predicted - (z1 - z0)).abs() < 1e-5, "{predicted} vs {}", z1 - z0);
+        assert!(
+            (predicted - (z1 - z0)).abs() < 1e-5,
+            "{predicted} vs {}",
+            z1 - z0
+        );
         // Edge-on to the sun: capped at tan θ = 4, never NaN.
         let edge = LeafShadowPlane::SHADERS.gradient(to_sun.any_orthonormal_vector(), &frame);
         assert!((edge.length() - 4.0).abs() < 1e-4, "{edge}");
@@ -780,10 +792,33 @@ mod tests {
     }
 
     #[test]
+    fn the_shaders_trust_in_the_map_falls_smoothly_from_fine_to_coarse_texels() {
+        assert_eq!(shadow_map_trust(0.0), 1.0);
+        assert_eq!(shadow_map_trust(LEAF_SHADOW_FINE), 1.0);
+        assert_eq!(shadow_map_trust(LEAF_SHADOW_COARSE), 0.0);
+        assert_eq!(shadow_map_trust(4.0 * LEAF_SHADOW_COARSE), 0.0);
+        assert_eq!(shadow_map_trust(f32::NAN), 0.0);
+        let middle = 0.5 * (LEAF_SHADOW_FINE + LEAF_SHADOW_COARSE);
+        assert!((shadow_map_trust(middle) - 0.5).abs() < 1e-6);
+        let steps: Vec<f32> = (0..=32)
+            .map(|i| {
+                let t = i as f32 / 32.0;
+                shadow_map_trust(LEAF_SHADOW_FINE + t * (LEAF_SHADOW_COARSE - LEAF_SHADOW_FINE))
+            })
+            .collect();
+        assert!(steps.windows(2).all(|w| w[1] < w[0]), "{steps:?}");
+        // Smooth at both ends (smoothstep's flat tangents): the first and last steps are small.
+        assert!(1.0 - steps[1] < 0.01 && steps[31] < 0.01, "{steps:?}");
+    }
+
+    #[test]
     fn the_leaf_shaders_read_the_map_as_measured_here() {
         let wgsl = include_str!("../pruning/leaf_volume_fragment.wgsl");
         let plane = LeafShadowPlane::SHADERS;
-        assert_eq!(LeafShadowLookup::SHADERS, LeafShadowLookup::ReceiverPlane(plane));
+        assert_eq!(
+            LeafShadowLookup::SHADERS,
+            LeafShadowLookup::ReceiverPlane(plane)
+        );
         for (name, value) in [
             ("LEAF_SHADOW_SLACK", plane.slack_texels),
             ("LEAF_SHADOW_MAX_SLOPE", plane.max_slope),
