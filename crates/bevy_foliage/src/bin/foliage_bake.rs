@@ -3,7 +3,7 @@
 //! ```text
 //! cargo run -p bevy_foliage --bin foliage_bake -- [--out DIR] [--resolution N] [--depth D]
 //!     [--leaf-material NAME ...] [--rays-per-bin R | --neighbour-bins] [--seen-points P]
-//!     [--bounce-rays R] [--no-hotspot] [TREE | FILE.gltf | FILE.glb ...]
+//!     [--bounce-rays R] [--bounce-pool K] [--no-hotspot] [TREE | FILE.gltf | FILE.glb ...]
 //! ```
 //! TREE is one of `olea`, `fraxinus`, `quercus`, `cedrus` (the thesis' test trees; default: all);
 //! a glTF file is split into leaves as `bevy_foliage::pruning::gltf` documents.
@@ -14,7 +14,9 @@
 //! in view (`lighting::seen_part`; default 32, twice a bake at load time's; 0 for none); their time is the envelope stage's.
 //! `--bounce-rays`: rays per leaf for the bounce gathered from its neighbours
 //! (`lighting::gathered_bounce`; default 64, twice a bake at load time's; 0 for none: eq. 5.24
-//! alone); the envelope stage's time too.
+//! alone); the envelope stage's time too. `--bounce-pool`: leaves whose gathers make each
+//! leaf's ratios (the leaf and its nearest neighbours; default 1, the leaf's own alone,
+//! `gathered_bounce::DEFAULT_BOUNCE_POOL`, where the measured trade-off is).
 //! `--no-hotspot`: leave the crown's hotspot (`lighting::hotspot`) unmeasured, its factors at 1
 //! (measured by default with `HotspotSettings::OFFLINE`; its time is the envelope stage's too).
 //! Prints progress on stderr and one JSON object per tree on stdout (bake time per stage, leaf
@@ -85,9 +87,12 @@ fn main() {
             "--bounce-rays" => {
                 settings.bounce_rays = value("--bounce-rays").parse().expect("--bounce-rays R")
             }
+            "--bounce-pool" => {
+                settings.bounce_pool = value("--bounce-pool").parse().expect("--bounce-pool K")
+            }
             "--help" | "-h" => {
                 eprintln!(
-                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [--seen-points P] [--bounce-rays R] [--no-hotspot] [olea|fraxinus|quercus|cedrus ...]"
+                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [--seen-points P] [--bounce-rays R] [--bounce-pool K] [--no-hotspot] [olea|fraxinus|quercus|cedrus ...]"
                 );
                 return;
             }

@@ -8,7 +8,8 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R]] [--sun X,Y,Z]
+//!     [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]]]
+//!     [--sun X,Y,Z]
 //!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
 //! `--sun X,Y,Z`: the direction towards the sun (0.5, 0.7, 0.3 by default; the eye looks from
@@ -25,7 +26,9 @@
 //! neighbours by R rays (`lighting::gathered_bounce`: eq. 5.24 scaled by the gathered ratios
 //! blended from fourteen suns, with and without the covered part's gain, and the gather for
 //! the image's own sun alone; with `--hotspot` also the ratios with the gain and a hotspot
-//! measured against them, as the leaf shaders draw the bounce). The shadow
+//! measured against them, as the leaf shaders draw the bounce), each leaf's ratios pooled
+//! with its nearest neighbours' (`--bounce-pool K[,K…]`: K leaves a pool, the first for
+//! those rows, and a row as drawn for each). The shadow
 //! map's row reads it as the leaf shaders do at the leaf (texels of `LEAF_SHADOW_FINE` of a
 //! leaf, up to which they take it alone; `--shadow-texel F[,F…]` for a row per share of the
 //! leaf's size, and with `--hotspot` a row of the sun as drawn for each share where the
@@ -66,6 +69,8 @@ fn main() {
     args.retain(|a| a != "--sun-maps" && a != "--images" && a != "--hotspot");
     let mut samples = 128u32;
     let mut bounce_rays = 0u32;
+    use bevy_foliage::lighting::gathered_bounce::{DEFAULT_BOUNCE_POOL, MAX_BOUNCE_POOL};
+    let mut bounce_pools = vec![DEFAULT_BOUNCE_POOL];
     let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
     let mut to_sun = Vec3::new(0.5, 0.7, 0.3).normalize();
     use bevy_foliage::lighting::sun_maps::{
@@ -165,6 +170,21 @@ fn main() {
                         std::process::exit(2)
                     })
             }
+            "--bounce-pool" => {
+                bounce_pools = args
+                    .get(i + 1)
+                    .map(|v| v.split(',').map(|r| r.trim().parse::<usize>()).collect())
+                    .and_then(|r: Result<Vec<usize>, _>| r.ok())
+                    .filter(|r| {
+                        !r.is_empty() && r.iter().all(|r| (1..=MAX_BOUNCE_POOL).contains(r))
+                    })
+                    .unwrap_or_else(|| {
+                        eprintln!(
+                            "--bounce-pool takes K or K,K,… with each K in 1..={MAX_BOUNCE_POOL}"
+                        );
+                        std::process::exit(2)
+                    })
+            }
             "--rays-per-bin" => {
                 rays_per_bin = args
                     .get(i + 1)
@@ -178,7 +198,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R]] [--sun x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]]] [--sun x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -217,6 +237,7 @@ fn main() {
                 leaf_shadow,
                 shadow_texels: shadow_texels.clone(),
                 bounce_rays,
+                bounce_pools: bounce_pools.clone(),
                 ..Default::default()
             },
             &rays_per_bin,
@@ -547,6 +568,14 @@ fn image_table(
                 "eq. 5.24 × gathered ratios, covered-part gain, hotspot measured with them (as the leaf shaders draw it)",
             ]) {
                 row(&g[size], "sun indirect (1 bounce)", name, &g[size].bounce);
+            }
+            for (pool, g) in &run.pooled {
+                row(
+                    &g[size],
+                    "sun indirect (1 bounce)",
+                    &format!("ratios pooled over {pool} leaves, as the leaf shaders draw them"),
+                    &g[size].bounce,
+                );
             }
             row(
                 &run.noise[size],

@@ -24,7 +24,7 @@ pub use super::format::LIGHT_ATLASES;
 use crate::lighting::bins::{LeafProxy, proxies};
 use crate::lighting::envelope::crown_envelope;
 use crate::lighting::gathered_bounce::{
-    BounceRatios, DEFAULT_BOUNCE_RAYS, bounce_ratios_of, crown_mean_ratios,
+    BounceRatios, DEFAULT_BOUNCE_POOL, DEFAULT_BOUNCE_RAYS, bounce_ratios_of, crown_mean_ratios,
 };
 use crate::lighting::hotspot::{Hotspot, HotspotSettings, crown_hotspot};
 use crate::lighting::leaf_scene::LeafScene;
@@ -306,6 +306,7 @@ impl ImpostorSource {
             &envelope.leaves,
             envelope.tau,
             DEFAULT_BOUNCE_RAYS,
+            DEFAULT_BOUNCE_POOL,
             &opacity,
             threads,
         );

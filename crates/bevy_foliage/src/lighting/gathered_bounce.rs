@@ -39,7 +39,11 @@
 //! closed form keeps more (15–17 %), sharper lobes (the cosine to the fourth) more again
 //! (7.8–12.7 %), but with the sun overhead — 54.7° from every sampling direction — eight stay
 //! at 14–26 %. With the six axes: 7.5–20.4 % at α = 4–83°, 19–36 % at 137–148°, the ball
-//! 4.3–6.5 % at every sun (the thesis reports 6 % on such a crown).
+//! 4.3–6.5 % at every sun (the thesis reports 6 % on such a crown). Neither other lobe
+//! powers ([`BASIS_LOBE_POWER`]) nor pooling each leaf's gather with its nearest neighbours'
+//! ([`pooled_ratios`], [`DEFAULT_BOUNCE_POOL`]) narrow the gap against the sun: there it is
+//! the blend over directions, not the gather's noise, that costs (on the trees at pixels about
+//! 1.5 leaves wide 11–18 % for the sun's own gather, 21–37 % blended).
 //!
 //! Cost: 0.7–1.3 s for a 2,000-leaf crown at 64 rays a leaf on two threads (about 0.6 ms a
 //! leaf, some 3.5× the 32-ray traced bins); a bake made while an app runs gathers
@@ -78,7 +82,13 @@ pub const SUN_BASIS: [Vec3; 14] = {
 };
 
 /// The power the blend raises each basis direction's cosine lobe to ([`basis_weights`]):
-/// eq. 5.7's plain cosine spreads a sun over directions up to 90° away.
+/// eq. 5.7's plain cosine spreads a sun over directions up to 90° away. Chosen by the bounce's
+/// image error (`tree_lighting_error --images`, pixels about 1.5 leaves, four procedural trees,
+/// three suns): powers 1 and 2 blend in directions too far from the sun (the trees' error up
+/// to 47 %), 8 and 16 lean on the one or two nearest directions (up to 52 %); summed over the
+/// trees and suns 4 is lowest (powers 1, 2, 8, 16: 25, 9.8, 3.6 and 22 % higher), and on every
+/// tree and sun lowest or within a point of it but two (olive and oak with the sun towards
+/// (0.3, 0.2, −1), where 8 is two points lower).
 pub const BASIS_LOBE_POWER: f32 = 4.0;
 
 /// Rays per leaf a bake made while an app runs gathers for its ratios
@@ -217,10 +227,75 @@ impl Default for BounceRatios {
     }
 }
 
-/// The [`BounceRatios`] of leaf `leaf` (its envelope `envelope`, in a crown of extinction
+/// What a leaf's [`BounceRatios`] are made of: per [`SUN_BASIS`] direction and face (front,
+/// back), the irradiance gathered from its neighbours ([`gather_irradiance`]) and eq. 5.24's
+/// ([`closed_form_irradiance`]), in the same units.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BounceGather {
+    /// The gathered irradiance per sun direction, front then back face.
+    pub gathered: [[f32; 2]; 14],
+    /// Eq. 5.24's.
+    pub closed: [[f32; 2]; 14],
+}
+
+/// A face's ratio: `gathered / closed` in `[0, RATIO_MAX]`, 1 where eq. 5.24 brings the face
+/// nothing (or the gather is not finite).
+fn face_ratio(gathered: f32, closed: f32) -> f32 {
+    if closed > 1e-6 && gathered.is_finite() {
+        (gathered / closed).clamp(0.0, RATIO_MAX)
+    } else {
+        1.0
+    }
+}
+
+impl BounceGather {
+    /// The leaf's ratios from its own gather alone.
+    pub fn ratios(&self) -> BounceRatios {
+        BounceRatios {
+            front: std::array::from_fn(|k| face_ratio(self.gathered[k][0], self.closed[k][0])),
+            back: std::array::from_fn(|k| face_ratio(self.gathered[k][1], self.closed[k][1])),
+        }
+    }
+}
+
+/// The [`BounceGather`] of leaf `leaf` (its envelope `envelope`, in a crown of extinction
 /// `tau` whose constants per basis sun are `bounces`, [`basis_bounces`]), from `rays` rays.
 /// The sun's share at the leaf is taken as the shaders take it for eq. 5.24, the blend of its
 /// attenuations ([`SunThroughCrown::BlendedAttenuation`]).
+#[allow(clippy::too_many_arguments)]
+pub fn bounce_gather(
+    scene: &LeafScene,
+    material: &LeafMaterial,
+    leaf: usize,
+    envelope: &LeafEnvelope,
+    tau: f32,
+    bounces: &[SunBounce; 14],
+    rays: u32,
+    opacity: &(impl Fn(u32) -> f32 + Sync),
+    seed: u64,
+) -> BounceGather {
+    let mut out = BounceGather::default();
+    if leaf >= scene.leaf_count() {
+        return out;
+    }
+    let gathered = gather_irradiance(scene, material, leaf, rays, &SUN_BASIS, opacity, seed);
+    let n = scene.normal(leaf);
+    for (k, &sun) in SUN_BASIS.iter().enumerate() {
+        let through = sun_through_crown(
+            SunThroughCrown::BlendedAttenuation,
+            tau,
+            &envelope.attenuation,
+            &envelope.s_max,
+            sun,
+        );
+        out.gathered[k] = gathered[k];
+        out.closed[k] = closed_form_irradiance(material, &bounces[k], through, &envelope.s_max, n);
+    }
+    out
+}
+
+/// The [`BounceRatios`] of leaf `leaf` from its own gather alone ([`bounce_gather`]'s
+/// arguments; [`BounceGather::ratios`]).
 #[allow(clippy::too_many_arguments)]
 pub fn bounce_ratios(
     scene: &LeafScene,
@@ -236,35 +311,16 @@ pub fn bounce_ratios(
     if leaf >= scene.leaf_count() {
         return BounceRatios::default();
     }
-    let gathered = gather_irradiance(scene, material, leaf, rays, &SUN_BASIS, opacity, seed);
-    let n = scene.normal(leaf);
-    let mut out = BounceRatios::default();
-    for (k, &sun) in SUN_BASIS.iter().enumerate() {
-        let through = sun_through_crown(
-            SunThroughCrown::BlendedAttenuation,
-            tau,
-            &envelope.attenuation,
-            &envelope.s_max,
-            sun,
-        );
-        let closed = closed_form_irradiance(material, &bounces[k], through, &envelope.s_max, n);
-        let ratio = |g: f32, c: f32| {
-            if c > 1e-6 && g.is_finite() {
-                (g / c).clamp(0.0, RATIO_MAX)
-            } else {
-                1.0
-            }
-        };
-        out.front[k] = ratio(gathered[k][0], closed[0]);
-        out.back[k] = ratio(gathered[k][1], closed[1]);
-    }
-    out
+    bounce_gather(
+        scene, material, leaf, envelope, tau, bounces, rays, opacity, seed,
+    )
+    .ratios()
 }
 
-/// [`bounce_ratios`] of each of `leaves` (indices into `scene`; `envelopes[i]` the envelope of
-/// `leaves[i]`) on up to `threads` threads.
+/// The [`BounceGather`] of each of `leaves` (indices into `scene`; `envelopes[i]` the envelope
+/// of `leaves[i]`, none: an empty gather, whose ratios are 1) on up to `threads` threads.
 #[allow(clippy::too_many_arguments)]
-pub fn bounce_ratios_of(
+pub fn bounce_gathers_of(
     scene: &LeafScene,
     material: &LeafMaterial,
     leaves: &[u32],
@@ -273,7 +329,7 @@ pub fn bounce_ratios_of(
     rays: u32,
     opacity: &(impl Fn(u32) -> f32 + Sync),
     threads: usize,
-) -> Vec<BounceRatios> {
+) -> Vec<BounceGather> {
     let bounces = basis_bounces(material, tau);
     let jobs: Vec<(u32, Option<&LeafEnvelope>)> = leaves
         .iter()
@@ -281,14 +337,223 @@ pub fn bounce_ratios_of(
         .map(|(i, &leaf)| (leaf, envelopes.get(i)))
         .collect();
     super::par_map(&jobs, threads, |&(leaf, envelope)| {
-        let l = leaf as usize;
         let Some(envelope) = envelope else {
-            return BounceRatios::default();
+            return BounceGather::default();
         };
         let seed = 0xB0B1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        bounce_ratios(
-            scene, material, l, envelope, tau, &bounces, rays, opacity, seed,
+        bounce_gather(
+            scene,
+            material,
+            leaf as usize,
+            envelope,
+            tau,
+            &bounces,
+            rays,
+            opacity,
+            seed,
         )
+    })
+}
+
+/// [`bounce_ratios`] of each of `leaves` (indices into `scene`; `envelopes[i]` the envelope of
+/// `leaves[i]`) on up to `threads` threads, each leaf's gather pooled with those of its
+/// `pool − 1` nearest neighbours among `leaves` ([`pooled_ratios`]; 0 or 1: its own alone).
+#[allow(clippy::too_many_arguments)]
+pub fn bounce_ratios_of(
+    scene: &LeafScene,
+    material: &LeafMaterial,
+    leaves: &[u32],
+    envelopes: &[LeafEnvelope],
+    tau: f32,
+    rays: u32,
+    pool: usize,
+    opacity: &(impl Fn(u32) -> f32 + Sync),
+    threads: usize,
+) -> Vec<BounceRatios> {
+    let gathers = bounce_gathers_of(
+        scene, material, leaves, envelopes, tau, rays, opacity, threads,
+    );
+    let at = |i: usize| {
+        leaves
+            .get(i)
+            .map(|&l| l as usize)
+            .filter(|&l| l < scene.leaf_count())
+    };
+    let centres: Vec<Vec3> = (0..leaves.len())
+        .map(|i| at(i).map_or(Vec3::ZERO, |l| scene.centre(l)))
+        .collect();
+    let normals: Vec<Vec3> = (0..leaves.len())
+        .map(|i| at(i).map_or(Vec3::ZERO, |l| scene.normal(l)))
+        .collect();
+    pooled_ratios(&centres, &normals, &gathers, pool, threads)
+}
+
+/// The default of [`crate::pruning::bake::BakeSettings::bounce_pool`]: leaves (the leaf and
+/// its nearest neighbours) whose gathers make each leaf's ratios — the leaf alone. Pooling
+/// was measured (`tree_lighting_error --images --rays-per-bin 32 --seen-points 16
+/// --bounce-rays 64 --hotspot --bounce-pool 1,4,8,16`, four suns, pixels about 1.5 leaves
+/// wide): over 8 leaves the bounce against the sun (α = 137–148°) is 0.2–4.8 points better on
+/// the four procedural trees (the ash 31.8 → 29.3 %, the oak 35.7 → 30.9 %) and on the
+/// uniform ball at pixels a leaf wide 1.4–2.3 points better at every sun, but with the sun from
+/// the side or above 0.1–2.4 points worse on the trees (the oak 11.2 → 13.6 %): the sum over
+/// the trees and suns barely moves. What holds the bounce against the sun at 21–37 % is not
+/// the gather's noise but the blend over [`SUN_BASIS`]: the same rays gathered for the image's
+/// own sun are 11–18 % off there.
+pub const DEFAULT_BOUNCE_POOL: usize = 1;
+
+/// The most leaves a pool takes.
+pub const MAX_BOUNCE_POOL: usize = 256;
+
+/// Each leaf's [`BounceRatios`] from its gather pooled with those of its `pool − 1` nearest
+/// neighbours (by centre; 0 or 1: its own alone): per face and sun direction the sum of the
+/// gathered irradiances over the sum of eq. 5.24's — a ratio of sums, which a neighbour with
+/// little light does not swing. A neighbour's faces are taken as the leaf's where its normal
+/// agrees with the leaf's (dot ≥ 0) and swapped where not, and weighted by the squared
+/// cosine between the two normals (the leaf itself by 1): a face's bounce depends on which way
+/// it faces. Why: 64 rays a leaf leave each ratio some 25 % noisy — a face sees lit
+/// neighbours along a third of its rays, each lit or not — where a leaf's neighbours, lit by
+/// the same gaps, share its ratio's cause (the crown's clustering, which eq. 5.24 averages
+/// away). `centres`, `normals` and `gathers` are per leaf, of one length (the shortest is
+/// taken).
+pub fn pooled_ratios(
+    centres: &[Vec3],
+    normals: &[Vec3],
+    gathers: &[BounceGather],
+    pool: usize,
+    threads: usize,
+) -> Vec<BounceRatios> {
+    let n = centres.len().min(normals.len()).min(gathers.len());
+    let pool = pool.clamp(1, MAX_BOUNCE_POOL);
+    if pool == 1 {
+        return gathers[..n].iter().map(BounceGather::ratios).collect();
+    }
+    let nearest = nearest_leaves(&centres[..n], pool, threads);
+    let items: Vec<usize> = (0..n).collect();
+    super::par_map(&items, threads, |&i| {
+        let ni = normals[i];
+        let mut sum = BounceGather::default();
+        for &j in &nearest[i] {
+            let j = j as usize;
+            let c = ni.dot(normals[j]);
+            let w = if j == i { 1.0 } else { c * c };
+            if !(w > 0.0) {
+                continue;
+            }
+            // The neighbour's face on the leaf's front side first.
+            let (f, b) = if c >= 0.0 || j == i { (0, 1) } else { (1, 0) };
+            for k in 0..14 {
+                let (g, cl) = (&gathers[j].gathered[k], &gathers[j].closed[k]);
+                if !(g[f].is_finite() && g[b].is_finite() && cl[f].is_finite() && cl[b].is_finite())
+                {
+                    continue;
+                }
+                sum.gathered[k][0] += w * g[f];
+                sum.gathered[k][1] += w * g[b];
+                sum.closed[k][0] += w * cl[f];
+                sum.closed[k][1] += w * cl[b];
+            }
+        }
+        sum.ratios()
+    })
+}
+
+/// For each of `points`, the indices of its `k` nearest among them (itself first, then by
+/// distance; fewer where there are fewer points), by a uniform grid searched ring by ring.
+pub fn nearest_leaves(points: &[Vec3], k: usize, threads: usize) -> Vec<Vec<u32>> {
+    let n = points.len();
+    let k = k.min(n);
+    if n == 0 || k == 0 {
+        return vec![Vec::new(); n];
+    }
+    let finite = |p: &Vec3| p.is_finite();
+    let (lo, hi) = points.iter().filter(|p| finite(p)).fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    );
+    if !lo.is_finite() {
+        return (0..n as u32).map(|i| vec![i]).collect();
+    }
+    // Cells of about `k` points where the points filled the box, at most 64 a side.
+    let extent = (hi - lo).max(Vec3::splat(1e-6));
+    let cell = (extent.x * extent.y * extent.z * k as f32 / n as f32)
+        .cbrt()
+        .max(extent.max_element() / 64.0)
+        .max(1e-6);
+    let dims = ((extent / cell).floor().as_uvec3() + 1).min(bevy::math::UVec3::splat(64));
+    let cell_of = |p: Vec3| {
+        let c = ((p - lo) / cell).floor();
+        let c = c.clamp(Vec3::ZERO, (dims - 1).as_vec3());
+        c.as_uvec3()
+    };
+    let index = |c: bevy::math::UVec3| ((c.z * dims.y + c.y) * dims.x + c.x) as usize;
+    let mut start = vec![0u32; (dims.x * dims.y * dims.z) as usize + 1];
+    let cells: Vec<usize> = points
+        .iter()
+        .map(|&p| {
+            if finite(&p) {
+                index(cell_of(p))
+            } else {
+                usize::MAX
+            }
+        })
+        .collect();
+    for &c in cells.iter().filter(|&&c| c != usize::MAX) {
+        start[c + 1] += 1;
+    }
+    for i in 1..start.len() {
+        start[i] += start[i - 1];
+    }
+    let mut fill = start.clone();
+    let mut members = vec![0u32; start[start.len() - 1] as usize];
+    for (i, &c) in cells.iter().enumerate().filter(|&(_, &c)| c != usize::MAX) {
+        members[fill[c] as usize] = i as u32;
+        fill[c] += 1;
+    }
+    let items: Vec<usize> = (0..n).collect();
+    let max_ring = dims.max_element() as i32;
+    super::par_map(&items, threads, |&i| {
+        let p = points[i];
+        if !finite(&p) {
+            return vec![i as u32];
+        }
+        let home = cell_of(p).as_ivec3();
+        // The best `k` so far, by squared distance, nearest first.
+        let mut best: Vec<(f32, u32)> = Vec::with_capacity(k + 1);
+        for ring in 0..=max_ring {
+            // Points in cells of this ring are at least (ring − 1) cells away.
+            let bound = (ring - 1).max(0) as f32 * cell;
+            if best.len() == k && best[k - 1].0 <= bound * bound {
+                break;
+            }
+            for z in -ring..=ring {
+                for y in -ring..=ring {
+                    for x in -ring..=ring {
+                        if x.abs().max(y.abs()).max(z.abs()) != ring {
+                            continue;
+                        }
+                        let c = home + bevy::math::IVec3::new(x, y, z);
+                        if c.min_element() < 0 || c.cmpge(dims.as_ivec3()).any() {
+                            continue;
+                        }
+                        let c = index(c.as_uvec3());
+                        for &j in &members[start[c] as usize..start[c + 1] as usize] {
+                            let d = if j as usize == i {
+                                -1.0
+                            } else {
+                                points[j as usize].distance_squared(p)
+                            };
+                            if best.len() == k && d >= best[k - 1].0 {
+                                continue;
+                            }
+                            let at = best.partition_point(|&(e, _)| e <= d);
+                            best.insert(at, (d, j));
+                            best.truncate(k);
+                        }
+                    }
+                }
+            }
+        }
+        best.into_iter().map(|(_, j)| j).collect()
     })
 }
 
@@ -517,6 +782,7 @@ mod tests {
             &picked_envelopes,
             env.tau,
             128,
+            1,
             &|_| 1.0,
             2,
         );
@@ -645,5 +911,157 @@ mod tests {
             assert_eq!(mean.front[k], 2.0 * k as f32);
             assert_eq!(mean.back[k], 1.0);
         }
+    }
+
+    /// The grid's nearest neighbours are a brute-force search's (by distance; the point
+    /// itself first), on clustered and spread points, with fewer points than asked and with a
+    /// point not finite (its own alone, and nobody's neighbour).
+    #[test]
+    fn nearest_leaves_are_a_brute_force_searchs() {
+        let mut rng = SplitMix64::new(3);
+        let mut points: Vec<Vec3> = Vec::new();
+        for c in 0..6 {
+            let centre = Vec3::new(c as f32 * 0.7, (c % 2) as f32, 0.0);
+            for _ in 0..60 {
+                points.push(
+                    centre
+                        + crate::lighting::leaf_scene::uniform_direction(&mut rng)
+                            * 0.05
+                            * rng.next_f32(),
+                );
+            }
+        }
+        for _ in 0..80 {
+            points.push(Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0);
+        }
+        points.push(Vec3::NAN);
+        let nan = points.len() - 1;
+        for k in [1, 8, 33] {
+            let got = nearest_leaves(&points, k, 2);
+            for (i, p) in points.iter().enumerate() {
+                assert_eq!(got[i][0] as usize, i);
+                if i == nan {
+                    assert_eq!(got[i].len(), 1);
+                    continue;
+                }
+                let mut want: Vec<f32> = points
+                    .iter()
+                    .enumerate()
+                    .filter(|&(j, q)| j != i && q.is_finite())
+                    .map(|(_, q)| q.distance(*p))
+                    .collect();
+                want.sort_by(f32::total_cmp);
+                let found: Vec<f32> = got[i][1..]
+                    .iter()
+                    .map(|&j| points[j as usize].distance(*p))
+                    .collect();
+                assert_eq!(found.len(), k - 1, "point {i}");
+                for (f, w) in found.iter().zip(&want) {
+                    assert!((f - w).abs() < 1e-6, "point {i}: {found:?} vs {want:?}");
+                }
+                assert!(!got[i].contains(&(nan as u32)));
+            }
+        }
+        let few = nearest_leaves(&points[..3], 8, 1);
+        assert!(few.iter().all(|n| n.len() == 3));
+        assert!(nearest_leaves(&[], 8, 1).is_empty());
+    }
+
+    /// Pooling is a ratio of sums with each neighbour's faces turned to the leaf's: a
+    /// neighbour facing the other way lends its back face's light to the leaf's front, one
+    /// edge-on (normal at right angles) lends nothing, and a pool of 1 is the leaf's own.
+    #[test]
+    fn pooling_turns_each_neighbours_faces_to_the_leaf() {
+        let g = |front: f32, back: f32, closed: [f32; 2]| BounceGather {
+            gathered: [[front, back]; 14],
+            closed: [closed; 14],
+        };
+        let centres = [Vec3::ZERO, Vec3::X * 0.1, Vec3::Z * 0.05, Vec3::X * 50.0];
+        let normals = [Vec3::Y, Vec3::NEG_Y, Vec3::X, Vec3::Y];
+        let gathers = [
+            g(1.0, 0.0, [1.0, 1.0]),
+            g(0.0, 3.0, [1.0, 2.0]),
+            g(9.0, 9.0, [1.0, 1.0]),
+            g(10.0, 10.0, [1.0, 1.0]),
+        ];
+        let own = pooled_ratios(&centres, &normals, &gathers, 1, 1);
+        for (r, g) in own.iter().zip(&gathers) {
+            assert_eq!(*r, g.ratios());
+        }
+        let three = pooled_ratios(&centres, &normals, &gathers, 3, 2);
+        // Leaf 0: its own (1, 0 over 1, 1), leaf 1 turned (3, 0 over 2, 1), leaf 2 edge-on.
+        assert_eq!(three[0].front, [4.0 / 3.0; 14]);
+        assert_eq!(three[0].back, [0.0; 14]);
+        // Leaf 1: its own (0, 3 over 1, 2), leaf 0 turned (0, 1 over 1, 1).
+        assert_eq!(three[1].front, [0.0; 14]);
+        assert_eq!(three[1].back, [4.0 / 3.0; 14]);
+        // The far leaf is in no one's pool of three (above); its own takes its nearest two,
+        // leaf 1 turned and leaf 0: (10 + 3 + 1, 10 + 0 + 0 over 1 + 2 + 1, 1 + 1 + 1).
+        assert_eq!(three[3].front, [14.0 / 4.0; 14]);
+        assert_eq!(three[3].back, [10.0 / 3.0; 14]);
+        // Broken input is left out: a NaN gather counts for nothing.
+        let mut broken = gathers;
+        broken[1].gathered[4][1] = f32::NAN;
+        let r = pooled_ratios(&centres, &normals, &broken, 3, 1);
+        assert_eq!(r[0].front[4], 1.0);
+        assert_eq!(r[0].front[5], 4.0 / 3.0);
+    }
+
+    /// What pooling is for: in a uniform ball, where neighbours share their causes, ratios
+    /// from 32 rays a leaf pooled over 8 leaves are nearer each leaf's ratios from 512 rays
+    /// than its own 32 rays' are.
+    #[test]
+    fn pooled_ratios_are_nearer_a_long_gather_than_a_leafs_own() {
+        let leaves = uniform_ball(900, 1.2, 0.05, 8);
+        let scene = LeafScene::new(&leaves);
+        let mat = LeafMaterial::default();
+        let order: Vec<u32> = (0..leaves.len() as u32).collect();
+        let env =
+            crown_envelope_traced(&proxies(&leaves), &scene, &order, &|_| 1.0, 16, 2, &|_| {});
+        let args = (&scene, &mat, &order, &env.leaves, env.tau);
+        let short = |pool| {
+            bounce_ratios_of(
+                args.0,
+                args.1,
+                args.2,
+                args.3,
+                args.4,
+                32,
+                pool,
+                &|_| 1.0,
+                2,
+            )
+        };
+        let (own, pooled) = (short(1), short(8));
+        let bounces = basis_bounces(&mat, env.tau);
+        let (mut own_off, mut pooled_off, mut n) = (0.0f32, 0.0f32, 0);
+        for leaf in (0..leaves.len()).step_by(30) {
+            let long = bounce_ratios(
+                &scene,
+                &mat,
+                leaf,
+                &env.leaves[leaf],
+                env.tau,
+                &bounces,
+                512,
+                &|_| 1.0,
+                77,
+            );
+            for k in [1, 6, 10, 12] {
+                for (l, o, p) in [
+                    (long.front[k], own[leaf].front[k], pooled[leaf].front[k]),
+                    (long.back[k], own[leaf].back[k], pooled[leaf].back[k]),
+                ] {
+                    own_off += (o - l).abs();
+                    pooled_off += (p - l).abs();
+                    n += 1;
+                }
+            }
+        }
+        let (own_off, pooled_off) = (own_off / n as f32, pooled_off / n as f32);
+        assert!(
+            pooled_off < 0.7 * own_off,
+            "pooled {pooled_off:.3} own {own_off:.3} from the long gather"
+        );
     }
 }

@@ -14,6 +14,7 @@
 
 use super::bins::proxies;
 use super::envelope::CrownEnvelope;
+use super::gathered_bounce::DEFAULT_BOUNCE_POOL;
 use super::leaf_scene::LeafScene;
 use super::model::{
     LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bsdf, lobe_blend, open_share, sun_radiance,
@@ -56,6 +57,11 @@ pub struct ImageSettings {
     /// Rays per leaf for the bounce gathered from the neighbours ([`super::gathered_bounce`];
     /// 0: not measured).
     pub bounce_rays: u32,
+    /// Leaves pooled into each leaf's gathered ratios
+    /// ([`super::gathered_bounce::pooled_ratios`]): the first for the rows of
+    /// [`ImageComparison::gathered`], each for a row of [`ImageComparison::pooled`] (by
+    /// default [`DEFAULT_BOUNCE_POOL`] alone).
+    pub bounce_pools: Vec<usize>,
 }
 
 impl Default for ImageSettings {
@@ -70,6 +76,7 @@ impl Default for ImageSettings {
             leaf_shadow: LeafShadowLookup::SHADERS,
             shadow_texels: vec![LEAF_SHADOW_FINE],
             bounce_rays: 0,
+            bounce_pools: vec![DEFAULT_BOUNCE_POOL],
         }
     }
 }
@@ -122,6 +129,11 @@ pub struct ImageComparison {
     pub gathered: Vec<Vec<ImageError>>,
     /// Seconds the ratios of every leaf took to gather (on the threads given), when measured.
     pub gathered_seconds: f32,
+    /// Per pool of [`ImageSettings::bounce_pools`]: the bounce as the leaf shaders draw it
+    /// with the ratios so pooled (eq. 5.24 scaled by them, the covered part's gain where the
+    /// gains were measured, and with [`ImageSettings::hotspot`] the crown's hotspot measured
+    /// against them), per pixel size. Empty unless [`ImageSettings::bounce_rays`].
+    pub pooled: Vec<(usize, Vec<ImageError>)>,
     /// The sun as the leaf shaders draw it under a shadow map of each texel side of
     /// `shadow_map_sun` that lies between [`super::sun_maps::LEAF_SHADOW_FINE`] and
     /// [`super::sun_maps::LEAF_SHADOW_COARSE`] of a leaf: `hotspot`'s sun (the baked blend)
@@ -396,14 +408,17 @@ pub fn images_against_tracer(
         _ => None,
     };
     let mut gathered_seconds = 0.0;
+    let mut pooled = Vec::new();
     let gathered = match (&last_model, settings.bounce_rays) {
         (Some(([sky, sun, _], envelope)), rays) if rays > 0 => {
-            use super::gathered_bounce::{bounce_ratios_of, gather_irradiance, ratio_towards};
+            use super::gathered_bounce::{
+                BounceRatios, bounce_gathers_of, gather_irradiance, pooled_ratios, ratio_towards,
+            };
             use super::model::bounce_radiance_by_face;
             let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
             let tau = envelope.tau;
             let started = std::time::Instant::now();
-            let ratios = bounce_ratios_of(
+            let gathers = bounce_gathers_of(
                 &scene,
                 material,
                 &all,
@@ -414,26 +429,39 @@ pub fn images_against_tracer(
                 threads,
             );
             gathered_seconds = started.elapsed().as_secs_f32();
-            // As a bake stores them.
-            let ratios: Vec<_> = ratios
-                .iter()
-                .map(|r| super::gathered_bounce::BounceRatios::from_stored(&r.quantized()))
-                .collect();
+            let centres: Vec<Vec3> = (0..scene.leaf_count()).map(|l| scene.centre(l)).collect();
+            let normals: Vec<Vec3> = (0..scene.leaf_count()).map(|l| scene.normal(l)).collect();
+            // Pooled, as a bake stores them.
+            let pooled_by = |pool: usize| -> Vec<BounceRatios> {
+                pooled_ratios(&centres, &normals, &gathers, pool, threads)
+                    .iter()
+                    .map(|r| BounceRatios::from_stored(&r.quantized()))
+                    .collect()
+            };
+            let pools = if settings.bounce_pools.is_empty() {
+                vec![DEFAULT_BOUNCE_POOL]
+            } else {
+                settings.bounce_pools.clone()
+            };
+            let ratios = pooled_by(pools[0]);
             // The crown's hotspot measured against the bounce with the ratios, as a bake
             // measures it when it stores them.
-            let spot = settings.hotspot.then(|| {
-                super::hotspot::crown_hotspot(
-                    &scene,
-                    envelope,
-                    gains.as_deref().unwrap_or(&[]),
-                    &ratios,
-                    &|l| Some(l as usize),
-                    material,
-                    &|_| 1.0,
-                    &super::hotspot::HotspotSettings::OFFLINE,
-                    threads,
-                )
-            });
+            let spot_of = |ratios: &[BounceRatios]| {
+                settings.hotspot.then(|| {
+                    super::hotspot::crown_hotspot(
+                        &scene,
+                        envelope,
+                        gains.as_deref().unwrap_or(&[]),
+                        ratios,
+                        &|l| Some(l as usize),
+                        material,
+                        &|_| 1.0,
+                        &super::hotspot::HotspotSettings::OFFLINE,
+                        threads,
+                    )
+                })
+            };
+            let spot = spot_of(&ratios);
             // The same gather for the sun's own direction: what no blend over directions beats.
             let exact: Vec<[f32; 2]> = super::par_map(&all, threads, |&leaf| {
                 let seed = 0xB0B1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
@@ -486,7 +514,7 @@ pub fn images_against_tracer(
             let image = |bounce_of: &dyn Fn(usize, Vec3) -> f32, covered: bool| {
                 image_with(bounce_of, covered, None)
             };
-            let scaled = |leaf: usize, n: Vec3| {
+            let scaled_by = |ratios: &[BounceRatios], leaf: usize, n: Vec3| {
                 let e = &envelope.leaves[leaf];
                 let through = lobe_blend(&e.attenuation, light.to_sun, 1.0);
                 luminance(bounce_radiance_by_face(
@@ -500,6 +528,7 @@ pub fn images_against_tracer(
                     ratio_towards(&ratios[leaf], light.to_sun),
                 ))
             };
+            let scaled = |leaf: usize, n: Vec3| scaled_by(&ratios, leaf, n);
             let own = |leaf: usize, n: Vec3| {
                 luminance(super::gathered_bounce::gathered_bounce_radiance(
                     material,
@@ -517,6 +546,12 @@ pub fn images_against_tracer(
             ];
             if let Some(h) = &spot {
                 rows.push(image_with(&scaled, true, Some(h)));
+            }
+            for &pool in &pools {
+                let ratios = pooled_by(pool);
+                let spot = spot_of(&ratios);
+                let drawn = |leaf: usize, n: Vec3| scaled_by(&ratios, leaf, n);
+                pooled.push((pool, image_with(&drawn, true, spot.as_ref())));
             }
             rows
         }
@@ -595,6 +630,7 @@ pub fn images_against_tracer(
         drawn,
         gathered,
         gathered_seconds,
+        pooled,
         hotspot_factors,
         shadow_map_sun,
         noise,

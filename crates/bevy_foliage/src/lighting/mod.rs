@@ -11,7 +11,7 @@
 //! gain from a leaf's mean to the part of it the eye sees and [`hotspot`] the crown's
 //! dependence on the angle between the eye and the sun (the eye's and the sun's paths share
 //! their gaps), and [`gathered_bounce`] the bounce gathered from each leaf's own neighbours as
-//! ratios to eq. 5.24 (measured against the tracer; not yet baked or in the shaders);
+//! ratios to eq. 5.24 (baked with the bins, drawn by the leaf shaders);
 //! [`settings`] switches the leaf
 //! shaders between it and Bevy's lighting; [`sun_maps`] measures maps rendered from the sun (shadow map, foliage
 //! maps) as the leaves' sun against the same tracer.

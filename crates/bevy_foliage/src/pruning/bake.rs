@@ -98,6 +98,12 @@ pub struct BakeSettings {
     /// of the gathered bounce to eq. 5.24's; 0 stores none (eq. 5.24 as it is). Where the bake
     /// traces through the leaves.
     pub bounce_rays: u32,
+    /// Leaves whose gathers make each leaf's bounce ratios: the leaf and its nearest
+    /// neighbours, a ratio of their sums
+    /// ([`crate::lighting::gathered_bounce::pooled_ratios`]); 0 or 1, the leaf's own alone
+    /// (the default: pooling trades a lower error with the sun against the eye for a higher
+    /// one with it from the side, [`crate::lighting::gathered_bounce::DEFAULT_BOUNCE_POOL`]).
+    pub bounce_pool: usize,
     /// How the crown's hotspot is measured — how what the eye sees of the crown's sun and
     /// bounce depends on the angle between the eye and the sun ([`crate::lighting::hotspot`])
     /// — where the bake traces through the leaves (traced bins or seen-part gains);
@@ -117,6 +123,7 @@ impl Default for BakeSettings {
             bins: BinEstimate::default(),
             seen_points: crate::lighting::seen_part::DEFAULT_SEEN_POINTS,
             bounce_rays: crate::lighting::gathered_bounce::DEFAULT_BOUNCE_RAYS,
+            bounce_pool: crate::lighting::gathered_bounce::DEFAULT_BOUNCE_POOL,
             hotspot: Default::default(),
         }
     }
@@ -390,6 +397,13 @@ pub fn bake_masked(
             crate::lighting::gathered_bounce::MAX_BOUNCE_RAYS
         )));
     }
+    if settings.bounce_pool > crate::lighting::gathered_bounce::MAX_BOUNCE_POOL {
+        return Err(BakeError::Settings(format!(
+            "bounce_pool {} not in 0..={}",
+            settings.bounce_pool,
+            crate::lighting::gathered_bounce::MAX_BOUNCE_POOL
+        )));
+    }
     settings.hotspot.checked().map_err(BakeError::Settings)?;
     let (leaves, skipped) = leaves.sanitized();
     if leaves.is_empty() {
@@ -620,6 +634,7 @@ pub fn bake_masked(
             &envelope.leaves,
             envelope.tau,
             settings.bounce_rays,
+            settings.bounce_pool,
             &|_| opaque,
             threads,
         )
@@ -798,7 +813,7 @@ mod tests {
         // bake's matches to within quantisation, so nearly every stored ratio is the one
         // wanted within a step or two of its logarithm.
         use crate::lighting::gathered_bounce::{
-            BounceRatios, DEFAULT_BOUNCE_RAYS, bounce_ratios_of,
+            BounceRatios, DEFAULT_BOUNCE_POOL, DEFAULT_BOUNCE_RAYS, bounce_ratios_of,
         };
         assert_eq!(b.leaf_bounce.len(), b.leaf_count());
         let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
@@ -809,6 +824,7 @@ mod tests {
             &envelope.leaves,
             envelope.tau,
             DEFAULT_BOUNCE_RAYS,
+            DEFAULT_BOUNCE_POOL,
             &|_| 1.0,
             2,
         );
@@ -851,6 +867,14 @@ mod tests {
         let (baked, _) = bake(&tree.leaves, &settings, &|_| {}).unwrap();
         assert!(baked.leaf_bounce.is_empty());
         assert!(!baked.leaf_seen.is_empty());
+        let absurd_pool = BakeSettings {
+            bounce_pool: usize::MAX,
+            ..settings.clone()
+        };
+        assert!(matches!(
+            bake(&tree.leaves, &absurd_pool, &|_| {}),
+            Err(BakeError::Settings(_))
+        ));
         let absurd = BakeSettings {
             bounce_rays: u32::MAX,
             ..settings
