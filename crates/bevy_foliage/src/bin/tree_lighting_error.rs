@@ -8,7 +8,7 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]]]
+//!     [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]] [--sun-ring N[,N…]]]]
 //!     [--sun X,Y,Z]
 //!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
@@ -26,7 +26,12 @@
 //! neighbours by R rays (`lighting::gathered_bounce`: eq. 5.24 scaled by the gathered ratios
 //! blended from fourteen suns, with and without the covered part's gain, and the gather for
 //! the image's own sun alone; with `--hotspot` also the ratios with the gain and a hotspot
-//! measured against them, as the leaf shaders draw the bounce), each leaf's ratios pooled
+//! measured against them, as the leaf shaders draw the bounce; and eq. 5.24 scaled by ratios
+//! re-gathered for the image's sun alone, `gathered_bounce::sun_ratios_of`, drawn as the
+//! blend's are, with the seconds that re-gather takes; `--sun-ring N[,N…]` a row per ring of
+//! N suns at the sun's elevation, `gathered_bounce::sun_ring`, ratios re-gathered on it and
+//! read for the sun midway between two nodes, as a tree turned about its vertical sees the
+//! sun), each leaf's ratios pooled
 //! with its nearest neighbours' (`--bounce-pool K[,K…]`: K leaves a pool, the first for
 //! those rows, and a row as drawn for each). The shadow
 //! map's row reads it as the leaf shaders do at the leaf (texels of `LEAF_SHADOW_FINE` of a
@@ -71,6 +76,7 @@ fn main() {
     let mut bounce_rays = 0u32;
     use bevy_foliage::lighting::gathered_bounce::{DEFAULT_BOUNCE_POOL, MAX_BOUNCE_POOL};
     let mut bounce_pools = vec![DEFAULT_BOUNCE_POOL];
+    let mut sun_rings: Vec<usize> = Vec::new();
     let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
     let mut to_sun = Vec3::new(0.5, 0.7, 0.3).normalize();
     use bevy_foliage::lighting::sun_maps::{
@@ -185,6 +191,17 @@ fn main() {
                         std::process::exit(2)
                     })
             }
+            "--sun-ring" => {
+                sun_rings = args
+                    .get(i + 1)
+                    .map(|v| v.split(',').map(|r| r.trim().parse::<usize>()).collect())
+                    .and_then(|r: Result<Vec<usize>, _>| r.ok())
+                    .filter(|r| !r.is_empty() && r.iter().all(|r| (1..=64).contains(r)))
+                    .unwrap_or_else(|| {
+                        eprintln!("--sun-ring takes N or N,N,… with each N in 1..=64");
+                        std::process::exit(2)
+                    })
+            }
             "--rays-per-bin" => {
                 rays_per_bin = args
                     .get(i + 1)
@@ -198,7 +215,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]]] [--sun x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]] [--sun-ring N[,N…]]]] [--sun x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -238,6 +255,7 @@ fn main() {
                 shadow_texels: shadow_texels.clone(),
                 bounce_rays,
                 bounce_pools: bounce_pools.clone(),
+                sun_rings: sun_rings.clone(),
                 ..Default::default()
             },
             &rays_per_bin,
@@ -569,6 +587,24 @@ fn image_table(
             ]) {
                 row(&g[size], "sun indirect (1 bounce)", name, &g[size].bounce);
             }
+            if let Some(g) = run.regathered.get(size) {
+                row(
+                    g,
+                    "sun indirect (1 bounce)",
+                    "eq. 5.24 × ratios re-gathered for this sun, covered-part gain, the blend's hotspot",
+                    &g.bounce,
+                );
+            }
+            for (count, g, _) in &run.rings {
+                row(
+                    &g[size],
+                    "sun indirect (1 bounce)",
+                    &format!(
+                        "eq. 5.24 × ratios re-gathered on a ring of {count} suns at its elevation, the sun midway between two"
+                    ),
+                    &g[size].bounce,
+                );
+            }
             for (pool, g) in &run.pooled {
                 row(
                     &g[size],
@@ -593,6 +629,17 @@ fn image_table(
                 crown.len(),
                 run.gathered_seconds
             );
+            eprintln!(
+                "{name}: ratios of {} leaves re-gathered for one sun in {:.2} s on {threads} threads",
+                crown.len(),
+                run.regathered_seconds
+            );
+            for (count, _, seconds) in &run.rings {
+                eprintln!(
+                    "{name}: ratios of {} leaves re-gathered on a ring of {count} suns in {seconds:.2} s on {threads} threads",
+                    crown.len()
+                );
+            }
         }
         eprintln!("{name}: {:.1} s", started.elapsed().as_secs_f32());
     }

@@ -43,6 +43,25 @@ pub struct LeafEnvelope {
     pub s_max: [f32; 8],
 }
 
+impl LeafEnvelope {
+    /// The envelope as a bake stores it, back: the attenuations of [`quantize_light`] and
+    /// `s_max = −ln(a_j) / τ`, a shut bin letting the least a bake stores through — what the
+    /// leaf shaders read (`tree_lighting.wgsl`). A τ of 0 or not finite: no distance.
+    pub fn from_stored(stored: &[u16; 8], tau: f32) -> Self {
+        let attenuation = stored.map(light_of);
+        Self {
+            attenuation,
+            s_max: attenuation.map(|a| {
+                if tau > 0.0 && tau.is_finite() {
+                    -a.max(DARKEST_LIGHT).ln() / tau
+                } else {
+                    0.0
+                }
+            }),
+        }
+    }
+}
+
 /// A tree's envelope: per leaf, in the order of the leaves given, and the fitted τ.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CrownEnvelope {
@@ -394,6 +413,25 @@ mod tests {
                     assert!(((-envelope.tau * leaf.s_max[j]).exp() - a).abs() < 1e-4);
                 }
             }
+            // And so does the envelope a bake stores, read back: within a quantisation step
+            // of the attenuation, its distance within what that step moves it.
+            let back =
+                LeafEnvelope::from_stored(&leaf.attenuation.map(quantize_light), envelope.tau);
+            for j in 0..8 {
+                assert!((back.attenuation[j] - leaf.attenuation[j]).abs() <= 0.5 / 65535.0 + 1e-7);
+                let a = leaf.attenuation[j].max(DARKEST_LIGHT);
+                let step = 1.0 / (65535.0 * a * envelope.tau);
+                assert!(
+                    (back.s_max[j] - leaf.s_max[j]).abs() <= step + 1e-4,
+                    "bin {j}: {} vs {}",
+                    back.s_max[j],
+                    leaf.s_max[j]
+                );
+            }
+        }
+        // A crown with no τ (or a broken one) has no distances.
+        for tau in [0.0, f32::NAN, f32::INFINITY] {
+            assert_eq!(LeafEnvelope::from_stored(&[0; 8], tau).s_max, [0.0; 8]);
         }
         // A leaf at the surface sees the whole ball on one side and nothing on the other.
         let surface = leaves

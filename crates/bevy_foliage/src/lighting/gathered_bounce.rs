@@ -340,7 +340,6 @@ pub fn bounce_gathers_of(
         let Some(envelope) = envelope else {
             return BounceGather::default();
         };
-        let seed = 0xB0B1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
         bounce_gather(
             scene,
             material,
@@ -350,9 +349,143 @@ pub fn bounce_gathers_of(
             &bounces,
             rays,
             opacity,
-            seed,
+            leaf_seed(leaf),
         )
     })
+}
+
+/// The seed of leaf `leaf`'s gather: its rays, from whichever sun, are the same rays.
+pub(crate) fn leaf_seed(leaf: u32) -> u64 {
+    0xB0B1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
+/// Per leaf of `leaves` (indices into `scene`; `envelopes[i]` the envelope of `leaves[i]`),
+/// its ratios for each of `suns` (towards the sun), front face then back: the
+/// [`BounceRatios`] a bake stores for the fourteen [`SUN_BASIS`] directions, gathered instead
+/// for the suns given — for the sun of the moment, or a ring of suns at its elevation
+/// ([`sun_ring`]) — so that no blend over far directions stands between the gather and the
+/// sun: one shadow ray per neighbour hit and sun. For a basis direction they are the bake's
+/// ratios for it exactly (the same rays, [`leaf_seed`]). A leaf without an envelope or not in
+/// `scene`, or a sun that is no direction (zero, not finite): 1, eq. 5.24 unchanged.
+///
+/// What lighting that changes would re-gather when the sun has moved (Boulanger 2008, §5.4.3
+/// and §5.6 recompute G1–G3, eq. 5.18, 5.25, 5.26, on the CPU when the lighting changes; this
+/// is the same step for the gathered part). Its cost and its image error against the blend
+/// are measured by `tree_lighting_error --images --bounce-rays R [--sun-ring N[,N…]]`.
+#[allow(clippy::too_many_arguments)]
+pub fn sun_ratios_of(
+    scene: &LeafScene,
+    material: &LeafMaterial,
+    leaves: &[u32],
+    envelopes: &[LeafEnvelope],
+    tau: f32,
+    suns: &[Vec3],
+    rays: u32,
+    opacity: &(impl Fn(u32) -> f32 + Sync),
+    threads: usize,
+) -> Vec<Vec<[f32; 2]>> {
+    // The suns that are directions, and where each given sun is among them.
+    let mut valid = Vec::with_capacity(suns.len());
+    let at: Vec<Option<usize>> = suns
+        .iter()
+        .map(|s| {
+            s.try_normalize().map(|s| {
+                valid.push(s);
+                valid.len() - 1
+            })
+        })
+        .collect();
+    let bounces: Vec<SunBounce> = valid
+        .iter()
+        .map(|&s| SunBounce::new(material, s, tau))
+        .collect();
+    let jobs: Vec<(u32, Option<&LeafEnvelope>)> = leaves
+        .iter()
+        .enumerate()
+        .map(|(i, &leaf)| (leaf, envelopes.get(i)))
+        .collect();
+    super::par_map(&jobs, threads, |&(leaf, envelope)| {
+        let Some(envelope) = envelope.filter(|_| (leaf as usize) < scene.leaf_count()) else {
+            return vec![[1.0; 2]; suns.len()];
+        };
+        if valid.is_empty() {
+            return vec![[1.0; 2]; suns.len()];
+        }
+        let gathered = gather_irradiance(
+            scene,
+            material,
+            leaf as usize,
+            rays,
+            &valid,
+            opacity,
+            leaf_seed(leaf),
+        );
+        let n = scene.normal(leaf as usize);
+        let ratios: Vec<[f32; 2]> = valid
+            .iter()
+            .zip(&bounces)
+            .zip(&gathered)
+            .map(|((&sun, bounce), gathered)| {
+                let through = sun_through_crown(
+                    SunThroughCrown::BlendedAttenuation,
+                    tau,
+                    &envelope.attenuation,
+                    &envelope.s_max,
+                    sun,
+                );
+                let closed = closed_form_irradiance(material, bounce, through, &envelope.s_max, n);
+                [
+                    face_ratio(gathered[0], closed[0]),
+                    face_ratio(gathered[1], closed[1]),
+                ]
+            })
+            .collect();
+        at.iter()
+            .map(|k| k.map_or([1.0; 2], |k| ratios[k]))
+            .collect()
+    })
+}
+
+/// `count` suns at the elevation of `to_sun` over the crown's ground (model space, +y up),
+/// at azimuths `phase + 2π·i / count` (the azimuth of `(x, y, z)` is `atan2(z, x)`): the
+/// suns a tree turned about its vertical by any angle sees the one sun as. Ratios gathered
+/// for them ([`sun_ratios_of`]) serve every such tree ([`ratio_on_ring`]), where ratios for
+/// the sun alone serve only trees turned as the bake's. Empty for a sun that is no direction
+/// or a count of 0.
+pub fn sun_ring(to_sun: Vec3, count: usize, phase: f32) -> Vec<Vec3> {
+    let Some(to_sun) = to_sun.try_normalize() else {
+        return Vec::new();
+    };
+    if !phase.is_finite() {
+        return Vec::new();
+    }
+    let y = to_sun.y.clamp(-1.0, 1.0);
+    let across = (1.0 - y * y).max(0.0).sqrt();
+    (0..count)
+        .map(|i| {
+            let azimuth = phase + std::f32::consts::TAU * i as f32 / count as f32;
+            Vec3::new(across * azimuth.cos(), y, across * azimuth.sin())
+        })
+        .collect()
+}
+
+/// The ratios towards `to_sun` from ratios gathered on a [`sun_ring`] of `ring.len()` suns
+/// at azimuths from `phase`: linear in azimuth between the two nodes either side (a sun on a
+/// node takes its ratios; continuous all round). No ring: eq. 5.24 unchanged (1, 1).
+pub fn ratio_on_ring(ring: &[[f32; 2]], phase: f32, to_sun: Vec3) -> [f32; 2] {
+    let count = ring.len();
+    if count == 0 {
+        return [1.0; 2];
+    }
+    let azimuth = to_sun.z.atan2(to_sun.x) - phase;
+    let x = (azimuth / (std::f32::consts::TAU / count as f32)).rem_euclid(count as f32);
+    if !x.is_finite() {
+        return ring[0];
+    }
+    let i = (x.floor() as usize).min(count - 1);
+    let f = (x - i as f32).clamp(0.0, 1.0);
+    let (a, b) = (ring[i], ring[(i + 1) % count]);
+    [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])]
 }
 
 /// [`bounce_ratios`] of each of `leaves` (indices into `scene`; `envelopes[i]` the envelope of
@@ -824,6 +957,178 @@ mod tests {
         );
         assert!((front + back - plain).length() < 1e-6);
         assert!(front.length() > 0.0 && back.length() > 0.0);
+    }
+
+    /// Re-gathered for given suns, a leaf's ratios are the bake's for a sun that is a basis
+    /// direction — the same rays, one shadow ray per hit and sun instead of fourteen — and move
+    /// with the sun between them; a sun that is no direction, a leaf not in the scene or without
+    /// an envelope leave eq. 5.24 as it is.
+    #[test]
+    fn ratios_regathered_for_a_basis_sun_are_the_bakes() {
+        let tree = crate::pruning::procedural::generate(
+            &crate::pruning::procedural::TreeSpecies::olea().with_leaf_count(400),
+        );
+        let scene = LeafScene::new(&tree.leaves);
+        let mat = LeafMaterial::default();
+        let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
+        let env = crown_envelope_traced(
+            &proxies(&tree.leaves),
+            &scene,
+            &all,
+            &|_| 1.0,
+            16,
+            2,
+            &|_| {},
+        );
+        let picked: Vec<u32> = all.iter().copied().step_by(7).collect();
+        let envelopes: Vec<_> = picked.iter().map(|&l| env.leaves[l as usize]).collect();
+        let rays = 24;
+        let regather = |suns: &[Vec3]| {
+            sun_ratios_of(
+                &scene,
+                &mat,
+                &picked,
+                &envelopes,
+                env.tau,
+                suns,
+                rays,
+                &|_| 1.0,
+                2,
+            )
+        };
+        let baked: Vec<BounceRatios> = bounce_gathers_of(
+            &scene,
+            &mat,
+            &picked,
+            &envelopes,
+            env.tau,
+            rays,
+            &|_| 1.0,
+            2,
+        )
+        .iter()
+        .map(BounceGather::ratios)
+        .collect();
+        let basis = [0, 5, 8, 10, 11, 13];
+        let suns: Vec<Vec3> = basis.iter().map(|&k| SUN_BASIS[k]).collect();
+        let again = regather(&suns);
+        let mut moved = 0;
+        for (r, b) in again.iter().zip(&baked) {
+            assert_eq!(r.len(), suns.len());
+            for (i, &k) in basis.iter().enumerate() {
+                // The same rays; the sun renormalised may differ in its last bit.
+                for (got, want) in r[i].iter().zip([b.front[k], b.back[k]]) {
+                    assert!(
+                        (got - want).abs() <= 1e-5 * want.max(1.0),
+                        "sun {k}: {r:?} {b:?}"
+                    );
+                }
+                moved += (r[i][0] != 1.0) as usize;
+            }
+        }
+        assert!(
+            moved * 2 > basis.len() * picked.len(),
+            "{moved} ratios gathered"
+        );
+        // Between two basis directions the sun's own ratios differ from both.
+        let between = (SUN_BASIS[10] + SUN_BASIS[8]).normalize();
+        let own = regather(&[between]);
+        let differs = |k: usize| {
+            own.iter()
+                .zip(&baked)
+                .filter(|(r, b)| (r[0][0] - b.front[k]).abs() > 1e-3)
+                .count()
+        };
+        assert!(differs(8) * 2 > picked.len() && differs(10) * 2 > picked.len());
+        assert!(
+            own.iter()
+                .flatten()
+                .flatten()
+                .all(|r| (0.0..=RATIO_MAX).contains(r))
+        );
+        // Bad input: a sun that is no direction leaves eq. 5.24, the others are gathered.
+        let mixed = regather(&[
+            Vec3::ZERO,
+            SUN_BASIS[5],
+            Vec3::NAN,
+            Vec3::splat(f32::INFINITY),
+        ]);
+        for (r, b) in mixed.iter().zip(&baked) {
+            assert_eq!(r.len(), 4);
+            assert_eq!([r[0], r[2], r[3]], [[1.0; 2]; 3]);
+            assert!((r[1][0] - b.front[5]).abs() <= 1e-5 * b.front[5].max(1.0));
+            assert!((r[1][1] - b.back[5]).abs() <= 1e-5 * b.back[5].max(1.0));
+        }
+        let r = sun_ratios_of(
+            &scene,
+            &mat,
+            &[0, scene.leaf_count() as u32, 1],
+            &envelopes[..1],
+            env.tau,
+            &[Vec3::Y],
+            rays,
+            &|_| 1.0,
+            1,
+        );
+        assert_eq!(r[1], vec![[1.0; 2]]);
+        assert_eq!(r[2], vec![[1.0; 2]]);
+    }
+
+    /// A ring's suns stand at the sun's elevation, evenly round the vertical from its phase;
+    /// a sun on a node takes that node's ratios, one midway the mean of the two, and the
+    /// ratios move continuously all round (across the last node to the first too).
+    #[test]
+    fn a_ring_of_suns_serves_every_turn_of_the_tree() {
+        let sun = Vec3::new(0.5, 0.7, 0.3).normalize();
+        let phase = 0.4;
+        let ring = sun_ring(sun, 8, phase);
+        assert_eq!(ring.len(), 8);
+        for (i, d) in ring.iter().enumerate() {
+            assert!((d.length() - 1.0).abs() < 1e-5);
+            assert!((d.y - sun.y).abs() < 1e-6);
+            let azimuth = d.z.atan2(d.x);
+            let want = phase + std::f32::consts::TAU * i as f32 / 8.0;
+            let off = (azimuth - want).rem_euclid(std::f32::consts::TAU);
+            assert!(off < 1e-4 || off > std::f32::consts::TAU - 1e-4, "node {i}");
+        }
+        let ratios: Vec<[f32; 2]> = (0..8).map(|i| [1.0 + i as f32, 0.5 * i as f32]).collect();
+        for (i, d) in ring.iter().enumerate() {
+            let r = ratio_on_ring(&ratios, phase, *d);
+            assert!((r[0] - ratios[i][0]).abs() < 1e-3 && (r[1] - ratios[i][1]).abs() < 1e-3);
+        }
+        let midway = sun_ring(sun, 16, phase);
+        let r = ratio_on_ring(&ratios, phase, midway[5]);
+        assert!(
+            (r[0] - 0.5 * (ratios[2][0] + ratios[3][0])).abs() < 1e-3,
+            "{r:?}"
+        );
+        // Across the wrap, from node 7 to node 0.
+        let r = ratio_on_ring(&ratios, phase, midway[15]);
+        assert!(
+            (r[0] - 0.5 * (ratios[7][0] + ratios[0][0])).abs() < 1e-3,
+            "{r:?}"
+        );
+        let mut last = ratio_on_ring(&ratios, phase, Vec3::X);
+        for step in 1..=720 {
+            let a = step as f32 / 720.0 * std::f32::consts::TAU;
+            let r = ratio_on_ring(&ratios, phase, Vec3::new(a.cos(), 0.3, a.sin()));
+            assert!(
+                (r[0] - last[0]).abs() <= 7.0 * 8.0 / 720.0 + 1e-3,
+                "step {step}"
+            );
+            last = r;
+        }
+        // Straight up, every node is the sun; bad input gives no ring or eq. 5.24.
+        assert!(
+            sun_ring(Vec3::Y, 4, 0.0)
+                .iter()
+                .all(|d| (*d - Vec3::Y).length() < 1e-6)
+        );
+        assert!(sun_ring(Vec3::ZERO, 4, 0.0).is_empty());
+        assert!(sun_ring(sun, 4, f32::NAN).is_empty());
+        assert!(sun_ring(sun, 0, 0.0).is_empty());
+        assert_eq!(ratio_on_ring(&[], 0.0, sun), [1.0; 2]);
+        assert_eq!(ratio_on_ring(&ratios, 0.0, Vec3::NAN), ratios[0]);
     }
 
     /// Every sun is within 36.2° of a basis direction, the weights sum to 1, are largest on

@@ -62,6 +62,9 @@ pub struct ImageSettings {
     /// [`ImageComparison::gathered`], each for a row of [`ImageComparison::pooled`] (by
     /// default [`DEFAULT_BOUNCE_POOL`] alone).
     pub bounce_pools: Vec<usize>,
+    /// Suns on each ring of re-gathered ratios measured ([`ImageComparison::rings`]; none by
+    /// default).
+    pub sun_rings: Vec<usize>,
 }
 
 impl Default for ImageSettings {
@@ -77,6 +80,7 @@ impl Default for ImageSettings {
             shadow_texels: vec![LEAF_SHADOW_FINE],
             bounce_rays: 0,
             bounce_pools: vec![DEFAULT_BOUNCE_POOL],
+            sun_rings: Vec::new(),
         }
     }
 }
@@ -129,6 +133,20 @@ pub struct ImageComparison {
     pub gathered: Vec<Vec<ImageError>>,
     /// Seconds the ratios of every leaf took to gather (on the threads given), when measured.
     pub gathered_seconds: f32,
+    /// The bounce with each leaf's ratios re-gathered for the image's sun alone
+    /// ([`super::gathered_bounce::sun_ratios_of`], quantised as a bake stores ratios) in place
+    /// of the blend over the fourteen basis suns, drawn as the leaf shaders draw the blend's
+    /// (the covered part's gain where the gains were measured, the hotspot measured against the
+    /// blend's ratios where [`ImageSettings::hotspot`]), per pixel size. Empty unless
+    /// [`ImageSettings::bounce_rays`].
+    pub regathered: Vec<ImageError>,
+    /// Seconds that re-gather took for every leaf (on the threads given).
+    pub regathered_seconds: f32,
+    /// Per ring of [`ImageSettings::sun_rings`]: its count, the bounce with each leaf's ratios
+    /// re-gathered on a ring of that many suns at the sun's elevation
+    /// ([`super::gathered_bounce::sun_ring`]), the sun midway between two of them, drawn as
+    /// `regathered` is, per pixel size; and the seconds that gather took.
+    pub rings: Vec<(usize, Vec<ImageError>, f32)>,
     /// Per pool of [`ImageSettings::bounce_pools`]: the bounce as the leaf shaders draw it
     /// with the ratios so pooled (eq. 5.24 scaled by them, the covered part's gain where the
     /// gains were measured, and with [`ImageSettings::hotspot`] the crown's hotspot measured
@@ -408,11 +426,14 @@ pub fn images_against_tracer(
         _ => None,
     };
     let mut gathered_seconds = 0.0;
+    let (mut regathered, mut regathered_seconds) = (Vec::new(), 0.0);
+    let mut rings = Vec::new();
     let mut pooled = Vec::new();
     let gathered = match (&last_model, settings.bounce_rays) {
         (Some(([sky, sun, _], envelope)), rays) if rays > 0 => {
             use super::gathered_bounce::{
-                BounceRatios, bounce_gathers_of, gather_irradiance, pooled_ratios, ratio_towards,
+                BounceRatios, bounce_gathers_of, gather_irradiance, pooled_ratios, quantize_ratio,
+                ratio_of, ratio_on_ring, ratio_towards, sun_ratios_of, sun_ring,
             };
             use super::model::bounce_radiance_by_face;
             let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
@@ -464,7 +485,7 @@ pub fn images_against_tracer(
             let spot = spot_of(&ratios);
             // The same gather for the sun's own direction: what no blend over directions beats.
             let exact: Vec<[f32; 2]> = super::par_map(&all, threads, |&leaf| {
-                let seed = 0xB0B1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                let seed = super::gathered_bounce::leaf_seed(leaf);
                 gather_irradiance(
                     &scene,
                     material,
@@ -514,19 +535,15 @@ pub fn images_against_tracer(
             let image = |bounce_of: &dyn Fn(usize, Vec3) -> f32, covered: bool| {
                 image_with(bounce_of, covered, None)
             };
-            let scaled_by = |ratios: &[BounceRatios], leaf: usize, n: Vec3| {
+            let scaled_with = |ratio: [f32; 2], leaf: usize, n: Vec3| {
                 let e = &envelope.leaves[leaf];
                 let through = lobe_blend(&e.attenuation, light.to_sun, 1.0);
                 luminance(bounce_radiance_by_face(
-                    material,
-                    n,
-                    view,
-                    &here,
-                    through,
-                    &e.s_max,
-                    light.sun,
-                    ratio_towards(&ratios[leaf], light.to_sun),
+                    material, n, view, &here, through, &e.s_max, light.sun, ratio,
                 ))
+            };
+            let scaled_by = |ratios: &[BounceRatios], leaf: usize, n: Vec3| {
+                scaled_with(ratio_towards(&ratios[leaf], light.to_sun), leaf, n)
             };
             let scaled = |leaf: usize, n: Vec3| scaled_by(&ratios, leaf, n);
             let own = |leaf: usize, n: Vec3| {
@@ -546,6 +563,56 @@ pub fn images_against_tracer(
             ];
             if let Some(h) = &spot {
                 rows.push(image_with(&scaled, true, Some(h)));
+            }
+            // Ratios re-gathered for the given suns, stored as a bake stores ratios, and the
+            // seconds the gather took.
+            let regather = |suns: &[Vec3]| {
+                let started = std::time::Instant::now();
+                let ratios = sun_ratios_of(
+                    &scene,
+                    material,
+                    &all,
+                    &envelope.leaves,
+                    tau,
+                    suns,
+                    rays,
+                    &|_| 1.0,
+                    threads,
+                );
+                let seconds = started.elapsed().as_secs_f32();
+                let stored: Vec<Vec<[f32; 2]>> = ratios
+                    .iter()
+                    .map(|r| {
+                        r.iter()
+                            .map(|r| r.map(|x| ratio_of(quantize_ratio(x))))
+                            .collect()
+                    })
+                    .collect();
+                (stored, seconds)
+            };
+            // For this sun alone, drawn as the leaf shaders draw the blend's (the hotspot, where
+            // measured, the blend's).
+            let (resun, seconds) = regather(&[light.to_sun]);
+            regathered_seconds = seconds;
+            regathered = image_with(
+                &|leaf, n| scaled_with(resun[leaf][0], leaf, n),
+                true,
+                spot.as_ref(),
+            );
+            // For rings of suns at the sun's elevation, the sun midway between two nodes (what
+            // a tree turned by half a node's step sees: the farthest from the ring's gather).
+            for &count in &settings.sun_rings {
+                let phase =
+                    light.to_sun.z.atan2(light.to_sun.x) + std::f32::consts::PI / count as f32;
+                let (ring, seconds) = regather(&sun_ring(light.to_sun, count, phase));
+                let drawn = image_with(
+                    &|leaf, n| {
+                        scaled_with(ratio_on_ring(&ring[leaf], phase, light.to_sun), leaf, n)
+                    },
+                    true,
+                    spot.as_ref(),
+                );
+                rings.push((count, drawn, seconds));
             }
             for &pool in &pools {
                 let ratios = pooled_by(pool);
@@ -630,6 +697,9 @@ pub fn images_against_tracer(
         drawn,
         gathered,
         gathered_seconds,
+        regathered,
+        regathered_seconds,
+        rings,
         pooled,
         hotspot_factors,
         shadow_map_sun,
