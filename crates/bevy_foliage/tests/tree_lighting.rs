@@ -8,7 +8,10 @@ use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::light::{CascadeShadowConfig, CascadeShadowConfigBuilder, Cascades};
 use bevy::prelude::*;
 use bevy_foliage::lighting::bins::{DARKEST_LIGHT, light_of};
-use bevy_foliage::lighting::gathered_bounce::{BounceRatios, ratio_towards};
+use bevy_foliage::lighting::bounce_ring::{
+    BounceRing, RING_NODES, ratio_with_ring, ratio_with_ring_nodes,
+};
+use bevy_foliage::lighting::gathered_bounce::BounceRatios;
 use bevy_foliage::lighting::hotspot::{HOTSPOT_NODES, Hotspot};
 use bevy_foliage::lighting::model::{
     SkyLight, SunBounce, SunThroughCrown, bounce_radiance, bounce_radiance_by_face, open_share,
@@ -16,6 +19,7 @@ use bevy_foliage::lighting::model::{
 };
 use bevy_foliage::lighting::path_trace::LeafScene;
 use bevy_foliage::lighting::seen_part::{covered_gain, gain_of, quantize_gain, seen_gain};
+use bevy_foliage::lighting::settings::BounceRingSettings;
 use bevy_foliage::lighting::sun_maps::{LEAF_SHADOW_FINE, LeafShadowPlane};
 use bevy_foliage::pruning::bake::{BakeSettings, BakedFoliage, CellCount, bake};
 use bevy_foliage::pruning::components::{PrunedFoliage, PruningParams};
@@ -143,7 +147,9 @@ fn unit_exposure_camera(transform: Transform) -> impl Bundle {
     )
 }
 
-fn scene(name: &str, sun_shadows: bool) -> Option<Scene> {
+/// `ring`: the bounce ratios re-gathered on a ring at the sun's elevation
+/// (`TreeLightingSettings::bounce_ring`) on; off, the leaves take the bake's blend alone.
+fn scene(name: &str, sun_shadows: bool, ring: bool) -> Option<Scene> {
     let mut harness = RenderHarness::for_test(name, SIZE, SIZE)?;
     let lighting = TreeLightingSettings {
         enabled: true,
@@ -160,6 +166,10 @@ fn scene(name: &str, sun_shadows: bool) -> Option<Scene> {
         bounce: true,
         gathered_bounce: true,
         seen_part: true,
+        bounce_ring: BounceRingSettings {
+            enabled: ring,
+            ..default()
+        },
     };
     lit_app(&mut harness, &lighting);
     harness.app_mut().insert_resource(FoliagePruningSettings {
@@ -246,6 +256,9 @@ struct Check {
     covered_visible: u32,
     /// Compared pixels the leaves' gathered bounce ratios move by more than 3/255.
     ratios_visible: u32,
+    /// Compared pixels the type's ring of re-gathered ratios moves by more than 3/255 from the
+    /// bake's blend.
+    ring_visible: u32,
     /// Compared pixels the crown's hotspot moves by more than 3/255, and those its exponent on
     /// the sun alone moves so.
     hotspot_visible: u32,
@@ -285,7 +298,8 @@ impl Check {
 /// and the sun. With `leaf_shadows` (Bevy's shadow map resolves leaves), the sun's share at the
 /// leaf is the shadow ray's answer — leaves and what is outside — instead of the baked blend
 /// under the outside shadow. Points within `margin` of a shadow's edge (the answer changes
-/// across the sun's light within it) are not compared.
+/// across the sun's light within it) are not compared. `ring`: the type's ring of re-gathered
+/// bounce ratios the leaves hold (with `lighting.bounce_ring` on).
 #[allow(clippy::too_many_arguments)]
 fn compare_with_model(
     harness: &mut RenderHarness,
@@ -297,6 +311,7 @@ fn compare_with_model(
     outside_blocked: impl Fn(Vec3) -> bool,
     leaf_shadows: bool,
     margin: f32,
+    ring: Option<&BounceRing>,
 ) -> Check {
     let image = harness.render().unwrap();
     let world = harness.world_mut();
@@ -335,6 +350,7 @@ fn compare_with_model(
                     covered_on: bool,
                     hotspot_on: bool,
                     ratios_on: bool,
+                    ring_on: bool,
                     outside: f32,
                     at_leaf: Option<f32>|
      -> Vec3 {
@@ -366,12 +382,19 @@ fn compare_with_model(
             } else {
                 1.0
             };
-            // Each face's bins by the leaf's gathered ratios towards the sun.
-            let faces = match baked.leaf_bounce.get(leaf as usize) {
-                Some(r) if lighting.gathered_bounce && ratios_on => {
-                    ratio_towards(&BounceRatios::from_stored(r), to_sun)
-                }
-                _ => [1.0; 2],
+            // Each face's bins by the leaf's gathered ratios towards the sun (read off the
+            // type's ring where the sun is at its elevation).
+            let basis = baked
+                .leaf_bounce
+                .get(leaf as usize)
+                .map_or_else(BounceRatios::default, BounceRatios::from_stored);
+            let ring = ring
+                .filter(|_| lighting.bounce_ring.enabled && ring_on)
+                .map(|r| (r.sun_height, &r.leaves[leaf as usize]));
+            let faces = if lighting.gathered_bounce && ratios_on {
+                ratio_with_ring(&basis, ring, to_sun)
+            } else {
+                [1.0; 2]
             };
             bounce_radiance_by_face(&optics, n, wo, &bounce, baked_through, &s_max, e_sun, faces)
                 * (covered * outside * spot.bounce_at(wo, to_sun))
@@ -429,6 +452,7 @@ fn compare_with_model(
         bounce_visible: 0,
         covered_visible: 0,
         ratios_visible: 0,
+        ring_visible: 0,
         hotspot_visible: 0,
         hotspot_sun_visible: 0,
         sunlit: 0,
@@ -481,17 +505,20 @@ fn compare_with_model(
             }
             // The pixel the model gives with the bounce, the covered part's gain and the
             // hotspot each on or off, in 255ths of sRGB.
-            let pixel = |bounce: bool, covered: bool, hotspot: bool, ratios: bool| {
-                expected(leaf, bounce, covered, hotspot, ratios, outside, at_leaf)
-                    .to_array()
-                    .map(|c| srgb(c) * 255.0)
+            let pixel = |bounce: bool, covered: bool, hotspot: bool, ratios: bool, ring: bool| {
+                expected(
+                    leaf, bounce, covered, hotspot, ratios, ring, outside, at_leaf,
+                )
+                .to_array()
+                .map(|c| srgb(c) * 255.0)
             };
-            let want = pixel(true, true, true, true);
-            let plain = pixel(false, true, true, true);
-            let uncovered = pixel(true, false, true, true);
-            let no_hotspot = pixel(true, true, false, true);
-            let plain_no_hotspot = pixel(false, true, false, true);
-            let no_ratios = pixel(true, true, true, false);
+            let want = pixel(true, true, true, true, true);
+            let plain = pixel(false, true, true, true, true);
+            let uncovered = pixel(true, false, true, true, true);
+            let no_hotspot = pixel(true, true, false, true, true);
+            let plain_no_hotspot = pixel(false, true, false, true, true);
+            let no_ratios = pixel(true, true, true, false, true);
+            let no_ring = pixel(true, true, true, true, false);
             let got = image.pixel(x, y);
             let [r, g, b] = want.map(|c| c.round() as u8);
             check.reference.set_pixel(x, y, [r, g, b, 255]);
@@ -516,6 +543,9 @@ fn compare_with_model(
             if (0..3).any(|c| (want[c] - no_ratios[c]).abs() > 3.0) {
                 check.ratios_visible += 1;
             }
+            if (0..3).any(|c| (want[c] - no_ring[c]).abs() > 3.0) {
+                check.ring_visible += 1;
+            }
             if (0..3).any(|c| (want[c] - no_hotspot[c]).abs() > 3.0) {
                 check.hotspot_visible += 1;
             }
@@ -539,7 +569,7 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         eye,
         tree,
         ..
-    }) = scene("tree_lighting", false)
+    }) = scene("tree_lighting", false, false)
     else {
         return;
     };
@@ -556,6 +586,7 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         |_| false,
         false,
         0.0,
+        None,
     );
     check.save("tree");
     let Check {
@@ -603,6 +634,7 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         |_| false,
         false,
         0.0,
+        None,
     );
     let moved = (0..check.image.height)
         .flat_map(|y| (0..check.image.width).map(move |x| (x, y)))
@@ -694,6 +726,7 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         |_| false,
         false,
         0.0,
+        None,
     );
     covered.save("tree_strong_gains");
     println!(
@@ -741,6 +774,231 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
     );
 }
 
+/// Steps `harness` until the bounce ring of tree type `id` is in and none is being gathered
+/// (at most a minute of frames), and returns it.
+fn wait_for_ring(harness: &mut RenderHarness, id: AssetId<BakedFoliage>) -> BounceRing {
+    use bevy_foliage::pruning::regather::BounceRings;
+    let started = std::time::Instant::now();
+    loop {
+        harness.step();
+        let rings = harness.world_mut().resource::<BounceRings>();
+        if let (Some(ring), false) = (rings.ring(id), rings.is_gathering(id)) {
+            return ring.clone();
+        }
+        assert!(
+            started.elapsed().as_secs() < 60,
+            "no bounce ring gathered within a minute"
+        );
+    }
+}
+
+/// The leaves read the bounce ratios their type's ring holds where the sun is at its elevation:
+/// the ring the app re-gathers is the CPU's [`gather_ring`] of the loaded bake for the sun's
+/// elevation, byte for byte; the render matches the CPU model with it; a ring of strong ratios,
+/// distinct per node and face, moves many pixels and the render follows; and an instance tilted
+/// so that the sun stands 4° off the ring's elevation in its frame takes the ring and the
+/// bake's blend half and half, as the model does. Then the sun's elevation moves and a new
+/// ring is gathered for it.
+///
+/// [`gather_ring`]: bevy_foliage::lighting::bounce_ring::gather_ring
+#[test]
+fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
+    use bevy_foliage::lighting::bounce_ring::{
+        RING_FULL_DEGREES, RING_GONE_DEGREES, gather_ring, ring_weight,
+    };
+    use bevy_foliage::lighting::gathered_bounce::quantize_ratio;
+    use bevy_foliage::pruning::regather::BounceRings;
+    let Some(Scene {
+        mut harness,
+        baked,
+        lighting,
+        instance,
+        to_sun_world,
+        eye,
+        tree,
+        ..
+    }) = scene("tree_lighting_ring", false, true)
+    else {
+        return;
+    };
+    let id = harness
+        .world_mut()
+        .get::<PrunedFoliage>(tree)
+        .unwrap()
+        .baked
+        .id();
+    // The render of the next frame against the CPU model with `ring` and the instance as
+    // `instance`, 99 % of its leaf pixels within 3/255 of the model.
+    let compare = |harness: &mut RenderHarness, instance: Transform, ring: &BounceRing, name| {
+        let check = compare_with_model(
+            harness,
+            &baked,
+            &lighting,
+            instance,
+            to_sun_world,
+            eye,
+            |_| false,
+            false,
+            0.0,
+            Some(ring),
+        );
+        check.save(name);
+        println!(
+            "{name}: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1}/255); the ring moves {} of them from the bake's blend by > 3/255",
+            check.within, check.compared, check.worst, check.ring_visible
+        );
+        assert!(
+            check.compared >= 800,
+            "too few leaf pixels: {}",
+            check.compared
+        );
+        assert!(
+            check.within as f32 >= 0.99 * check.compared as f32,
+            "{name}: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1})",
+            check.within,
+            check.compared,
+            check.worst
+        );
+        check
+    };
+    let ring = wait_for_ring(&mut harness, id);
+    // The CPU's gather of the loaded bake at the sun's elevation (the instance is turned about
+    // its vertical only: its frame's elevation is the world's).
+    let all: Vec<u32> = (0..baked.leaf_count() as u32).collect();
+    let opacity = baked.leaf_opacity;
+    let cpu = gather_ring(
+        &baked.leaf_scene(),
+        &lighting.optics,
+        &all,
+        &baked.leaf_envelopes(),
+        baked.extinction,
+        ring.sun_height,
+        lighting.bounce_ring.rays,
+        &|_| opacity,
+        2,
+    );
+    assert!(
+        (ring.sun_height - to_sun_world.y).abs() < 1e-5,
+        "ring at sun height {} for the sun at {}",
+        ring.sun_height,
+        to_sun_world.y
+    );
+    assert_eq!(ring.leaves.len(), baked.leaf_count());
+    let same = ring
+        .leaves
+        .iter()
+        .zip(&cpu.leaves)
+        .filter(|(a, b)| a == b)
+        .count();
+    assert_eq!(
+        same,
+        baked.leaf_count(),
+        "leaves whose ring ratios the app gathered as the CPU does"
+    );
+    for _ in 0..4 {
+        harness.step();
+    }
+    compare(&mut harness, instance, &ring, "tree_ring");
+
+    // A ring of strong ratios, distinct per node and face (a shader that reads the nodes out of
+    // order, by another azimuth or with the faces swapped fails), put in at the sun's height.
+    let strong = BounceRing {
+        sun_height: ring.sun_height,
+        leaves: vec![
+            std::array::from_fn(|i| {
+                if i < RING_NODES {
+                    quantize_ratio(0.3 + 0.25 * i as f32)
+                } else {
+                    quantize_ratio(6.0 - 0.35 * (i - RING_NODES) as f32)
+                }
+            });
+            baked.leaf_count()
+        ],
+    };
+    harness
+        .world_mut()
+        .resource_mut::<BounceRings>()
+        .insert(id, strong.clone());
+    for _ in 0..4 {
+        harness.step();
+    }
+    let completed = harness.world_mut().resource::<BounceRings>().completed();
+    let strong_check = compare(&mut harness, instance, &strong, "tree_ring_strong");
+    assert_eq!(
+        harness.world_mut().resource::<BounceRings>().completed(),
+        completed,
+        "a ring at the sun's elevation is not gathered again"
+    );
+    assert!(
+        strong_check.ring_visible * 4 >= strong_check.compared,
+        "the ring shows in too few pixels ({} of {}) for the test to see it",
+        strong_check.ring_visible,
+        strong_check.compared
+    );
+
+    // Tilted so that the sun stands midway between the ring's whole and gone spans of elevation
+    // in the instance's frame: half ring, half blend.
+    let across = Vec3::Y
+        .cross(Vec3::new(to_sun_world.x, 0.0, to_sun_world.z))
+        .normalize();
+    let tilt = (0.5 * (RING_FULL_DEGREES + RING_GONE_DEGREES)).to_radians();
+    let tilted = Transform::from_rotation(Quat::from_axis_angle(across, tilt) * instance.rotation);
+    let local_sun = tilted.rotation.inverse() * to_sun_world;
+    let w = ring_weight(to_sun_world.y, local_sun);
+    assert!(
+        (w - 0.5).abs() < 0.05,
+        "ring weight {w} in the tilted frame"
+    );
+    harness.world_mut().entity_mut(tree).insert(tilted);
+    for _ in 0..4 {
+        harness.step();
+    }
+    println!("tilted: ring weight {w:.2}");
+    let half = compare(&mut harness, tilted, &strong, "tree_ring_tilted");
+    assert!(
+        half.ring_visible * 5 >= half.compared,
+        "the half ring shows in too few pixels ({} of {})",
+        half.ring_visible,
+        half.compared
+    );
+
+    // The sun's elevation moves by 10°: a new ring is gathered for it.
+    let lower = {
+        let e = to_sun_world.y.asin() - 10f32.to_radians();
+        let flat = Vec3::new(to_sun_world.x, 0.0, to_sun_world.z).normalize();
+        (flat * e.cos() + Vec3::Y * e.sin()).normalize()
+    };
+    let world = harness.world_mut();
+    let sun = world
+        .query_filtered::<Entity, With<DirectionalLight>>()
+        .single(world)
+        .unwrap();
+    world
+        .entity_mut(sun)
+        .insert(Transform::default().looking_to(-lower, Vec3::Y));
+    let started = std::time::Instant::now();
+    let moved = loop {
+        harness.step();
+        let rings = harness.world_mut().resource::<BounceRings>();
+        match rings.ring(id) {
+            Some(r) if r.sun_height != strong.sun_height && !rings.is_gathering(id) => {
+                break r.clone();
+            }
+            _ => assert!(
+                started.elapsed().as_secs() < 60,
+                "no new ring within a minute"
+            ),
+        }
+    };
+    assert!(
+        (moved.sun_height - lower.y).abs() < 1e-4,
+        "the new ring's sun height {} for a sun at {}",
+        moved.sun_height,
+        lower.y
+    );
+    assert!(moved.leaves != strong.leaves && moved.leaves != ring.leaves);
+}
+
 /// The crown's light summed over the image: the mean linear luminance of every pixel (the black
 /// background adds nothing), so leaves lost, leaves shrunk and leaves lit darker all lower it.
 fn crown_light(image: &RgbaImage) -> f64 {
@@ -771,7 +1029,7 @@ fn a_pruned_crown_keeps_its_light() {
         instance,
         tree,
         ..
-    }) = scene("tree_lighting_pruned", false)
+    }) = scene("tree_lighting_pruned", false, false)
     else {
         return;
     };
@@ -866,7 +1124,7 @@ fn sun_shadows(name: &str, cascades: SunCascades) -> Option<Check> {
         eye,
         radius,
         ..
-    } = scene(name, true)?;
+    } = scene(name, true, false)?;
     let coarse = cascades == SunCascades::Coarse;
     let one_cascade = |harness: &mut RenderHarness, distance: f32| {
         let world = harness.world_mut();
@@ -966,6 +1224,7 @@ fn sun_shadows(name: &str, cascades: SunCascades) -> Option<Check> {
         blocked,
         !coarse,
         margin,
+        None,
     );
     check.save(name);
     println!(
@@ -1190,6 +1449,8 @@ struct CloudCheck {
     covered_visible: u32,
     /// Compared leaf pixels the crown's bounce ratios move by more than 3/255.
     ratios_visible: u32,
+    /// Compared leaf pixels the crown's mean ring moves from the blend by more than 3/255.
+    ring_visible: u32,
     bark: u32,
     bark_same: u32,
 }
@@ -1200,8 +1461,9 @@ struct CloudCheck {
 /// With `plate`, the sun casts shadow maps and a plate outside the crown shades part of the
 /// cloud: the model then takes the sun and the bounce only where a ray from the point where the
 /// sun's light enters the crown misses the plate. A board inside the crown, which only the sun
-/// sees, shades another part in the shadow map, which the cloud must not count.
-fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
+/// sees, shades another part in the shadow map, which the cloud must not count. With `ring`,
+/// the cloud's material holds [`cloud_ring`] as its crown's mean ring at the sun's elevation.
+fn tree_lit_cloud(name: &str, plate: bool, ring: bool) -> Option<CloudCheck> {
     use bevy_foliage::impostor::assets::BillboardCloudAsset;
     use bevy_foliage::impostor::texture::srgb_to_linear;
     let mut harness = RenderHarness::for_test(name, SIZE, SIZE)?;
@@ -1218,6 +1480,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
         bounce: true,
         gathered_bounce: true,
         seen_part: true,
+        bounce_ring: default(),
     };
     lit_app(&mut harness, &lighting);
     let (data, blocks) = block_cloud();
@@ -1234,6 +1497,19 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
     // The sun from the side and above, so the leaves' own light, the light through them and
     // the bounce all show.
     let to_sun_world = Vec3::new(0.6, 0.7, 0.4).normalize();
+    // The instance is turned about its vertical: its frame's elevation is the world's.
+    let ring = ring.then(|| (to_sun_world.y, cloud_ring()));
+    if let Some((height, nodes)) = ring {
+        let mut materials = harness
+            .world_mut()
+            .resource_mut::<Assets<bevy_foliage::impostor::tree_lit::TreeLitImpostorMaterial>>();
+        let mut material = materials.get_mut(&asset.tree_lit).unwrap();
+        material.extension.params.ring_height = height;
+        material.extension.params.ring_ratios = bevy_foliage::impostor::tree_lit::ratios_as_vectors(
+            &nodes.map(|n| n[0]),
+            &nodes.map(|n| n[1]),
+        );
+    }
     harness.world_mut().spawn((
         DirectionalLight {
             illuminance: SUN,
@@ -1357,6 +1633,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
     let (mut bark, mut bark_same, mut leaves_unlike_pbr) = (0u32, 0u32, 0u32);
     let mut covered_visible = 0u32;
     let mut ratios_visible = 0u32;
+    let mut ring_visible = 0u32;
     let (mut sunlit, mut shaded) = (0u32, 0u32);
     // The sun's light enters the crown on the plane touching its bounding sphere on the sun's
     // side; the plate's shadow edge is blurred over a few texels.
@@ -1449,15 +1726,34 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
             } else {
                 (1.0, 1.0, Hotspot::default())
             };
-            // The crown's mean bounce ratios on each face, towards the sun.
-            let faces = if lighting.gathered_bounce {
-                ratio_towards(&cloud_bounce_ratios(), to_sun)
-            } else {
-                [1.0; 2]
+            // The crown's mean bounce ratios on each face, towards the sun (off its mean ring
+            // where the sun is at the ring's elevation).
+            let faces_with = |ring: Option<&(f32, [[f32; 2]; RING_NODES])>| {
+                if lighting.gathered_bounce {
+                    ratio_with_ring_nodes(
+                        &cloud_bounce_ratios(),
+                        ring.filter(|_| lighting.bounce_ring.enabled)
+                            .map(|(h, nodes)| (*h, nodes)),
+                        to_sun,
+                    )
+                } else {
+                    [1.0; 2]
+                }
             };
+            let faces = faces_with(ring.as_ref());
             let bounced =
                 bounce_radiance_by_face(&optics, n, wo, &bounce, through, &s_max, e_sun, faces)
                     * (outside * spot.bounce_at(wo, to_sun));
+            let blended = bounce_radiance_by_face(
+                &optics,
+                n,
+                wo,
+                &bounce,
+                through,
+                &s_max,
+                e_sun,
+                faces_with(None),
+            ) * (outside * spot.bounce_at(wo, to_sun));
             let unratioed = bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun)
                 * (outside * spot.bounce_at(wo, to_sun));
             let radiance = sky_radiance(&optics, n, wo, &a, &sky) * seen
@@ -1479,6 +1775,10 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
                 .to_array()
                 .map(|c| srgb(c) * 255.0);
             ratios_visible += (0..3).any(|c| (want[c] - without_ratios[c]).abs() > 3.0) as u32;
+            let without_ring = (radiance + (blended - bounced) * covered)
+                .to_array()
+                .map(|c| srgb(c) * 255.0);
+            ring_visible += (0..3).any(|c| (want[c] - without_ring[c]).abs() > 3.0) as u32;
             reference.set_pixel(x, y, [want[0] as u8, want[1] as u8, want[2] as u8, 255]);
             let off = (0..3)
                 .map(|c| (got[c] as f32 - want[c]).abs())
@@ -1496,7 +1796,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
     reference.save_png(dir.join(format!("{name}_cpu.png"))).ok();
     pbr.save_png(dir.join(format!("{name}_pbr.png"))).ok();
     eprintln!(
-        "{name}: leaf pixels {within} of {compared} within 3/255 (worst {worst:.1}; {sunlit} sunlit, {shaded} shaded), {leaves_unlike_pbr} unlike Bevy's PBR, {covered_visible} moved by > 3/255 by the covered part's gain on the bounce, {ratios_visible} by the crown's bounce ratios; bark pixels: {bark_same} of {bark} as Bevy's PBR"
+        "{name}: leaf pixels {within} of {compared} within 3/255 (worst {worst:.1}; {sunlit} sunlit, {shaded} shaded), {leaves_unlike_pbr} unlike Bevy's PBR, {covered_visible} moved by > 3/255 by the covered part's gain on the bounce, {ratios_visible} by the crown's bounce ratios, {ring_visible} by its mean ring; bark pixels: {bark_same} of {bark} as Bevy's PBR"
     );
     Some(CloudCheck {
         compared,
@@ -1507,6 +1807,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
         leaves_unlike_pbr,
         covered_visible,
         ratios_visible,
+        ring_visible,
         bark,
         bark_same,
     })
@@ -1516,7 +1817,7 @@ fn tree_lit_cloud(name: &str, plate: bool) -> Option<CloudCheck> {
 /// texel; bark is Bevy's PBR, leaves are not.
 #[test]
 fn a_tree_lit_billboard_cloud_lights_each_leaf_texel_as_the_model_does() {
-    let Some(c) = tree_lit_cloud("tree_lit_impostor", false) else {
+    let Some(c) = tree_lit_cloud("tree_lit_impostor", false, false) else {
         return;
     };
     assert!(c.compared > 1500, "{} leaf pixels compared", c.compared);
@@ -1546,12 +1847,29 @@ fn a_tree_lit_billboard_cloud_lights_each_leaf_texel_as_the_model_does() {
     );
 }
 
+/// A tree-lit billboard cloud whose crown has a ring of re-gathered bounce ratios at the sun's
+/// elevation reads the crown's mean ring, as the CPU model does, not the bake's blend.
+#[test]
+fn a_tree_lit_billboard_cloud_reads_its_crowns_mean_ring() {
+    let Some(c) = tree_lit_cloud("tree_lit_impostor_ring", false, true) else {
+        return;
+    };
+    assert!(c.compared > 1500, "{} leaf pixels compared", c.compared);
+    assert_eq!(c.within, c.compared, "worst {:.1}/255", c.worst);
+    assert!(
+        c.ring_visible * 4 >= c.compared,
+        "the ring shows in {} of {} pixels",
+        c.ring_visible,
+        c.compared
+    );
+}
+
 /// A tree-lit billboard cloud partly in a plate's shadow: the sun and its bounce reach the leaf
 /// texels where the ray from where the sun's light enters the crown misses the plate, as in the
 /// CPU model, and the cloud's own planes (which cast into the same shadow map) are not counted.
 #[test]
 fn a_tree_lit_billboard_cloud_takes_the_sun_shadow_from_outside_its_crown() {
-    let Some(c) = tree_lit_cloud("tree_lit_impostor_plate", true) else {
+    let Some(c) = tree_lit_cloud("tree_lit_impostor_plate", true, false) else {
         return;
     };
     assert!(
@@ -1679,6 +1997,7 @@ fn a_tree_lit_crown_keeps_its_light_when_its_billboard_cloud_takes_over() {
         .add(cloud);
     let (baked, _) = bake(&tree.leaves, &BakeSettings::default(), &|_| {}).unwrap();
     let baked = world.resource_mut::<Assets<BakedFoliage>>().add(baked);
+    let baked_id = baked.id();
     let leaves = world
         .resource_mut::<Assets<LeafMaterial>>()
         .add(leaf_material(StandardMaterial {
@@ -1727,8 +2046,37 @@ fn a_tree_lit_crown_keeps_its_light_when_its_billboard_cloud_takes_over() {
             .collect::<Vec<_>>();
         (image, impostors)
     };
+    // The leaves with their type's bounce ring re-gathered at the sun's elevation (on by
+    // default), which the cloud, lit by the crown's mean of the bake's ratios, does not have.
+    render_with(&mut harness, 1000.0, true);
+    let ring = wait_for_ring(&mut harness, baked_id);
     let (leaves_lit, _) = render_with(&mut harness, 1000.0, true);
     let (cloud_lit, impostors_lit) = render_with(&mut harness, 20.0, true);
+    // The cloud's material holds the crown's mean of the type's ring.
+    {
+        use bevy_foliage::impostor::tree_lit::{TreeLitImpostorMaterial, ratios_as_vectors};
+        let world = harness.world_mut();
+        let tree_lit = world
+            .resource::<Assets<BillboardCloudAsset>>()
+            .iter()
+            .next()
+            .unwrap()
+            .1
+            .tree_lit
+            .clone();
+        let params = world
+            .resource::<Assets<TreeLitImpostorMaterial>>()
+            .get(&tree_lit)
+            .unwrap()
+            .extension
+            .params;
+        let mean = bevy_foliage::lighting::bounce_ring::crown_mean_ring(&ring);
+        assert_eq!(params.ring_height, ring.sun_height);
+        assert_eq!(
+            params.ring_ratios,
+            ratios_as_vectors(&mean.map(|n| n[0]), &mean.map(|n| n[1]))
+        );
+    }
     let (cloud_pbr, impostors_pbr) = render_with(&mut harness, 20.0, false);
     let (leaves_pbr, _) = render_with(&mut harness, 1000.0, false);
     let dir = artifacts_dir().join("tree_lighting");
@@ -1778,6 +2126,13 @@ fn cloud_bounce_ratios() -> BounceRatios {
         front: std::array::from_fn(|k| 2.0 + 0.15 * k as f32),
         back: std::array::from_fn(|k| 0.3 + 0.05 * k as f32),
     }
+}
+
+/// The test cloud's crown mean ring: distinct per node and face, far from
+/// [`cloud_bounce_ratios`], so a shader that skips it, swaps the faces or reads the nodes by
+/// another azimuth shows.
+fn cloud_ring() -> [[f32; 2]; RING_NODES] {
+    std::array::from_fn(|k| [0.4 + 0.2 * k as f32, 4.0 - 0.2 * k as f32])
 }
 
 /// The test cloud's hotspot: distinct nodes, none 1, so a shader that skips or misreads it

@@ -130,11 +130,10 @@ pub fn tree_lit_extension(data: &ImpostorData, light: [Handle<Image>; 3]) -> Tre
             extinction: data.extinction,
             seen_gains: gains_as_vectors(&data.seen_gains),
             hotspot: data.hotspot.packed().into(),
-            bounce_ratios: {
-                let r = &data.bounce_ratios;
-                let all: Vec<f32> = r.front.iter().chain(&r.back).copied().collect();
-                std::array::from_fn(|i| Vec4::from_slice(&all[4 * i..4 * i + 4]))
-            },
+            bounce_ratios: super::tree_lit::ratios_as_vectors(
+                &data.bounce_ratios.front,
+                &data.bounce_ratios.back,
+            ),
             ..default()
         },
         light0,

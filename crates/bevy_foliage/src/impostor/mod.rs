@@ -10,7 +10,8 @@
 //! - main world: [`bake`] (the GPU bake: orthographic cameras into the atlas, read back),
 //!   [`assets`] (the `AssetServer` loader, the quads and their `StandardMaterial`),
 //!   [`systems`] (drawing a forest tree's impostor beyond the pruning's `far`), [`tree_lit`]
-//!   (the material that lights the cloud's leaf texels by the tree lighting);
+//!   (the material that lights the cloud's leaf texels by the tree lighting), [`tree_lit_ring`]
+//!   (its crown's mean of the type's re-gathered bounce ring);
 //! - render side: `impostor_bake.wgsl`, the bake's unlit material; `tree_lit_impostor.wgsl`.
 
 pub mod assets;
@@ -21,6 +22,7 @@ pub mod format;
 pub mod systems;
 pub mod texture;
 pub mod tree_lit;
+pub mod tree_lit_ring;
 
 use bevy::prelude::*;
 
@@ -30,5 +32,6 @@ pub(crate) fn build(app: &mut App) {
         .init_asset_loader::<assets::BillboardCloudLoader>();
     bake::build(app);
     tree_lit::build(app);
+    tree_lit_ring::build(app);
     systems::build(app);
 }

@@ -41,7 +41,7 @@ pub struct TreeLitImpostor {
 }
 
 /// Uniforms of [`TreeLitImpostor`] (see `tree_lit_impostor.wgsl`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, ShaderType, Reflect)]
+#[derive(Clone, Copy, Debug, PartialEq, ShaderType, Reflect)]
 pub struct TreeLitImpostorParams {
     /// The optics (multiples of the texel's albedo) and the scene's lights.
     pub lights: TreeLightUniform,
@@ -66,6 +66,42 @@ pub struct TreeLitImpostorParams {
     pub bounce_ratios: [Vec4; 7],
     /// 1: the bounce scaled by them (`TreeLightingSettings::gathered_bounce`).
     pub gathered_bounce: u32,
+    /// The sun height of the crown's ring of re-gathered ratios
+    /// ([`crate::lighting::bounce_ring`]; [`NO_RING`](crate::lighting::bounce_ring::NO_RING)
+    /// for none).
+    pub ring_height: f32,
+    /// 1: the ring read where the sun is at its elevation (`BounceRingSettings::enabled`).
+    pub bounce_ring: u32,
+    /// The crown's mean ring ratios (`lighting::bounce_ring::crown_mean_ring`), the front
+    /// faces' fourteen nodes then the back faces', four a vector.
+    pub ring_ratios: [Vec4; 7],
+}
+
+impl Default for TreeLitImpostorParams {
+    fn default() -> Self {
+        Self {
+            lights: TreeLightUniform::default(),
+            crown_sphere: Vec4::ZERO,
+            extinction: 0.0,
+            smooth_envelope: 0,
+            bounce: 0,
+            seen_part: 0,
+            seen_gains: [Vec4::ONE; 2],
+            hotspot: UVec4::ZERO,
+            bounce_ratios: [Vec4::ONE; 7],
+            gathered_bounce: 0,
+            ring_height: crate::lighting::bounce_ring::NO_RING,
+            bounce_ring: 0,
+            ring_ratios: [Vec4::ONE; 7],
+        }
+    }
+}
+
+/// Twenty-eight ratios (front faces' fourteen, then the back faces') as the shader's seven
+/// vectors.
+pub fn ratios_as_vectors(front: &[f32; 14], back: &[f32; 14]) -> [Vec4; 7] {
+    let all: Vec<f32> = front.iter().chain(back).copied().collect();
+    std::array::from_fn(|i| Vec4::from_slice(&all[4 * i..4 * i + 4]))
 }
 
 impl TreeLitImpostorParams {
@@ -84,6 +120,9 @@ impl TreeLitImpostorParams {
             hotspot: own.hotspot,
             bounce_ratios: own.bounce_ratios,
             gathered_bounce: leaves.gathered_bounce,
+            ring_height: own.ring_height,
+            bounce_ring: leaves.bounce_ring,
+            ring_ratios: own.ring_ratios,
         }
     }
 }

@@ -19,7 +19,7 @@
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
     shadows::fetch_directional_shadow,
 }
-#import bevy_foliage::tree_lighting::{TreeLightUniform, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, seen_gain}
+#import bevy_foliage::tree_lighting::{TreeLightUniform, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, ratio_with_ring, seen_gain}
 
 struct TreeLitImpostorParams {
     lights: TreeLightUniform,
@@ -37,6 +37,12 @@ struct TreeLitImpostorParams {
     // the back's, and whether the bounce takes them.
     bounce_ratios: array<vec4<f32>, 7>,
     gathered_bounce: u32,
+    // The sun height of the crown's ring of re-gathered ratios (outside [−1, 1]: none), whether
+    // it is read, and its mean ratios, front faces' fourteen nodes then the back faces'
+    // (`lighting::bounce_ring::crown_mean_ring`).
+    ring_height: f32,
+    bounce_ring: u32,
+    ring_ratios: array<vec4<f32>, 7>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> params: TreeLitImpostorParams;
@@ -98,14 +104,21 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> Fragment
             params.lights, normalize(local_from_world * params.lights.to_sun.xyz));
         let attenuation = array<f32, 8>(l0.x, l0.y, l0.z, l1.x, l1.y, l1.z, l2.x, l2.y);
         // Eq. 5.24 on each face by the crown's mean gathered ratios, towards the sun (a texel
-        // has no room for its leaf's own).
+        // has no room for its leaf's own) — or off the crown's mean ring where the sun is at
+        // its elevation, as the leaves read theirs.
         var bounce_faces = vec2(1.0);
         if params.bounce != 0u && params.gathered_bounce != 0u {
             var ratios: array<f32, 28>;
+            var ring: array<f32, 28>;
             for (var i = 0u; i < 28u; i += 1u) {
                 ratios[i] = params.bounce_ratios[i / 4u][i % 4u];
+                ring[i] = params.ring_ratios[i / 4u][i % 4u];
             }
-            bounce_faces = ratio_towards(ratios, lights.to_sun);
+            if params.bounce_ring != 0u {
+                bounce_faces = ratio_with_ring(ratios, params.ring_height, ring, lights.to_sun);
+            } else {
+                bounce_faces = ratio_towards(ratios, lights.to_sun);
+            }
         }
         let light = leaf_radiance(
             optics_of(params.lights, base.rgb),

@@ -14,7 +14,9 @@ use bevy::prelude::*;
 /// times its brightness, as the radiance of the upper hemisphere) and the ground under it
 /// (that radiance times `ground_albedo`) through the crown (eq. 5.6); the sun — the brightest
 /// `DirectionalLight` — through the crown (eq. 5.8); and one bounce of the sun's light off the
-/// neighbouring leaves (eq. 5.24). A leaf's reflectances and transmittances are `optics` times its
+/// neighbouring leaves (eq. 5.24), scaled by each leaf's gathered ratios (blended from the
+/// bake's fourteen suns, or read off its type's ring re-gathered at the sun's elevation,
+/// `bounce_ring`). A leaf's reflectances and transmittances are `optics` times its
 /// material's base colour (linear), and its texture's colour multiplies the light it sends, so
 /// leaves keep their materials' colours. The sun's direct light on a leaf goes through Bevy's
 /// shadow map of the sun read at the leaf where the map's texels are at most half the leaf
@@ -51,6 +53,52 @@ pub struct TreeLightingSettings {
     /// ([`crate::lighting::seen_part`]); and apply the crown's hotspot by the angle between
     /// the eye and the sun, measured with those gains ([`crate::lighting::hotspot`]).
     pub seen_part: bool,
+    /// Re-gather each tree type's bounce ratios, while the app runs, on a ring of suns at the
+    /// sun's elevation ([`crate::lighting::bounce_ring`]), which the leaves read where the sun
+    /// is at it (with `gathered_bounce`).
+    pub bounce_ring: BounceRingSettings,
+}
+
+/// How the bounce ratios are re-gathered on a ring of suns at the sun's elevation while the app
+/// runs ([`crate::lighting::bounce_ring`]): in the background, one task per tree type, each
+/// time the sun's elevation has moved `regather_degrees` from the last ring. Upright instances
+/// (turned about their vertical only) take the ring at any turn; a tilted one, or any while the
+/// sun is more than [`RING_FULL_DEGREES`](crate::lighting::bounce_ring::RING_FULL_DEGREES) of
+/// elevation from its type's ring, takes the bake's blend over fourteen suns in part or whole.
+#[derive(Clone, Debug, PartialEq, Reflect)]
+#[reflect(Default, Debug, PartialEq)]
+pub struct BounceRingSettings {
+    /// Gather rings and read them in the leaf shaders (off: the bake's blend alone).
+    pub enabled: bool,
+    /// Rays a leaf casts over its two sides; each neighbour hit casts a shadow ray towards each
+    /// of the ring's fourteen suns (the cost of one bake's bounce gather).
+    pub rays: u32,
+    /// Degrees of elevation the sun moves from a tree type's ring before a new one is gathered.
+    pub regather_degrees: f32,
+    /// Threads each re-gather runs on (0: half the machine's, at least one).
+    pub threads: usize,
+}
+
+impl Default for BounceRingSettings {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            rays: crate::lighting::gathered_bounce::DEFAULT_BOUNCE_RAYS,
+            regather_degrees: crate::lighting::bounce_ring::DEFAULT_REGATHER_DEGREES,
+            threads: 0,
+        }
+    }
+}
+
+impl BounceRingSettings {
+    /// The threads a re-gather runs on: `threads`, or for 0 half of `available` (at least one).
+    pub fn threads_of(&self, available: usize) -> usize {
+        if self.threads == 0 {
+            (available / 2).max(1)
+        } else {
+            self.threads
+        }
+    }
 }
 
 impl Default for TreeLightingSettings {
@@ -68,6 +116,7 @@ impl Default for TreeLightingSettings {
             bounce: true,
             gathered_bounce: true,
             seen_part: true,
+            bounce_ring: BounceRingSettings::default(),
         }
     }
 }
@@ -97,6 +146,37 @@ impl TreeLightingSettings {
                 self.ground_albedo
             ));
             out.ground_albedo = albedo;
+        }
+        use crate::lighting::bounce_ring::RING_FULL_DEGREES;
+        use crate::lighting::gathered_bounce::MAX_BOUNCE_RAYS;
+        let ring = &self.bounce_ring;
+        if ring.rays == 0 || ring.rays > MAX_BOUNCE_RAYS {
+            fixes.push(format!(
+                "bounce ring rays {} must lie in [1, {MAX_BOUNCE_RAYS}]: clamped",
+                ring.rays
+            ));
+            out.bounce_ring.rays = ring.rays.clamp(1, MAX_BOUNCE_RAYS);
+        }
+        // Above the ring's whole span the ring in use would fade before its successor is asked
+        // for; below a hundredth of a degree every frame of a moving sun would ask for one.
+        if !(ring.regather_degrees >= 0.01 && ring.regather_degrees <= RING_FULL_DEGREES) {
+            let fixed = if ring.regather_degrees.is_nan() {
+                crate::lighting::bounce_ring::DEFAULT_REGATHER_DEGREES
+            } else {
+                ring.regather_degrees.clamp(0.01, RING_FULL_DEGREES)
+            };
+            fixes.push(format!(
+                "bounce ring re-gather angle {}° must lie in [0.01, {RING_FULL_DEGREES}]: {fixed}°",
+                ring.regather_degrees
+            ));
+            out.bounce_ring.regather_degrees = fixed;
+        }
+        if ring.threads > 1024 {
+            fixes.push(format!(
+                "bounce ring threads {} is absurd: 0 (half the machine's)",
+                ring.threads
+            ));
+            out.bounce_ring.threads = 0;
         }
         (out, fixes)
     }
@@ -134,5 +214,39 @@ mod tests {
         let (same, none) = TreeLightingSettings::default().sanitized();
         assert!(none.is_empty());
         assert_eq!(same, TreeLightingSettings::default());
+    }
+
+    #[test]
+    fn absurd_ring_settings_are_corrected_and_reported() {
+        let bad = TreeLightingSettings {
+            bounce_ring: BounceRingSettings {
+                enabled: true,
+                rays: 0,
+                regather_degrees: f32::NAN,
+                threads: 1 << 20,
+            },
+            ..default()
+        };
+        let (fixed, fixes) = bad.sanitized();
+        assert_eq!(fixes.len(), 3, "{fixes:?}");
+        assert_eq!(fixed.bounce_ring.rays, 1);
+        assert_eq!(
+            fixed.bounce_ring.regather_degrees,
+            crate::lighting::bounce_ring::DEFAULT_REGATHER_DEGREES
+        );
+        assert_eq!(fixed.bounce_ring.threads, 0);
+        let wide = TreeLightingSettings {
+            bounce_ring: BounceRingSettings {
+                regather_degrees: 90.0,
+                ..default()
+            },
+            ..default()
+        };
+        assert_eq!(
+            wide.sanitized().0.bounce_ring.regather_degrees,
+            crate::lighting::bounce_ring::RING_FULL_DEGREES
+        );
+        assert_eq!(BounceRingSettings::default().threads_of(16), 8);
+        assert_eq!(BounceRingSettings::default().threads_of(1), 1);
     }
 }

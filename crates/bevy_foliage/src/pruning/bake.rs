@@ -247,6 +247,10 @@ pub struct BakedFoliage {
     /// The crown's fitted extinction τ per unit of model space (eq. 5.5; 0 for a crown with no
     /// leaf behind another): `s_max(P, ω_j) = −ln(a_j) / τ`.
     pub extinction: f32,
+    /// The share of each leaf's area that stops light, as the bake traced the leaves with (the
+    /// leaf texture's opaque share, 1 for solid leaves): what a re-gather of the bounce while
+    /// an app runs traces them with ([`crate::lighting::bounce_ring`]).
+    pub leaf_opacity: f32,
     /// Leaves skipped as unusable.
     pub skipped: SkippedLeaves,
 }
@@ -345,15 +349,16 @@ impl BakedFoliage {
 
     /// Bytes the GPU holds for this tree type: the packed leaf vertices, the stored index
     /// list, per-leaf index starts, per-cell leaf starts and visibility, and each leaf's
-    /// light (attenuations, seen-part gains, bounce ratios; `store::LEAF_LIGHT_WORDS`).
+    /// light (attenuations, seen-part gains, bounce ratios and their ring;
+    /// `store::LEAF_LIGHT_WORDS`).
     pub fn gpu_bytes(&self) -> usize {
-        // 16 words a vertex and 16 a leaf (`store::LEAF_VERTEX_WORDS`, `LEAF_LIGHT_WORDS`).
+        // 16 words a vertex and 24 a leaf (`store::LEAF_VERTEX_WORDS`, `LEAF_LIGHT_WORDS`).
         self.positions.len() * 16 * 4
             + self.indices.len() * 4
             + self.leaf_index_start.len() * 4
             + self.cell_first_leaf.len() * 4
             + self.visibility.len() * 2
-            + self.leaf_count() * 16 * 4
+            + self.leaf_count() * 24 * 4
     }
 }
 
@@ -512,6 +517,7 @@ pub fn bake_masked(
         leaf_bounce: Vec::new(),
         hotspot: Default::default(),
         extinction: 0.0,
+        leaf_opacity: 1.0,
         skipped,
     };
     for &leaf in &stored_leaves {
@@ -612,6 +618,12 @@ pub fn bake_masked(
     let opaque = mask
         .and_then(|m| m.opaque_fraction_of(&leaves))
         .unwrap_or(1.0);
+    // Kept in (0, 1] (a texture with no opaque texel still stops a little light).
+    baked.leaf_opacity = if opaque.is_nan() {
+        1.0
+    } else {
+        opaque.clamp(1.0 / 65536.0, 1.0)
+    };
     let all = crate::lighting::envelope::proxies(&leaves);
     let stored: Vec<_> = stored_leaves
         .iter()

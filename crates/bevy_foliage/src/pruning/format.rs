@@ -22,7 +22,10 @@ use std::path::Path;
 /// File signature.
 pub const MAGIC: &[u8; 8] = b"BNFOLIAG";
 /// Current format version; bump on any layout change.
-pub const FORMAT_VERSION: u32 = 5;
+///
+/// Version 6 added the leaves' opacity the bake traced them with
+/// ([`BakedFoliage::leaf_opacity`]); version 5 the bounce ratios, 4 the crown's hotspot.
+pub const FORMAT_VERSION: u32 = 6;
 
 /// Why a baked foliage file could not be read.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -204,6 +207,7 @@ pub fn encode(baked: &BakedFoliage) -> Vec<u8> {
     w.u8s(&bounce);
     w.u32s(&baked.hotspot.packed());
     w.u32s(&[baked.extinction.to_bits()]);
+    w.u32s(&[baked.leaf_opacity.to_bits()]);
     let s = baked.skipped;
     w.u32s(&[s.non_finite as u32, s.degenerate as u32, s.malformed as u32]);
     let payload = w.0;
@@ -270,6 +274,10 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
     let bounce = r.u8s()?;
     let hotspot = r.u32s()?;
     let extinction = r.u32s()?;
+    let opacity = r.u32s()?;
+    if opacity.len() != 1 {
+        return Err(FormatError::Invalid("leaf opacity section".into()));
+    }
     let hotspot = match <[u32; crate::lighting::hotspot::HOTSPOT_WORDS]>::try_from(hotspot) {
         Ok(words) => crate::lighting::hotspot::Hotspot::unpacked(words),
         Err(_) => return Err(FormatError::Invalid("hotspot section".into())),
@@ -313,6 +321,7 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
         leaf_bounce,
         hotspot,
         extinction: f32::from_bits(extinction[0]),
+        leaf_opacity: f32::from_bits(opacity[0]),
         skipped: SkippedLeaves {
             non_finite: skipped[0] as usize,
             degenerate: skipped[1] as usize,
@@ -404,6 +413,9 @@ pub fn validate(b: &BakedFoliage) -> Result<(), FormatError> {
     }
     if !(b.extinction.is_finite() && b.extinction >= 0.0) {
         return bad(format!("extinction {} is not a finite τ ≥ 0", b.extinction));
+    }
+    if !(b.leaf_opacity > 0.0 && b.leaf_opacity <= 1.0) {
+        return bad(format!("leaf opacity {} is not in (0, 1]", b.leaf_opacity));
     }
     Ok(())
 }
@@ -529,6 +541,14 @@ pub(crate) mod tests {
             decode(&encode(&bad_tau)),
             Err(FormatError::Invalid(_))
         ));
+        for opacity in [0.0, -0.5, 1.5, f32::NAN] {
+            let mut bad_opacity = sample();
+            bad_opacity.leaf_opacity = opacity;
+            assert!(matches!(
+                decode(&encode(&bad_opacity)),
+                Err(FormatError::Invalid(_))
+            ));
+        }
         assert_eq!(
             decode(&bytes[..bytes.len() - 1]),
             Err(FormatError::Truncated)

@@ -6,8 +6,8 @@
 #import bevy_foliage::leaf_pulling::{SlotVertex, pull_leaf_vertex}
 #ifdef TREE_LIGHTING
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
-#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_bounce_ratios, leaf_params, leaf_seen_gains}
-#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, seen_gain}
+#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_bounce_ratios, leaf_params, leaf_ring_height, leaf_ring_ratios, leaf_seen_gains}
+#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, ratio_with_ring, seen_gain}
 
 // The tree instance's frame, read once per vertex: world directions into the model's frame
 // (the transpose undoes a rotation and, once normalised, a uniform scale), the instance's scale
@@ -36,10 +36,17 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
     let to_eye = normalize(frame.local_from_world * (view.world_position - leaf.world_position.xyz));
     let albedo = leaf_params.albedo.rgb;
     // Eq. 5.24 on each face scaled by what the leaf's own neighbours bring it
-    // (`lighting::gathered_bounce`), blended towards the sun.
+    // (`lighting::gathered_bounce`), blended towards the sun — or, where the sun is at the
+    // elevation of the type's ring of ratios re-gathered while the app runs, read off the ring
+    // (`lighting::bounce_ring`).
     var bounce_faces = vec2(1.0);
     if leaf_params.bounce != 0u && leaf_params.gathered_bounce != 0u {
-        bounce_faces = ratio_towards(leaf_bounce_ratios(leaf.leaf), frame.to_sun);
+        if leaf_params.bounce_ring != 0u {
+            bounce_faces = ratio_with_ring(leaf_bounce_ratios(leaf.leaf),
+                leaf_ring_height(leaf.leaf), leaf_ring_ratios(leaf.leaf), frame.to_sun);
+        } else {
+            bounce_faces = ratio_towards(leaf_bounce_ratios(leaf.leaf), frame.to_sun);
+        }
     }
     var light = leaf_radiance(
         optics_of(leaf_params.lights, albedo),

@@ -41,7 +41,9 @@ struct LeafParams {
     fade_end: f32,
     // 1: the bounce on each leaf face scaled by the leaf's gathered ratios.
     gathered_bounce: u32,
-    pad_y: u32,
+    // 1: those ratios from the type's ring re-gathered at the sun's elevation, where the sun is
+    // at it (`lighting::bounce_ring`).
+    bounce_ring: u32,
     // The tree lighting (`lighting::settings::TreeLightingSettings`, `tree_lighting.wgsl`): on,
     // the sun through the crown by eq. 5.7's envelope blend (else the attenuations' blend), the
     // bounce on, the seen-part gains on.
@@ -61,8 +63,9 @@ struct LeafParams {
 // Per (instance, cell): kept index count, output offset, LoD(cell), 0.
 @group(#{MATERIAL_BIND_GROUP}) @binding(103) var<storage, read> cell_offsets: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var<storage, read> leaf_vertices: array<LeafVertex>;
-// Per leaf, its eight attenuations then its eight seen-part gains, as u16 pairs, then its 28
-// bounce ratios as bytes and a word of padding (`store::LEAF_LIGHT_WORDS`).
+// Per leaf, six vec4s: its eight attenuations then its eight seen-part gains, as u16 pairs; its 28
+// bounce ratios as bytes and its type's ring's sun height (f32 bits); its 28 ring ratios as
+// bytes and a word of padding (`store::LEAF_LIGHT_WORDS`).
 @group(#{MATERIAL_BIND_GROUP}) @binding(105) var<storage, read> leaf_light: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(106) var<uniform> leaf_params: LeafParams;
 
@@ -162,12 +165,12 @@ fn unpack_eight(words: vec4<u32>) -> array<f32, 8> {
 
 // The eight attenuations of leaf `leaf` (`lighting::bins::light_of` of the stored u16s).
 fn leaf_attenuation(leaf: u32) -> array<f32, 8> {
-    return unpack_eight(leaf_light[4u * leaf]);
+    return unpack_eight(leaf_light[LEAF_LIGHT_VECS * leaf]);
 }
 
 // The eight seen-part gains of leaf `leaf` (`lighting::seen_part::gain_of` of the stored u16s).
 fn leaf_seen_gains(leaf: u32) -> array<f32, 8> {
-    var g = unpack_eight(leaf_light[4u * leaf + 1u]);
+    var g = unpack_eight(leaf_light[LEAF_LIGHT_VECS * leaf + 1u]);
     for (var j = 0u; j < 8u; j += 1u) {
         g[j] *= SEEN_GAIN_MAX;
     }
@@ -177,15 +180,37 @@ fn leaf_seen_gains(leaf: u32) -> array<f32, 8> {
 // The largest gain a bake stores (`lighting::seen_part::GAIN_RANGE`).
 const SEEN_GAIN_MAX: f32 = 4.0;
 
-// The bounce ratios of leaf `leaf`, the front face's fourteen then the back face's
-// (`lighting::gathered_bounce::BounceRatios::from_stored`): code 0 is 0, codes 1–255 the
-// ratio's base-2 logarithm from −4 to 4.
-fn leaf_bounce_ratios(leaf: u32) -> array<f32, 28> {
-    var words = array<vec4<u32>, 2>(leaf_light[4u * leaf + 2u], leaf_light[4u * leaf + 3u]);
+// vec4s per leaf in `leaf_light` (`store::LEAF_LIGHT_WORDS` / 4).
+const LEAF_LIGHT_VECS: u32 = 6u;
+
+// 28 ratios stored a byte each in two vec4s (the last word not read): code 0 is 0, codes 1–255
+// the ratio's base-2 logarithm from −4 to 4 (`lighting::gathered_bounce::ratio_of`).
+fn unpack_ratios(stored: array<vec4<u32>, 2>) -> array<f32, 28> {
+    var words = stored;
     var r: array<f32, 28>;
     for (var i = 0u; i < 28u; i += 1u) {
         let q = (words[i / 16u][(i / 4u) % 4u] >> (8u * (i % 4u))) & 0xffu;
         r[i] = select(0.0, exp2(f32(q - 1u) / 254.0 * 8.0 - 4.0), q != 0u);
     }
     return r;
+}
+
+// The bounce ratios of leaf `leaf`, the front face's fourteen then the back face's
+// (`lighting::gathered_bounce::BounceRatios::from_stored`).
+fn leaf_bounce_ratios(leaf: u32) -> array<f32, 28> {
+    return unpack_ratios(array<vec4<u32>, 2>(
+        leaf_light[LEAF_LIGHT_VECS * leaf + 2u], leaf_light[LEAF_LIGHT_VECS * leaf + 3u]));
+}
+
+// The sun height (sine of the elevation, model space) of the ring of ratios of leaf `leaf`'s
+// type; outside [−1, 1] for none (`lighting::bounce_ring::NO_RING`).
+fn leaf_ring_height(leaf: u32) -> f32 {
+    return bitcast<f32>(leaf_light[LEAF_LIGHT_VECS * leaf + 3u].w);
+}
+
+// The ring ratios of leaf `leaf`: node k's front face at k, its back face at 14 + k
+// (`lighting::bounce_ring::ring_nodes_of`).
+fn leaf_ring_ratios(leaf: u32) -> array<f32, 28> {
+    return unpack_ratios(array<vec4<u32>, 2>(
+        leaf_light[LEAF_LIGHT_VECS * leaf + 4u], leaf_light[LEAF_LIGHT_VECS * leaf + 5u]));
 }

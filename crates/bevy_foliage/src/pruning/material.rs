@@ -37,8 +37,9 @@ pub struct LeafParams {
     /// 1 to scale the bounce on each leaf face by the leaf's gathered ratios
     /// ([`crate::lighting::gathered_bounce`]).
     pub gathered_bounce: u32,
-    /// Padding.
-    pub pad_y: u32,
+    /// 1 to take the bounce ratios from the type's ring of ratios re-gathered at the sun's
+    /// elevation where the sun is at it ([`crate::lighting::bounce_ring`]).
+    pub bounce_ring: u32,
     /// 1 to light the leaves as a volume ([`TreeLightingSettings`](crate::TreeLightingSettings)) instead of by Bevy's PBR.
     pub tree_lighting: u32,
     /// 1: the sun through the crown by eq. 5.7's envelope blend
@@ -107,7 +108,7 @@ impl Default for LeafParams {
             fade_start: s.fade_start_pixels,
             fade_end: s.fade_end_pixels,
             gathered_bounce: 1,
-            pad_y: 0,
+            bounce_ring: 0,
             tree_lighting: 0,
             smooth_envelope: 0,
             bounce: 1,

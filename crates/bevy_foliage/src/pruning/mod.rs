@@ -12,6 +12,7 @@
 //!   [`procedural`] and [`gltf`].
 //! - **Main world**: [`components`] (what a game puts on its entities), [`systems`] (pruning
 //!   inputs per tree, slot meshes, diagnostics), [`store`] (the shared GPU buffers),
+//!   [`regather`] (the tree lighting's bounce ratios re-gathered at the sun's elevation),
 //!   [`slot_mesh`], [`spawn`] (one-call tree spawning) and [`asset`] (the `.foliage` loader).
 //! - **Render world**, beside its WGSL: [`render`] (`prune.wgsl`, the compute pass) and
 //!   [`material`] (`leaf*.wgsl`, the leaf material's vertex stages), [`opacity_shadow`]
@@ -33,6 +34,7 @@ pub mod opacity_casting;
 pub mod opacity_shadow;
 pub(crate) mod plugin;
 pub mod procedural;
+pub mod regather;
 pub mod render;
 pub mod selection;
 pub mod slot_mesh;

@@ -24,6 +24,8 @@ pub(crate) fn build(app: &mut App) {
         TRIANGLES_FULL,
         KEPT_PERCENT,
         TREES_PRUNED,
+        super::regather::BOUNCE_RING_SECONDS,
+        super::regather::BOUNCE_RINGS_GATHERING,
     ] {
         app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
     }
@@ -32,6 +34,7 @@ pub(crate) fn build(app: &mut App) {
         .init_resource::<FoliageStore>()
         .init_resource::<SlotMeshes>()
         .init_resource::<FoliageShadowLight>()
+        .init_resource::<super::regather::BounceRings>()
         .configure_sets(
             PostUpdate,
             (
@@ -49,7 +52,9 @@ pub(crate) fn build(app: &mut App) {
                 (track_shadow_light, compute_pruning_params)
                     .chain()
                     .in_set(FoliageSystems::PruningParams),
-                update_foliage_store.in_set(FoliageSystems::Store),
+                (update_foliage_store, super::regather::regather_bounce_rings)
+                    .chain()
+                    .in_set(FoliageSystems::Store),
                 (
                     assign_slot_meshes,
                     refresh_leaf_materials,

@@ -6,7 +6,8 @@
 
 use super::bake::BakedFoliage;
 use super::components::{FoliageShadowLight, PrunedFoliage, PruningParams};
-use crate::lighting::gathered_bounce::BounceRatios;
+use crate::lighting::bounce_ring::{BounceRing, NO_RING};
+use crate::lighting::gathered_bounce::{BounceRatios, STORED_RATIOS};
 use crate::settings::FoliagePruningSettings;
 use bevy::asset::{AssetId, RenderAssetUsages};
 use bevy::platform::collections::HashMap;
@@ -55,6 +56,8 @@ pub struct TypeSlot {
     pub vertex_base: u32,
     /// Indices with every leaf kept.
     pub full_index_count: u32,
+    /// The type's first leaf in the `leaf_light` buffer.
+    pub light_base: u32,
     /// Every leaf is a canonical quad ([`BakedFoliage::quad_leaves`]): drawn with quad slot
     /// meshes.
     pub quads: bool,
@@ -85,11 +88,55 @@ pub const LEAF_VERTEX_WORDS: usize = 16;
 /// Words per leaf in the `leaf_light` buffer: its eight attenuations (`BakedFoliage::leaf_light`),
 /// then its eight seen-part gains (`BakedFoliage::leaf_seen`), two `u16` a word, direction `2k`
 /// in the low half of word `k` of each four; then its 28 bounce ratios
-/// (`BakedFoliage::leaf_bounce`), four bytes a word, low byte first, and a word of padding.
-pub const LEAF_LIGHT_WORDS: usize = 16;
+/// (`BakedFoliage::leaf_bounce`), four bytes a word, low byte first; the sun height of its
+/// type's ring of re-gathered ratios (`f32` bits; [`NO_RING`] for none,
+/// [`crate::lighting::bounce_ring`]); its 28 ring ratios, as the bounce ratios; a word of
+/// padding.
+pub const LEAF_LIGHT_WORDS: usize = 24;
 
 // `BakedFoliage::gpu_bytes` counts these sizes.
-const _: () = assert!(LEAF_VERTEX_WORDS == 16 && LEAF_LIGHT_WORDS == 16);
+const _: () = assert!(LEAF_VERTEX_WORDS == 16 && LEAF_LIGHT_WORDS == 24);
+
+/// Appends the [`LEAF_LIGHT_WORDS`] words of each of `tree`'s leaves to `out`, with `ring` (its
+/// sun height and per leaf its ratios) as the type's ring; `None`, or a ring for another number
+/// of leaves: no ring.
+pub fn push_leaf_light(tree: &BakedFoliage, ring: Option<&BounceRing>, out: &mut Vec<u32>) {
+    let ring = ring.filter(|r| r.leaves.len() == tree.leaf_count() && r.sun_height.abs() <= 1.0);
+    let no_ratios = BounceRatios::default().quantized();
+    let ratio_words = |r: &[u8; STORED_RATIOS]| {
+        r.chunks_exact(4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect::<Vec<u32>>()
+    };
+    for leaf in 0..tree.leaf_count() {
+        // The leaves' attenuations (a bake without them, none stored, lets all light through)
+        // and seen-part gains.
+        let a = tree.leaf_light.get(leaf).copied().unwrap_or([u16::MAX; 8]);
+        out.extend((0..4).map(|k| a[2 * k] as u32 | (a[2 * k + 1] as u32) << 16));
+        // A bake without gains: the leaf's mean light as it is.
+        let g = tree
+            .leaf_seen
+            .get(leaf)
+            .copied()
+            .unwrap_or([crate::lighting::seen_part::quantize_gain(1.0); 8]);
+        out.extend((0..4).map(|k| g[2 * k] as u32 | (g[2 * k + 1] as u32) << 16));
+        // A bake without ratios: eq. 5.24 as it is.
+        out.extend(ratio_words(
+            tree.leaf_bounce.get(leaf).unwrap_or(&no_ratios),
+        ));
+        match ring {
+            Some(ring) => {
+                out.push(ring.sun_height.to_bits());
+                out.extend(ratio_words(&ring.leaves[leaf]));
+            }
+            None => {
+                out.push(NO_RING.to_bits());
+                out.extend(ratio_words(&no_ratios));
+            }
+        }
+        out.push(0);
+    }
+}
 
 /// Words per instance record (must match `Instance` in `prune.wgsl` and `leaf_pulling.wgsl`).
 pub const INSTANCE_WORDS: usize = 28;
@@ -140,6 +187,33 @@ struct Capacity {
     instances: u32,
     output: u32,
     cell_offsets: u32,
+}
+
+impl FoliageStore {
+    /// Replaces the `leaf_light` buffer with every uploaded type's leaves (in the buffer's
+    /// order) and the ring `ring_of` gives each type (`None`: no ring); bumps the generation so
+    /// that the leaf materials bind the new buffer. A type whose asset is gone is left out (zeros
+    /// up to the next type's place).
+    pub fn rewrite_leaf_light<'a>(
+        &mut self,
+        buffers: &mut Assets<ShaderBuffer>,
+        baked: &'a Assets<BakedFoliage>,
+        ring_of: impl Fn(AssetId<BakedFoliage>) -> Option<&'a BounceRing>,
+    ) {
+        let mut types: Vec<(AssetId<BakedFoliage>, TypeSlot)> =
+            self.types.iter().map(|(id, slot)| (*id, *slot)).collect();
+        types.sort_by_key(|(_, slot)| slot.light_base);
+        let mut light: Vec<u32> = Vec::new();
+        for (id, slot) in types {
+            // The type's place (already reached while every type's asset lives).
+            light.resize(slot.light_base as usize * LEAF_LIGHT_WORDS, 0);
+            if let Some(tree) = baked.get(id) {
+                push_leaf_light(tree, ring_of(id), &mut light);
+            }
+        }
+        self.buffers.leaf_light = buffers.add(words_buffer(&light, "foliage_leaf_light"));
+        self.generation += 1;
+    }
 }
 
 fn words_buffer(words: &[u32], label: &'static str) -> ShaderBuffer {
@@ -205,6 +279,7 @@ pub fn update_foliage_store(
                 vertex_base: (verts.len() / LEAF_VERTEX_WORDS) as u32,
                 full_index_count: tree.indices.len() as u32,
                 quads: tree.quad_leaves() && !store_force_triangles,
+                light_base: (light.len() / LEAF_LIGHT_WORDS) as u32,
                 extinction_bits: tree.extinction.to_bits(),
                 hotspot: tree.hotspot.packed(),
                 crown_sphere_bits: {
@@ -217,31 +292,8 @@ pub fn update_foliage_store(
                     [centre.x, centre.y, centre.z, radius].map(f32::to_bits)
                 },
             };
-            // The leaves' attenuations (a bake without them, none stored, lets all light through)
-            // and seen-part gains.
             let light_base = (light.len() / LEAF_LIGHT_WORDS) as u32;
-            for leaf in 0..tree.leaf_count() {
-                let a = tree.leaf_light.get(leaf).copied().unwrap_or([u16::MAX; 8]);
-                light.extend((0..4).map(|k| a[2 * k] as u32 | (a[2 * k + 1] as u32) << 16));
-                // A bake without gains: the leaf's mean light as it is.
-                let g = tree
-                    .leaf_seen
-                    .get(leaf)
-                    .copied()
-                    .unwrap_or([crate::lighting::seen_part::quantize_gain(1.0); 8]);
-                light.extend((0..4).map(|k| g[2 * k] as u32 | (g[2 * k + 1] as u32) << 16));
-                // A bake without ratios: eq. 5.24 as it is.
-                let r = tree
-                    .leaf_bounce
-                    .get(leaf)
-                    .copied()
-                    .unwrap_or_else(|| BounceRatios::default().quantized());
-                light.extend(
-                    r.chunks_exact(4)
-                        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-                );
-                light.push(0);
-            }
+            push_leaf_light(tree, None, &mut light);
             cfl.extend_from_slice(&tree.cell_first_leaf);
             vis.extend(tree.visibility.iter().map(|&v| v as u32));
             lis.extend_from_slice(&tree.leaf_index_start);
@@ -391,5 +443,51 @@ pub fn update_foliage_store(
         b.draws = buffers.add(draws);
         store.capacity = cap;
         store.generation += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::gathered_bounce::quantize_ratio;
+
+    /// Each leaf's words: the bake's values where they were, then its type's ring height and
+    /// ring ratios (low byte first), or no ring's — also for a ring of the wrong size.
+    #[test]
+    fn the_leaf_light_words_hold_the_types_ring() {
+        let tree = crate::pruning::format::tests::sample();
+        let n = tree.leaf_count();
+        let ring = BounceRing {
+            sun_height: 0.25,
+            leaves: (0..n)
+                .map(|l| std::array::from_fn(|i| (l * 7 + i) as u8))
+                .collect(),
+        };
+        let (mut with, mut without, mut wrong) = (Vec::new(), Vec::new(), Vec::new());
+        push_leaf_light(&tree, Some(&ring), &mut with);
+        push_leaf_light(&tree, None, &mut without);
+        let short = BounceRing {
+            sun_height: 0.25,
+            leaves: ring.leaves[1..].to_vec(),
+        };
+        push_leaf_light(&tree, Some(&short), &mut wrong);
+        assert_eq!(with.len(), n * LEAF_LIGHT_WORDS);
+        assert_eq!(without, wrong);
+        let one = u32::from_le_bytes([quantize_ratio(1.0); 4]);
+        for leaf in [0, n / 2, n - 1] {
+            let w = &with[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
+            let o = &without[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
+            assert_eq!(w[..15], o[..15]);
+            let b = tree.leaf_bounce[leaf];
+            assert_eq!(w[8], u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+            assert_eq!(f32::from_bits(w[15]), 0.25);
+            assert_eq!(f32::from_bits(o[15]), NO_RING);
+            for k in 0..7 {
+                let r = &ring.leaves[leaf][4 * k..4 * k + 4];
+                assert_eq!(w[16 + k], u32::from_le_bytes([r[0], r[1], r[2], r[3]]));
+                assert_eq!(o[16 + k], one);
+            }
+            assert_eq!((w[23], o[23]), (0, 0));
+        }
     }
 }

@@ -345,6 +345,7 @@ pub fn tree_lights<'a>(
         bounce: lighting.bounce as u32,
         seen_part: lighting.seen_part as u32,
         gathered_bounce: lighting.gathered_bounce as u32,
+        bounce_ring: lighting.bounce_ring.enabled as u32,
         lights: TreeLightUniform {
             reflectance_front: optics.reflectance_front.extend(0.0),
             reflectance_back: optics.reflectance_back.extend(0.0),

@@ -199,6 +199,58 @@ fn ratio_towards(ratios: array<f32, 28>, to_sun: vec3<f32>) -> vec2<f32> {
     return mean / 14.0;
 }
 
+// Suns on a ring of re-gathered ratios (`lighting::bounce_ring::RING_NODES`), and the degrees of
+// elevation from its ring within which a sun takes the ring alone and beyond which the bake's
+// blend alone (`RING_FULL_DEGREES`, `RING_GONE_DEGREES`).
+const RING_NODES: u32 = 14u;
+const RING_FULL_DEGREES: f32 = 2.0;
+const RING_GONE_DEGREES: f32 = 6.0;
+
+// How much of a leaf's ratios its type's ring at sun height `ring_height` gives for the sun
+// towards `to_sun` (`lighting::bounce_ring::ring_weight`): 1 within RING_FULL_DEGREES of the
+// ring's elevation, 0 beyond RING_GONE_DEGREES (and for no ring, a height outside [−1, 1]),
+// smoothstep between.
+fn ring_weight(ring_height: f32, to_sun: vec3<f32>) -> f32 {
+    if !(abs(ring_height) <= 1.0) {
+        return 0.0;
+    }
+    let apart = abs(asin(clamp(to_sun.y, -1.0, 1.0)) - asin(ring_height)) * (180.0 / PI);
+    let t = clamp((apart - RING_FULL_DEGREES) / (RING_GONE_DEGREES - RING_FULL_DEGREES), 0.0, 1.0);
+    return 1.0 - t * t * (3.0 - 2.0 * t);
+}
+
+// The ratios towards `to_sun` from a leaf's ring (node k's front face at k, its back face at
+// 14 + k; node k at azimuth 2πk/14 from +x towards +z): linear in azimuth between the nodes
+// either side (`lighting::bounce_ring::ratio_on_ring`).
+fn ratio_on_ring(ring: array<f32, 28>, to_sun: vec3<f32>) -> vec2<f32> {
+    let step = 2.0 * PI / f32(RING_NODES);
+    var x = atan2(to_sun.z, to_sun.x) / step;
+    x = x - f32(RING_NODES) * floor(x / f32(RING_NODES));
+    let i = min(u32(floor(x)), RING_NODES - 1u);
+    let f = clamp(x - f32(i), 0.0, 1.0);
+    let j = (i + 1u) % RING_NODES;
+    let a = vec2(ring[i], ring[RING_NODES + i]);
+    let b = vec2(ring[j], ring[RING_NODES + j]);
+    return a + f * (b - a);
+}
+
+// A leaf's bounce factors (front, back) for the sun towards `to_sun`: its type's ring where the
+// sun is at the ring's elevation, the bake's basis ratios blended towards the sun where not,
+// mixed by `ring_weight` between (`lighting::bounce_ring::ratio_with_ring`).
+fn ratio_with_ring(
+    basis: array<f32, 28>,
+    ring_height: f32,
+    ring: array<f32, 28>,
+    to_sun: vec3<f32>,
+) -> vec2<f32> {
+    let blend = ratio_towards(basis, to_sun);
+    let w = ring_weight(ring_height, to_sun);
+    if w <= 0.0 {
+        return blend;
+    }
+    return blend + w * (ratio_on_ring(ring, to_sun) - blend);
+}
+
 // Node `k` of eight u8 nodes packed four to a word, low byte first, in 64ths.
 fn hotspot_node(nodes: vec2<u32>, k: u32) -> f32 {
     return f32((nodes[k / 4u] >> (8u * (k % 4u))) & 0xffu) / 64.0;

@@ -1,0 +1,438 @@
+//! The bounce ratios re-gathered while an app runs, on a ring of suns at the sun's elevation.
+//!
+//! A bake gathers each leaf's bounce for fourteen fixed suns ([`super::gathered_bounce`]) and
+//! the leaf shaders blend them towards the sun of the moment. Against the sun the blend is what
+//! costs: in images of the four procedural trees at pixels 1.4–2.5 leaves wide it is 21–35 %
+//! off where the same rays gathered for the image's own sun are 7–18 % off
+//! (`tree_lighting_error --images --bounce-rays 64 --sun-ring 14`). Boulanger 2008 recomputes
+//! the bounce's per-tree constants (G1–G3, eq. 5.18, 5.25, 5.26) on the CPU whenever the
+//! lighting changes (§5.4.3, §5.6); this is the same step for the gathered part.
+//!
+//! Re-gathering for the sun alone would serve only trees turned as the bake's: a forest turns
+//! its instances about their vertical, and each sees the one sun at its own azimuth in its
+//! model's frame. So the ratios are gathered for [`RING_NODES`] suns at the sun's elevation
+//! spread round the model's vertical ([`ring_suns`]), which every upright instance, however
+//! turned, sees the sun among; the leaf vertex shader reads the ring linearly in azimuth
+//! ([`ratio_on_ring`]). Fourteen nodes fill the 28 bytes a leaf's basis ratios take, stored the
+//! same way (front face's nodes, then the back's). Measured against a ring of 12 (the table of
+//! `tree_lighting_error --sun-ring 6,8,12,14`), fewer nodes cost more between them.
+//!
+//! The ring holds for the elevation it was gathered at. A sun (in the model's frame) within
+//! [`RING_FULL_DEGREES`] of it takes the ring alone, one beyond [`RING_GONE_DEGREES`] the
+//! fourteen-sun blend alone, and between them the two are mixed ([`ring_weight`]): a tilted
+//! instance, a ring not yet gathered or one the sun has moved away from while its successor is
+//! gathered fall back to the bake's ratios without a jump. [`needs_regather`] says when the sun
+//! has moved far enough for a new ring.
+//!
+//! Plain Rust, no render types.
+
+use super::envelope::LeafEnvelope;
+use super::gathered_bounce::{
+    BounceRatios, STORED_RATIOS, quantize_ratio, ratio_of, ratio_towards, sun_ratios_of,
+};
+use super::leaf_scene::LeafScene;
+use super::model::LeafMaterial;
+use bevy::math::Vec3;
+use std::f32::consts::TAU;
+
+/// Suns on a ring: their ratios, front and back, fill a leaf's [`STORED_RATIOS`] bytes.
+pub const RING_NODES: usize = STORED_RATIOS / 2;
+
+/// Within this many degrees of elevation of its ring a sun takes the ring alone.
+pub const RING_FULL_DEGREES: f32 = 2.0;
+
+/// Beyond this many degrees of elevation from its ring a sun takes the bake's blend alone.
+pub const RING_GONE_DEGREES: f32 = 6.0;
+
+/// The default of how far (degrees of elevation) the sun moves from the ring before a new one
+/// is gathered: half of [`RING_FULL_DEGREES`], so that the ring in use stays whole while the
+/// next is gathered unless the sun moves faster than a degree per re-gather.
+pub const DEFAULT_REGATHER_DEGREES: f32 = 1.0;
+
+/// The sun height stored for a leaf without a ring (no sun is that high): the blend alone.
+pub const NO_RING: f32 = 2.0;
+
+/// A tree type's ring: the height of the suns it was gathered for (the y of the direction
+/// towards them in the model's frame, +y up: the sine of their elevation) and, per stored leaf,
+/// its ratios for the [`RING_NODES`] suns of [`ring_suns`] as a bake stores ratios
+/// ([`quantize_ratio`]): node `k`'s front face at byte `k`, its back face at `RING_NODES + k`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BounceRing {
+    /// The sine of the ring's elevation.
+    pub sun_height: f32,
+    /// Per stored leaf, its ring ratios.
+    pub leaves: Vec<[u8; STORED_RATIOS]>,
+}
+
+/// The elevation (radians) of a direction whose y is `height` (clamped to [−1, 1]).
+pub fn elevation_of(height: f32) -> f32 {
+    height.clamp(-1.0, 1.0).asin()
+}
+
+/// The [`RING_NODES`] suns of a ring at sun height `height` (the sine of their elevation,
+/// clamped to [−1, 1]; not finite: empty): node `k` at azimuth `2π·k / RING_NODES` from +x
+/// towards +z (the azimuth of `(x, y, z)` is `atan2(z, x)`).
+pub fn ring_suns(height: f32) -> Vec<Vec3> {
+    if !height.is_finite() {
+        return Vec::new();
+    }
+    let y = height.clamp(-1.0, 1.0);
+    let across = (1.0 - y * y).max(0.0).sqrt();
+    (0..RING_NODES)
+        .map(|k| {
+            let azimuth = TAU * k as f32 / RING_NODES as f32;
+            Vec3::new(across * azimuth.cos(), y, across * azimuth.sin())
+        })
+        .collect()
+}
+
+/// The ring at sun height `height` for `leaves` (indices into `scene`, in the order the ring
+/// stores them; `envelopes[i]` the envelope of `leaves[i]`) of a crown of extinction `tau`:
+/// [`sun_ratios_of`] for [`ring_suns`], `rays` rays a leaf, quantised. A leaf without an
+/// envelope or outside `scene`: ratios of 1 (eq. 5.24 unchanged).
+#[allow(clippy::too_many_arguments)]
+pub fn gather_ring(
+    scene: &LeafScene,
+    material: &LeafMaterial,
+    leaves: &[u32],
+    envelopes: &[LeafEnvelope],
+    tau: f32,
+    height: f32,
+    rays: u32,
+    opacity: &(impl Fn(u32) -> f32 + Sync),
+    threads: usize,
+) -> BounceRing {
+    let suns = ring_suns(height);
+    let ratios = sun_ratios_of(
+        scene, material, leaves, envelopes, tau, &suns, rays, opacity, threads,
+    );
+    BounceRing {
+        sun_height: height.clamp(-1.0, 1.0),
+        leaves: ratios
+            .iter()
+            .map(|nodes| {
+                std::array::from_fn(|i| {
+                    let face = i / RING_NODES;
+                    quantize_ratio(nodes.get(i % RING_NODES).map_or(1.0, |r| r[face]))
+                })
+            })
+            .collect(),
+    }
+}
+
+/// The crown's mean ring: per node and face the mean of its leaves' ring ratios (read back as
+/// stored), for a billboard cloud, whose texels have no room for their leaves' own (as
+/// [`super::gathered_bounce::crown_mean_ratios`] for the bake's). No leaves: all 1.
+pub fn crown_mean_ring(ring: &BounceRing) -> [[f32; 2]; RING_NODES] {
+    if ring.leaves.is_empty() {
+        return [[1.0; 2]; RING_NODES];
+    }
+    let mut sum = [[0.0f64; 2]; RING_NODES];
+    for stored in &ring.leaves {
+        for (k, node) in ring_nodes_of(stored).iter().enumerate() {
+            sum[k][0] += node[0] as f64;
+            sum[k][1] += node[1] as f64;
+        }
+    }
+    let n = ring.leaves.len() as f64;
+    sum.map(|[f, b]| [(f / n) as f32, (b / n) as f32])
+}
+
+/// A leaf's ring ratios as stored, read back: per node, front and back.
+pub fn ring_nodes_of(stored: &[u8; STORED_RATIOS]) -> [[f32; 2]; RING_NODES] {
+    std::array::from_fn(|k| [ratio_of(stored[k]), ratio_of(stored[RING_NODES + k])])
+}
+
+/// The ratios towards `to_sun` (model space) from a leaf's ring nodes: linear in azimuth
+/// between the two nodes either side, continuous all round (a sun straight up or down, whose
+/// azimuth is none, takes node 0's: every node is that sun there).
+pub fn ratio_on_ring(nodes: &[[f32; 2]; RING_NODES], to_sun: Vec3) -> [f32; 2] {
+    super::gathered_bounce::ratio_on_ring(nodes, 0.0, to_sun)
+}
+
+/// How much of a leaf's ratios the ring gathered at sun height `ring_height` gives for the sun
+/// towards `to_sun` (unit, model space), the bake's blend giving the rest: 1 within
+/// [`RING_FULL_DEGREES`] of the ring's elevation, 0 beyond [`RING_GONE_DEGREES`], smooth
+/// (smoothstep) between; 0 for no ring ([`NO_RING`], anything outside [−1, 1]) or a sun that
+/// is not finite.
+pub fn ring_weight(ring_height: f32, to_sun: Vec3) -> f32 {
+    if ring_height.is_nan() || ring_height.abs() > 1.0 || !to_sun.is_finite() {
+        return 0.0;
+    }
+    let apart = (elevation_of(to_sun.y) - elevation_of(ring_height))
+        .abs()
+        .to_degrees();
+    let t = ((apart - RING_FULL_DEGREES) / (RING_GONE_DEGREES - RING_FULL_DEGREES)).clamp(0.0, 1.0);
+    1.0 - t * t * (3.0 - 2.0 * t)
+}
+
+/// A leaf's bounce factors (front, back) for the sun towards `to_sun` (unit, model space): its
+/// ring's nodes (`ring`: the ring's sun height and the leaf's stored ring ratios) where the
+/// sun is at the ring's elevation, the bake's `basis` ratios blended towards the sun
+/// ([`ratio_towards`]) where it is not, mixed by [`ring_weight`] between. What the leaf vertex
+/// shader gives eq. 5.24's faces (`tree_lighting.wgsl`'s `ratio_with_ring`).
+pub fn ratio_with_ring(
+    basis: &BounceRatios,
+    ring: Option<(f32, &[u8; STORED_RATIOS])>,
+    to_sun: Vec3,
+) -> [f32; 2] {
+    let nodes = ring.map(|(height, stored)| (height, ring_nodes_of(stored)));
+    ratio_with_ring_nodes(basis, nodes.as_ref().map(|(h, n)| (*h, n)), to_sun)
+}
+
+/// [`ratio_with_ring`] with the ring's nodes as ratios (a billboard cloud's crown mean,
+/// [`crown_mean_ring`]).
+pub fn ratio_with_ring_nodes(
+    basis: &BounceRatios,
+    ring: Option<(f32, &[[f32; 2]; RING_NODES])>,
+    to_sun: Vec3,
+) -> [f32; 2] {
+    let blend = ratio_towards(basis, to_sun);
+    let Some((height, nodes)) = ring else {
+        return blend;
+    };
+    let w = ring_weight(height, to_sun);
+    if w <= 0.0 {
+        return blend;
+    }
+    let on_ring = ratio_on_ring(nodes, to_sun);
+    [0, 1].map(|f| blend[f] + w * (on_ring[f] - blend[f]))
+}
+
+/// Whether a tree type needs a new ring for the sun at height `sun_height` (the sine of its
+/// elevation): not while the ring it has (`ring`, its sun height) is within
+/// `threshold_degrees` of elevation of the sun; else yes. A sun that is not finite needs none.
+/// (One being gathered is waited for: a re-gather runs to its end once started.)
+pub fn needs_regather(sun_height: f32, ring: Option<f32>, threshold_degrees: f32) -> bool {
+    if !sun_height.is_finite() {
+        return false;
+    }
+    !ring.is_some_and(|h| {
+        (elevation_of(h) - elevation_of(sun_height))
+            .abs()
+            .to_degrees()
+            <= threshold_degrees
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::gathered_bounce::{
+        DEFAULT_BOUNCE_RAYS, SUN_BASIS, basis_bounces, bounce_gather, leaf_seed,
+    };
+    use crate::lighting::path_trace::uniform_ball;
+    use crate::lighting::traced_bins::crown_envelope_traced;
+
+    #[test]
+    fn the_ring_lies_at_the_suns_elevation_round_the_vertical() {
+        let suns = ring_suns(0.5);
+        assert_eq!(suns.len(), RING_NODES);
+        for (k, s) in suns.iter().enumerate() {
+            assert!((s.length() - 1.0).abs() < 1e-6);
+            assert!((s.y - 0.5).abs() < 1e-6);
+            let azimuth = s.z.atan2(s.x).rem_euclid(TAU);
+            assert!((azimuth - TAU * k as f32 / RING_NODES as f32).abs() < 1e-5);
+        }
+        assert_eq!(ring_suns(0.0)[0], Vec3::X);
+        assert!(ring_suns(f32::NAN).is_empty());
+        assert!(ring_suns(3.0).iter().all(|s| *s == Vec3::Y));
+    }
+
+    #[test]
+    fn the_ring_weight_is_whole_near_the_ring_and_gone_far_from_it() {
+        let at = |degrees: f32| {
+            let e = degrees.to_radians();
+            Vec3::new(e.cos(), e.sin(), 0.0)
+        };
+        let h = 30f32.to_radians().sin();
+        assert_eq!(ring_weight(h, at(30.0)), 1.0);
+        assert_eq!(ring_weight(h, at(30.0 + RING_FULL_DEGREES - 0.01)), 1.0);
+        assert_eq!(ring_weight(h, at(30.0 - RING_GONE_DEGREES - 0.01)), 0.0);
+        assert_eq!(ring_weight(h, at(30.0 + RING_GONE_DEGREES + 0.01)), 0.0);
+        let mid = ring_weight(h, at(30.0 + 0.5 * (RING_FULL_DEGREES + RING_GONE_DEGREES)));
+        assert!((mid - 0.5).abs() < 1e-3, "{mid}");
+        // Monotone in the elevation apart, the same either side.
+        let mut last = 1.0;
+        for tenth in 0..100 {
+            let d = tenth as f32 * 0.1;
+            let w = ring_weight(h, at(30.0 + d));
+            assert!(w <= last + 1e-6 && (w - ring_weight(h, at(30.0 - d))).abs() < 1e-4);
+            last = w;
+        }
+        // No ring, or a sun that is no direction: the blend alone.
+        assert_eq!(ring_weight(NO_RING, at(30.0)), 0.0);
+        assert_eq!(ring_weight(f32::NAN, at(30.0)), 0.0);
+        assert_eq!(ring_weight(h, Vec3::NAN), 0.0);
+        // The azimuth does not matter.
+        assert_eq!(
+            ring_weight(h, Vec3::new(0.0, h, -(1.0 - h * h).sqrt())),
+            1.0
+        );
+    }
+
+    /// Distinct ratios per node and face, as stored.
+    fn distinct_ring() -> [u8; STORED_RATIOS] {
+        std::array::from_fn(|i| {
+            if i < RING_NODES {
+                quantize_ratio(0.4 + 0.1 * i as f32)
+            } else {
+                quantize_ratio(3.0 + 0.25 * (i - RING_NODES) as f32)
+            }
+        })
+    }
+
+    #[test]
+    fn the_ring_gives_its_nodes_and_mixes_with_the_blend_off_its_elevation() {
+        let stored = distinct_ring();
+        let nodes = ring_nodes_of(&stored);
+        let basis = BounceRatios {
+            front: std::array::from_fn(|k| 1.0 + 0.05 * k as f32),
+            back: std::array::from_fn(|k| 0.7 + 0.02 * k as f32),
+        };
+        let h = 0.3f32;
+        let suns = ring_suns(h);
+        // On a node: its ratios exactly, front and back.
+        for k in [0, 3, 13] {
+            let r = ratio_with_ring(&basis, Some((h, &stored)), suns[k]);
+            assert!((r[0] - nodes[k][0]).abs() < 1e-5 && (r[1] - nodes[k][1]).abs() < 1e-5);
+        }
+        // Midway between nodes 13 and 0 (across the wrap): their mean.
+        let mid = (suns[13] + suns[0]).normalize();
+        let mid = Vec3::new(mid.x, 0.0, mid.z).normalize() * (1.0 - h * h).sqrt() + Vec3::Y * h;
+        let r = ratio_with_ring(&basis, Some((h, &stored)), mid);
+        assert!(
+            (r[0] - 0.5 * (nodes[13][0] + nodes[0][0])).abs() < 1e-4,
+            "{r:?}"
+        );
+        assert!(
+            (r[1] - 0.5 * (nodes[13][1] + nodes[0][1])).abs() < 1e-4,
+            "{r:?}"
+        );
+        // No ring, or a sun far from its elevation: the blend.
+        let far = Vec3::new(0.0, 0.9, 0.4359).normalize();
+        assert_eq!(
+            ratio_with_ring(&basis, None, far),
+            ratio_towards(&basis, far)
+        );
+        assert_eq!(
+            ratio_with_ring(&basis, Some((h, &stored)), far),
+            ratio_towards(&basis, far)
+        );
+        // Between: the two mixed by the weight.
+        let e = elevation_of(h) + (0.5 * (RING_FULL_DEGREES + RING_GONE_DEGREES)).to_radians();
+        let between = Vec3::new(e.cos(), e.sin(), 0.0);
+        let w = ring_weight(h, between);
+        let (blend, ring) = (
+            ratio_towards(&basis, between),
+            ratio_on_ring(&nodes, between),
+        );
+        let r = ratio_with_ring(&basis, Some((h, &stored)), between);
+        for f in 0..2 {
+            assert!((r[f] - (blend[f] + w * (ring[f] - blend[f]))).abs() < 1e-5);
+            assert!((r[f] - blend[f]).abs() > 0.1 && (r[f] - ring[f]).abs() > 0.1);
+        }
+    }
+
+    #[test]
+    fn the_crowns_mean_ring_is_each_node_and_faces_mean() {
+        let a = distinct_ring();
+        let b: [u8; STORED_RATIOS] = std::array::from_fn(|i| quantize_ratio(1.0 + i as f32 * 0.01));
+        let ring = BounceRing {
+            sun_height: 0.2,
+            leaves: vec![a, b],
+        };
+        let mean = crown_mean_ring(&ring);
+        let (na, nb) = (ring_nodes_of(&a), ring_nodes_of(&b));
+        for k in 0..RING_NODES {
+            for f in 0..2 {
+                assert!((mean[k][f] - 0.5 * (na[k][f] + nb[k][f])).abs() < 1e-5);
+            }
+        }
+        let none = BounceRing {
+            sun_height: 0.2,
+            leaves: Vec::new(),
+        };
+        assert_eq!(crown_mean_ring(&none), [[1.0; 2]; RING_NODES]);
+    }
+
+    #[test]
+    fn a_new_ring_is_gathered_when_the_sun_leaves_the_last() {
+        let deg = |d: f32| d.to_radians().sin();
+        // Nothing yet: gather.
+        assert!(needs_regather(deg(40.0), None, 1.0));
+        // A ring close enough: none.
+        assert!(!needs_regather(deg(40.0), Some(deg(39.5)), 1.0));
+        assert!(!needs_regather(deg(40.0), Some(deg(40.9)), 1.0));
+        // The sun moved on: gather.
+        assert!(needs_regather(deg(40.0), Some(deg(38.5)), 1.0));
+        assert!(needs_regather(deg(-10.0), Some(deg(-12.0)), 1.0));
+        assert!(!needs_regather(f32::NAN, None, 1.0));
+    }
+
+    /// A ring at the horizon has its node 0 at +x, a basis sun: the leaves' ring ratios there
+    /// are the bake's ratios for +x (the same rays), quantised as stored.
+    #[test]
+    fn a_ring_node_on_a_basis_sun_takes_the_bakes_ratios_for_it() {
+        let leaves = uniform_ball(300, 1.0, 0.12, 7);
+        let scene = LeafScene::new(&leaves);
+        let proxies = crate::lighting::bins::proxies(&leaves);
+        let all: Vec<u32> = (0..leaves.len() as u32).collect();
+        let envelope = crown_envelope_traced(&proxies, &scene, &all, &|_| 1.0, 16, 2, &|_| {});
+        let material = crate::lighting::settings::TreeLightingSettings::default().optics;
+        let ring = gather_ring(
+            &scene,
+            &material,
+            &all,
+            &envelope.leaves,
+            envelope.tau,
+            0.0,
+            DEFAULT_BOUNCE_RAYS,
+            &|_| 1.0,
+            2,
+        );
+        assert_eq!(ring.leaves.len(), leaves.len());
+        assert_eq!(ring.sun_height, 0.0);
+        assert_eq!(SUN_BASIS[8], Vec3::X);
+        let bounces = basis_bounces(&material, envelope.tau);
+        let mut differ = 0;
+        for (leaf, stored) in ring.leaves.iter().enumerate() {
+            let baked = bounce_gather(
+                &scene,
+                &material,
+                leaf,
+                &envelope.leaves[leaf],
+                envelope.tau,
+                &bounces,
+                DEFAULT_BOUNCE_RAYS,
+                &|_| 1.0,
+                leaf_seed(leaf as u32),
+            )
+            .ratios();
+            assert_eq!(stored[0], quantize_ratio(baked.front[8]), "leaf {leaf}");
+            assert_eq!(
+                stored[RING_NODES],
+                quantize_ratio(baked.back[8]),
+                "leaf {leaf}"
+            );
+            // Other nodes are other suns.
+            differ += (stored[3] != stored[0]) as usize;
+        }
+        assert!(differ * 2 > leaves.len(), "{differ}");
+        // A leaf the scene lacks, or without an envelope: eq. 5.24 unchanged.
+        let outside = gather_ring(
+            &scene,
+            &material,
+            &[9999, 0],
+            &envelope.leaves[..1],
+            envelope.tau,
+            0.0,
+            8,
+            &|_| 1.0,
+            1,
+        );
+        for stored in &outside.leaves {
+            assert!(stored.iter().all(|&q| q == quantize_ratio(1.0)));
+        }
+    }
+}

@@ -1,0 +1,236 @@
+//! Re-gathering each tree type's bounce ratios on a ring of suns at the sun's elevation while
+//! the app runs ([`crate::lighting::bounce_ring`]): when the sun's elevation has moved
+//! [`BounceRingSettings::regather_degrees`] from a type's ring, a background task gathers the
+//! next one from the type's loaded bake (its leaves as a scene, its envelopes read back, the
+//! opacity it was traced with); when it lands, the leaves' light buffer is rewritten with it.
+//!
+//! The sun's elevation is taken in the world's frame, which is each instance's own for trees
+//! turned about their vertical only; the leaf shaders compare the ring's elevation with the
+//! sun's in each instance's frame, so a tilted instance falls back to the bake's blend.
+//!
+//! [`BounceRingSettings::regather_degrees`]: crate::lighting::settings::BounceRingSettings::regather_degrees
+
+use super::bake::BakedFoliage;
+use super::store::FoliageStore;
+use super::systems::tree_lights;
+use crate::lighting::bounce_ring::{
+    BounceRing, RING_NODES, crown_mean_ring, gather_ring, needs_regather,
+};
+use crate::lighting::settings::TreeLightingSettings;
+use bevy::asset::AssetId;
+use bevy::diagnostic::{DiagnosticPath, Diagnostics};
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+use bevy::render::storage::ShaderBuffer;
+use bevy::tasks::{AsyncComputeTaskPool, Task, block_on, poll_once};
+use std::sync::Arc;
+
+/// Diagnostic: seconds the last ring re-gather took (its wall-clock time on its threads).
+pub const BOUNCE_RING_SECONDS: DiagnosticPath =
+    DiagnosticPath::const_new("foliage/bounce_ring_seconds");
+/// Diagnostic: tree types whose ring is being re-gathered.
+pub const BOUNCE_RINGS_GATHERING: DiagnosticPath =
+    DiagnosticPath::const_new("foliage/bounce_rings_gathering");
+
+/// What a re-gather hands back: the ring and the seconds it took.
+struct Gathered {
+    ring: BounceRing,
+    seconds: f32,
+}
+
+/// Each tree type's ring of bounce ratios re-gathered at the sun's elevation, and the
+/// re-gathers in flight (a resource). A ring put in with [`BounceRings::insert`] is used as if
+/// gathered, until the sun moves from its elevation.
+#[derive(Resource, Default)]
+pub struct BounceRings {
+    rings: HashMap<AssetId<BakedFoliage>, BounceRing>,
+    /// Per ring, its crown's mean (for billboard clouds).
+    means: HashMap<AssetId<BakedFoliage>, [[f32; 2]; RING_NODES]>,
+    in_flight: HashMap<AssetId<BakedFoliage>, (f32, Task<Gathered>)>,
+    /// The leaf light buffer last written with the rings (a new one from the store means its
+    /// types were uploaded again, without rings).
+    written: Option<Handle<ShaderBuffer>>,
+    changed: bool,
+    generation: u64,
+    completed: u64,
+    last_seconds: Option<f32>,
+}
+
+impl BounceRings {
+    /// Tree type `id`'s ring, once one has been gathered or put in.
+    pub fn ring(&self, id: AssetId<BakedFoliage>) -> Option<&BounceRing> {
+        self.rings.get(&id)
+    }
+
+    /// Puts in `ring` as type `id`'s (for the leaves of that type: a ring for another number
+    /// of leaves is not drawn); it is drawn from the next frame.
+    pub fn insert(&mut self, id: AssetId<BakedFoliage>, ring: BounceRing) {
+        self.means.insert(id, crown_mean_ring(&ring));
+        self.rings.insert(id, ring);
+        self.changed = true;
+        self.generation += 1;
+    }
+
+    /// Bumped whenever a ring comes in.
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// Tree type `id`'s ring as its crown's mean, with its sun height: what the type's
+    /// tree-lit billboard clouds read ([`crown_mean_ring`]).
+    pub fn crown_mean(&self, id: AssetId<BakedFoliage>) -> Option<(f32, [[f32; 2]; RING_NODES])> {
+        Some((self.rings.get(&id)?.sun_height, *self.means.get(&id)?))
+    }
+
+    /// Whether type `id`'s ring is being re-gathered.
+    pub fn is_gathering(&self, id: AssetId<BakedFoliage>) -> bool {
+        self.in_flight.contains_key(&id)
+    }
+
+    /// Re-gathers completed since the app started.
+    pub fn completed(&self) -> u64 {
+        self.completed
+    }
+
+    /// Seconds the last completed re-gather took.
+    pub fn last_seconds(&self) -> Option<f32> {
+        self.last_seconds
+    }
+}
+
+/// The re-gather of tree `tree`'s ring at sun height `height`, as [`gather_ring`] of its
+/// stored leaves with the lighting's optics, `rays` rays a leaf and `threads` threads.
+fn regather(
+    tree: &BakedFoliage,
+    optics: &crate::lighting::model::LeafMaterial,
+    height: f32,
+    rays: u32,
+    threads: usize,
+) -> Gathered {
+    let started = std::time::Instant::now();
+    let scene = tree.leaf_scene();
+    let envelopes = tree.leaf_envelopes();
+    let leaves: Vec<u32> = (0..tree.leaf_count() as u32).collect();
+    let opacity = tree.leaf_opacity;
+    let ring = gather_ring(
+        &scene,
+        optics,
+        &leaves,
+        &envelopes,
+        tree.extinction,
+        height,
+        rays,
+        &|_| opacity,
+        threads,
+    );
+    Gathered {
+        ring,
+        seconds: started.elapsed().as_secs_f32(),
+    }
+}
+
+/// Collects finished re-gathers, starts one for each uploaded tree type the sun's elevation
+/// has left (while [`TreeLightingSettings::bounce_ring`] and the gathered bounce are on), and
+/// rewrites the leaves' light buffer when a ring has come in or the store uploaded its types
+/// again.
+#[allow(clippy::too_many_arguments)]
+pub fn regather_bounce_rings(
+    lighting: Res<TreeLightingSettings>,
+    suns: Query<(&DirectionalLight, &GlobalTransform)>,
+    baked: Res<Assets<BakedFoliage>>,
+    mut store: ResMut<FoliageStore>,
+    mut buffers: ResMut<Assets<ShaderBuffer>>,
+    mut rings: ResMut<BounceRings>,
+    mut diagnostics: Diagnostics,
+    mut warned: Local<bool>,
+) {
+    let rings = &mut *rings;
+    // Finished re-gathers (whatever the settings now: a ring gathered is kept).
+    let done: Vec<(AssetId<BakedFoliage>, Gathered)> = rings
+        .in_flight
+        .iter_mut()
+        .filter_map(|(id, (_, task))| block_on(poll_once(task)).map(|gathered| (*id, gathered)))
+        .collect();
+    for (id, gathered) in done {
+        rings.in_flight.remove(&id);
+        rings.last_seconds = Some(gathered.seconds);
+        rings.insert(id, gathered.ring);
+        rings.completed += 1;
+    }
+    if let Some(seconds) = rings.last_seconds {
+        diagnostics.add_measurement(&BOUNCE_RING_SECONDS, || seconds as f64);
+    }
+
+    let settings = &lighting.bounce_ring;
+    let active =
+        lighting.enabled && lighting.bounce && lighting.gathered_bounce && settings.enabled;
+    let lights = tree_lights(
+        &lighting,
+        None,
+        suns.iter().map(|(l, t)| (l, t.back().as_vec3())),
+    );
+    let has_sun = lights.lights.sun.truncate() != Vec3::ZERO;
+    if active && has_sun {
+        let height = lights.lights.to_sun.y;
+        let available = std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1);
+        let threads = settings.threads_of(available);
+        let mut ids: Vec<AssetId<BakedFoliage>> = store.types.keys().copied().collect();
+        ids.sort();
+        for id in ids {
+            if rings.in_flight.contains_key(&id) {
+                continue;
+            }
+            let ring = rings.rings.get(&id).map(|r| r.sun_height);
+            if !needs_regather(height, ring, settings.regather_degrees) {
+                continue;
+            }
+            let Some(tree) = baked.get(id) else {
+                continue;
+            };
+            if tree.leaf_count() == 0 {
+                continue;
+            }
+            let tree = Arc::new(tree.clone());
+            let (optics, rays) = (lighting.optics, settings.rays);
+            let task = match AsyncComputeTaskPool::try_get() {
+                Some(pool) => {
+                    pool.spawn(async move { regather(&tree, &optics, height, rays, threads) })
+                }
+                None => {
+                    // An app without Bevy's task pools: gathered here, in this frame.
+                    if !*warned {
+                        warn!(
+                            "bounce ring: no async compute task pool (TaskPoolPlugin); re-gathering in the frame"
+                        );
+                        *warned = true;
+                    }
+                    let gathered = regather(&tree, &optics, height, rays, threads);
+                    rings.last_seconds = Some(gathered.seconds);
+                    rings.insert(id, gathered.ring);
+                    rings.completed += 1;
+                    continue;
+                }
+            };
+            rings.in_flight.insert(id, (height, task));
+        }
+    }
+    diagnostics.add_measurement(&BOUNCE_RINGS_GATHERING, || rings.in_flight.len() as f64);
+
+    // The buffer holds the rings as they are: rewrite it when one came in, or when the store
+    // uploaded its types again (without rings).
+    let uploaded_again = rings
+        .written
+        .as_ref()
+        .is_some_and(|h| *h != store.buffers.leaf_light)
+        || (rings.written.is_none() && !rings.rings.is_empty());
+    if rings.changed || (uploaded_again && !rings.rings.is_empty()) {
+        if !store.types.is_empty() {
+            let held = &rings.rings;
+            store.rewrite_leaf_light(&mut buffers, &baked, |id| held.get(&id));
+            rings.written = Some(store.buffers.leaf_light.clone());
+        }
+        rings.changed = false;
+    }
+}
