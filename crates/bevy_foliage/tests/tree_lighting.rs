@@ -1740,20 +1740,12 @@ fn tree_lit_cloud(name: &str, plate: bool, ring: bool) -> Option<CloudCheck> {
                     [1.0; 2]
                 }
             };
-            let faces = faces_with(ring.as_ref());
-            let bounced =
+            let bounce_by = |faces: [f32; 2]| {
                 bounce_radiance_by_face(&optics, n, wo, &bounce, through, &s_max, e_sun, faces)
-                    * (outside * spot.bounce_at(wo, to_sun));
-            let blended = bounce_radiance_by_face(
-                &optics,
-                n,
-                wo,
-                &bounce,
-                through,
-                &s_max,
-                e_sun,
-                faces_with(None),
-            ) * (outside * spot.bounce_at(wo, to_sun));
+                    * (outside * spot.bounce_at(wo, to_sun))
+            };
+            let bounced = bounce_by(faces_with(ring.as_ref()));
+            let blended = bounce_by(faces_with(None));
             let unratioed = bounce_radiance(&optics, n, wo, &bounce, through, &s_max, e_sun)
                 * (outside * spot.bounce_at(wo, to_sun));
             let radiance = sky_radiance(&optics, n, wo, &a, &sky) * seen

@@ -16,6 +16,8 @@ use super::systems::tree_lights;
 use crate::lighting::bounce_ring::{
     BounceRing, RING_NODES, crown_mean_ring, gather_ring, needs_regather,
 };
+use crate::lighting::envelope::LeafEnvelope;
+use crate::lighting::leaf_scene::LeafScene;
 use crate::lighting::settings::TreeLightingSettings;
 use bevy::asset::AssetId;
 use bevy::diagnostic::{DiagnosticPath, Diagnostics};
@@ -32,10 +34,32 @@ pub const BOUNCE_RING_SECONDS: DiagnosticPath =
 pub const BOUNCE_RINGS_GATHERING: DiagnosticPath =
     DiagnosticPath::const_new("foliage/bounce_rings_gathering");
 
-/// What a re-gather hands back: the ring and the seconds it took.
+/// What a tree type's re-gathers trace: its stored leaves as a scene, their envelopes read
+/// back, the crown's τ and the opacity the bake traced the leaves with. Built by the type's
+/// first re-gather (in its task), kept for the next.
+struct RingSource {
+    scene: LeafScene,
+    envelopes: Vec<LeafEnvelope>,
+    tau: f32,
+    opacity: f32,
+}
+
+impl RingSource {
+    fn of(tree: &BakedFoliage) -> Self {
+        Self {
+            scene: tree.leaf_scene(),
+            envelopes: tree.leaf_envelopes(),
+            tau: tree.extinction,
+            opacity: tree.leaf_opacity,
+        }
+    }
+}
+
+/// What a re-gather hands back: the ring, the seconds it took and what it traced.
 struct Gathered {
     ring: BounceRing,
     seconds: f32,
+    source: Arc<RingSource>,
 }
 
 /// Each tree type's ring of bounce ratios re-gathered at the sun's elevation, and the
@@ -46,7 +70,9 @@ pub struct BounceRings {
     rings: HashMap<AssetId<BakedFoliage>, BounceRing>,
     /// Per ring, its crown's mean (for billboard clouds).
     means: HashMap<AssetId<BakedFoliage>, [[f32; 2]; RING_NODES]>,
-    in_flight: HashMap<AssetId<BakedFoliage>, (f32, Task<Gathered>)>,
+    in_flight: HashMap<AssetId<BakedFoliage>, Task<Gathered>>,
+    /// Per tree type, what its re-gathers trace.
+    sources: HashMap<AssetId<BakedFoliage>, Arc<RingSource>>,
     /// The leaf light buffer last written with the rings (a new one from the store means its
     /// types were uploaded again, without rings).
     written: Option<Handle<ShaderBuffer>>,
@@ -69,6 +95,14 @@ impl BounceRings {
         self.rings.insert(id, ring);
         self.changed = true;
         self.generation += 1;
+    }
+
+    /// Takes in a finished re-gather of type `id`.
+    fn land(&mut self, id: AssetId<BakedFoliage>, gathered: Gathered) {
+        self.last_seconds = Some(gathered.seconds);
+        self.sources.insert(id, gathered.source);
+        self.insert(id, gathered.ring);
+        self.completed += 1;
     }
 
     /// Bumped whenever a ring comes in.
@@ -98,26 +132,35 @@ impl BounceRings {
     }
 }
 
-/// The re-gather of tree `tree`'s ring at sun height `height`, as [`gather_ring`] of its
-/// stored leaves with the lighting's optics, `rays` rays a leaf and `threads` threads.
+/// Where a re-gather takes its leaves from: what an earlier one traced, or the bake itself (a
+/// copy, made once per type).
+enum Leaves {
+    Traced(Arc<RingSource>),
+    Baked(Box<BakedFoliage>),
+}
+
+/// The re-gather of a tree type's ring at sun height `height`: [`gather_ring`] of its stored
+/// leaves with the lighting's optics, `rays` rays a leaf and `threads` threads.
 fn regather(
-    tree: &BakedFoliage,
+    leaves: Leaves,
     optics: &crate::lighting::model::LeafMaterial,
     height: f32,
     rays: u32,
     threads: usize,
 ) -> Gathered {
     let started = std::time::Instant::now();
-    let scene = tree.leaf_scene();
-    let envelopes = tree.leaf_envelopes();
-    let leaves: Vec<u32> = (0..tree.leaf_count() as u32).collect();
-    let opacity = tree.leaf_opacity;
+    let source = match leaves {
+        Leaves::Traced(source) => source,
+        Leaves::Baked(tree) => Arc::new(RingSource::of(&tree)),
+    };
+    let all: Vec<u32> = (0..source.scene.leaf_count() as u32).collect();
+    let opacity = source.opacity;
     let ring = gather_ring(
-        &scene,
+        &source.scene,
         optics,
-        &leaves,
-        &envelopes,
-        tree.extinction,
+        &all,
+        &source.envelopes,
+        source.tau,
         height,
         rays,
         &|_| opacity,
@@ -126,6 +169,7 @@ fn regather(
     Gathered {
         ring,
         seconds: started.elapsed().as_secs_f32(),
+        source,
     }
 }
 
@@ -149,13 +193,11 @@ pub fn regather_bounce_rings(
     let done: Vec<(AssetId<BakedFoliage>, Gathered)> = rings
         .in_flight
         .iter_mut()
-        .filter_map(|(id, (_, task))| block_on(poll_once(task)).map(|gathered| (*id, gathered)))
+        .filter_map(|(id, task)| block_on(poll_once(task)).map(|gathered| (*id, gathered)))
         .collect();
     for (id, gathered) in done {
         rings.in_flight.remove(&id);
-        rings.last_seconds = Some(gathered.seconds);
-        rings.insert(id, gathered.ring);
-        rings.completed += 1;
+        rings.land(id, gathered);
     }
     if let Some(seconds) = rings.last_seconds {
         diagnostics.add_measurement(&BOUNCE_RING_SECONDS, || seconds as f64);
@@ -186,17 +228,19 @@ pub fn regather_bounce_rings(
             if !needs_regather(height, ring, settings.regather_degrees) {
                 continue;
             }
-            let Some(tree) = baked.get(id) else {
-                continue;
+            let leaves = match rings.sources.get(&id) {
+                Some(source) => Leaves::Traced(source.clone()),
+                None => match baked.get(id) {
+                    Some(tree) if tree.leaf_count() > 0 => Leaves::Baked(Box::new(tree.clone())),
+                    _ => continue,
+                },
             };
-            if tree.leaf_count() == 0 {
-                continue;
-            }
-            let tree = Arc::new(tree.clone());
             let (optics, rays) = (lighting.optics, settings.rays);
-            let task = match AsyncComputeTaskPool::try_get() {
+            match AsyncComputeTaskPool::try_get() {
                 Some(pool) => {
-                    pool.spawn(async move { regather(&tree, &optics, height, rays, threads) })
+                    let task =
+                        pool.spawn(async move { regather(leaves, &optics, height, rays, threads) });
+                    rings.in_flight.insert(id, task);
                 }
                 None => {
                     // An app without Bevy's task pools: gathered here, in this frame.
@@ -206,25 +250,16 @@ pub fn regather_bounce_rings(
                         );
                         *warned = true;
                     }
-                    let gathered = regather(&tree, &optics, height, rays, threads);
-                    rings.last_seconds = Some(gathered.seconds);
-                    rings.insert(id, gathered.ring);
-                    rings.completed += 1;
-                    continue;
+                    rings.land(id, regather(leaves, &optics, height, rays, threads));
                 }
-            };
-            rings.in_flight.insert(id, (height, task));
+            }
         }
     }
     diagnostics.add_measurement(&BOUNCE_RINGS_GATHERING, || rings.in_flight.len() as f64);
 
     // The buffer holds the rings as they are: rewrite it when one came in, or when the store
     // uploaded its types again (without rings).
-    let uploaded_again = rings
-        .written
-        .as_ref()
-        .is_some_and(|h| *h != store.buffers.leaf_light)
-        || (rings.written.is_none() && !rings.rings.is_empty());
+    let uploaded_again = rings.written.as_ref() != Some(&store.buffers.leaf_light);
     if rings.changed || (uploaded_again && !rings.rings.is_empty()) {
         if !store.types.is_empty() {
             let held = &rings.rings;
