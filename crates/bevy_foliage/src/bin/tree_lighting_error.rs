@@ -31,7 +31,9 @@
 //! blend's are, with the seconds that re-gather takes; `--sun-ring N[,N…]` a row per ring of
 //! N suns at the sun's elevation, `gathered_bounce::sun_ring`, ratios re-gathered on it and
 //! read for the sun midway between two nodes, as a tree turned about its vertical sees the
-//! sun), each leaf's ratios pooled
+//! sun, and with `--hotspot` also drawn with the ring's own hotspot, measured for suns at the
+//! sun's height against the bounce with the ring, `hotspot::HotspotSuns::Height`), each leaf's
+//! ratios pooled
 //! with its nearest neighbours' (`--bounce-pool K[,K…]`: K leaves a pool, the first for
 //! those rows, and a row as drawn for each). The shadow
 //! map's row reads it as the leaf shaders do at the leaf (texels of `LEAF_SHADOW_FINE` of a
@@ -605,6 +607,21 @@ fn image_table(
                     &g[size].bounce,
                 );
             }
+            for (count, g, _, _) in &run.ring_spots {
+                for (component, errors) in [
+                    ("sun direct", &g[size].sun),
+                    ("sun indirect (1 bounce)", &g[size].bounce),
+                ] {
+                    row(
+                        &g[size],
+                        component,
+                        &format!(
+                            "ring of {count} suns, the ring's own hotspot (measured at the sun's height against the ring)"
+                        ),
+                        errors,
+                    );
+                }
+            }
             for (pool, g) in &run.pooled {
                 row(
                     &g[size],
@@ -634,6 +651,12 @@ fn image_table(
                 crown.len(),
                 run.regathered_seconds
             );
+            for (count, _, h, seconds) in &run.ring_spots {
+                eprintln!(
+                    "{name}: ring of {count}: its own hotspot sun {:.3?} bounce {:.3?}, measured in {seconds:.2} s on {threads} threads",
+                    h.sun, h.bounce
+                );
+            }
             for (count, _, seconds) in &run.rings {
                 eprintln!(
                     "{name}: ratios of {} leaves re-gathered on a ring of {count} suns in {seconds:.2} s on {threads} threads",

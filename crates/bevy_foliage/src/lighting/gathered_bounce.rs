@@ -280,20 +280,53 @@ pub fn bounce_gather(
     if leaf >= scene.leaf_count() {
         return out;
     }
-    let gathered = gather_irradiance(scene, material, leaf, rays, &SUN_BASIS, opacity, seed);
-    let n = scene.normal(leaf);
-    for (k, &sun) in SUN_BASIS.iter().enumerate() {
-        let through = sun_through_crown(
-            SunThroughCrown::BlendedAttenuation,
-            tau,
-            &envelope.attenuation,
-            &envelope.s_max,
-            sun,
-        );
-        out.gathered[k] = gathered[k];
-        out.closed[k] = closed_form_irradiance(material, &bounces[k], through, &envelope.s_max, n);
+    let faces = gathered_and_closed(
+        scene, material, leaf, envelope, tau, &SUN_BASIS, bounces, rays, opacity, seed,
+    );
+    for (k, (gathered, closed)) in faces.into_iter().enumerate() {
+        out.gathered[k] = gathered;
+        out.closed[k] = closed;
     }
     out
+}
+
+/// Per sun of `suns` (unit, towards the sun; `bounces[k]` eq. 5.24's constants for `suns[k]`),
+/// the irradiance leaf `leaf` (in `scene`, envelope `envelope`, in a crown of extinction `tau`)
+/// gathers from its neighbours on each face ([`gather_irradiance`], `rays` rays, `seed`) and
+/// eq. 5.24's ([`closed_form_irradiance`]), the sun's share at the leaf taken as the shaders
+/// take it for eq. 5.24, the blend of its attenuations ([`SunThroughCrown::BlendedAttenuation`]).
+/// What the bake's ratios ([`bounce_gather`]) and those re-gathered for given suns
+/// ([`sun_ratios_of`]) are both made of.
+#[allow(clippy::too_many_arguments)]
+fn gathered_and_closed(
+    scene: &LeafScene,
+    material: &LeafMaterial,
+    leaf: usize,
+    envelope: &LeafEnvelope,
+    tau: f32,
+    suns: &[Vec3],
+    bounces: &[SunBounce],
+    rays: u32,
+    opacity: &(impl Fn(u32) -> f32 + Sync),
+    seed: u64,
+) -> Vec<([f32; 2], [f32; 2])> {
+    let gathered = gather_irradiance(scene, material, leaf, rays, suns, opacity, seed);
+    let n = scene.normal(leaf);
+    suns.iter()
+        .zip(bounces)
+        .zip(gathered)
+        .map(|((&sun, bounce), gathered)| {
+            let through = sun_through_crown(
+                SunThroughCrown::BlendedAttenuation,
+                tau,
+                &envelope.attenuation,
+                &envelope.s_max,
+                sun,
+            );
+            let closed = closed_form_irradiance(material, bounce, through, &envelope.s_max, n);
+            (gathered, closed)
+        })
+        .collect()
 }
 
 /// The [`BounceRatios`] of leaf `leaf` from its own gather alone ([`bounce_gather`]'s
@@ -413,35 +446,26 @@ pub fn sun_ratios_of(
         if valid.is_empty() {
             return vec![[1.0; 2]; suns.len()];
         }
-        let gathered = gather_irradiance(
+        let ratios: Vec<[f32; 2]> = gathered_and_closed(
             scene,
             material,
             leaf as usize,
-            rays,
+            envelope,
+            tau,
             &valid,
+            &bounces,
+            rays,
             opacity,
             leaf_seed(leaf),
-        );
-        let n = scene.normal(leaf as usize);
-        let ratios: Vec<[f32; 2]> = valid
-            .iter()
-            .zip(&bounces)
-            .zip(&gathered)
-            .map(|((&sun, bounce), gathered)| {
-                let through = sun_through_crown(
-                    SunThroughCrown::BlendedAttenuation,
-                    tau,
-                    &envelope.attenuation,
-                    &envelope.s_max,
-                    sun,
-                );
-                let closed = closed_form_irradiance(material, bounce, through, &envelope.s_max, n);
-                [
-                    face_ratio(gathered[0], closed[0]),
-                    face_ratio(gathered[1], closed[1]),
-                ]
-            })
-            .collect();
+        )
+        .into_iter()
+        .map(|(gathered, closed)| {
+            [
+                face_ratio(gathered[0], closed[0]),
+                face_ratio(gathered[1], closed[1]),
+            ]
+        })
+        .collect();
         at.iter()
             .map(|k| k.map_or([1.0; 2], |k| ratios[k]))
             .collect()
@@ -571,7 +595,8 @@ pub fn pooled_ratios(
             let j = j as usize;
             let c = ni.dot(normals[j]);
             let w = if j == i { 1.0 } else { c * c };
-            if !(w > 0.0) {
+            // A weight of 0 or not a number (a degenerate normal) pools nothing.
+            if w.is_nan() || w <= 0.0 {
                 continue;
             }
             // The neighbour's face on the leaf's front side first.
@@ -1091,7 +1116,10 @@ mod tests {
             let azimuth = d.z.atan2(d.x);
             let want = phase + std::f32::consts::TAU * i as f32 / 8.0;
             let off = (azimuth - want).rem_euclid(std::f32::consts::TAU);
-            assert!(off < 1e-4 || off > std::f32::consts::TAU - 1e-4, "node {i}");
+            assert!(
+                !(1e-4..=std::f32::consts::TAU - 1e-4).contains(&off),
+                "node {i}"
+            );
         }
         let ratios: Vec<[f32; 2]> = (0..8).map(|i| [1.0 + i as f32, 0.5 * i as f32]).collect();
         for (i, d) in ring.iter().enumerate() {

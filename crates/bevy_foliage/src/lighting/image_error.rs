@@ -147,6 +147,13 @@ pub struct ImageComparison {
     /// ([`super::gathered_bounce::sun_ring`]), the sun midway between two of them, drawn as
     /// `regathered` is, per pixel size; and the seconds that gather took.
     pub rings: Vec<(usize, Vec<ImageError>, f32)>,
+    /// Per ring of `rings`, with [`ImageSettings::hotspot`]: the images drawn with the ring's
+    /// own hotspot in place of the blend's — measured for suns at the sun's height
+    /// ([`super::hotspot::HotspotSuns::Height`]) against the bounce with the ring's ratios,
+    /// traced as `foliage_bake` traces a bake's ([`super::hotspot::HotspotSettings::OFFLINE`]),
+    /// both its sun and its bounce factors applied — per pixel size; that hotspot; and the
+    /// seconds its measurement took.
+    pub ring_spots: Vec<(usize, Vec<ImageError>, super::hotspot::Hotspot, f32)>,
     /// Per pool of [`ImageSettings::bounce_pools`]: the bounce as the leaf shaders draw it
     /// with the ratios so pooled (eq. 5.24 scaled by them, the covered part's gain where the
     /// gains were measured, and with [`ImageSettings::hotspot`] the crown's hotspot measured
@@ -428,6 +435,7 @@ pub fn images_against_tracer(
     let mut gathered_seconds = 0.0;
     let (mut regathered, mut regathered_seconds) = (Vec::new(), 0.0);
     let mut rings = Vec::new();
+    let mut ring_spots = Vec::new();
     let mut pooled = Vec::new();
     let gathered = match (&last_model, settings.bounce_rays) {
         (Some(([sky, sun, _], envelope)), rays) if rays > 0 => {
@@ -612,6 +620,30 @@ pub fn images_against_tracer(
                     true,
                     spot.as_ref(),
                 );
+                if settings.hotspot {
+                    let started = std::time::Instant::now();
+                    let own = super::hotspot::crown_hotspot_for(
+                        &scene,
+                        envelope,
+                        gains.as_deref().unwrap_or(&[]),
+                        &|leaf, to_sun| ratio_on_ring(&ring[leaf], phase, to_sun),
+                        super::hotspot::HotspotSuns::Height(light.to_sun.y),
+                        &|l| Some(l as usize),
+                        material,
+                        &|_| 1.0,
+                        &super::hotspot::HotspotSettings::OFFLINE,
+                        threads,
+                    );
+                    let seconds = started.elapsed().as_secs_f32();
+                    let drawn = image_with(
+                        &|leaf, n| {
+                            scaled_with(ratio_on_ring(&ring[leaf], phase, light.to_sun), leaf, n)
+                        },
+                        true,
+                        Some(&own),
+                    );
+                    ring_spots.push((count, drawn, own, seconds));
+                }
                 rings.push((count, drawn, seconds));
             }
             for &pool in &pools {
@@ -700,6 +732,7 @@ pub fn images_against_tracer(
         regathered,
         regathered_seconds,
         rings,
+        ring_spots,
         pooled,
         hotspot_factors,
         shadow_map_sun,

@@ -934,8 +934,8 @@ mod tests {
         let envelopes = b.leaf_envelopes();
         assert_eq!(envelopes.len(), b.leaf_count());
         for (e, q) in envelopes.iter().zip(&b.leaf_light) {
-            for j in 0..8 {
-                let a = q[j] as f32 / 65535.0;
+            for (j, &stored) in q.iter().enumerate() {
+                let a = stored as f32 / 65535.0;
                 assert!((e.attenuation[j] - a).abs() < 1e-6);
                 assert!(((-b.extinction * e.s_max[j]).exp() - a.max(1.0 / 65535.0)).abs() < 1e-4);
             }
