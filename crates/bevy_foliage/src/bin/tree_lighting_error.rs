@@ -8,7 +8,7 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]] [--sun-ring N[,N…]]]]
+//!     [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]]
 //!     [--sun X,Y,Z]
 //!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
@@ -45,6 +45,12 @@
 //! point moved towards the sun by `T + S·tan θ` texels, θ the leaf's tilt from the sun
 //! (`sun_maps::LeafShadowOffset`); also in the `--sun-maps` table.
 //!
+//! `--sunlit-points P` (with `--images`): rows of the sun through the crown from each leaf's
+//! sunlit share traced from P points on it (`lighting::sunlit_share`) for the image's sun and,
+//! per `--sun-ring N`, on a ring of N suns at its elevation read with the sun midway between
+//! two nodes; as it is, with the seen-part gain, with the crown's hotspot, and (rings, with
+//! `--hotspot`) with a hotspot fitted against the ring's shares at the sun's height.
+//!
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
 //! map at five texel sizes, 1/16 to one leaf, read as the leaf shaders read it and with a 3×3 filter, the crown's extinction over its depth, eq. 5.3's foliage maps)
 //! against the tracer's shadow rays, beside the baked attenuations' blend
@@ -76,6 +82,7 @@ fn main() {
     args.retain(|a| a != "--sun-maps" && a != "--images" && a != "--hotspot");
     let mut samples = 128u32;
     let mut bounce_rays = 0u32;
+    let mut sunlit_points = 0u32;
     use bevy_foliage::lighting::gathered_bounce::{DEFAULT_BOUNCE_POOL, MAX_BOUNCE_POOL};
     let mut bounce_pools = vec![DEFAULT_BOUNCE_POOL];
     let mut sun_rings: Vec<usize> = Vec::new();
@@ -105,6 +112,7 @@ fn main() {
             "--samples" => samples = value(i) as u32,
             "--seen-points" => seen_points = value(i) as u32,
             "--bounce-rays" => bounce_rays = value(i) as u32,
+            "--sunlit-points" => sunlit_points = value(i) as u32,
             "--leaf-shadow-offset" => {
                 let parts: Option<Vec<f32>> = args
                     .get(i + 1)
@@ -217,7 +225,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]] [--sun-ring N[,N…]]]] [--sun x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]] [--sun x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -258,6 +266,7 @@ fn main() {
                 bounce_rays,
                 bounce_pools: bounce_pools.clone(),
                 sun_rings: sun_rings.clone(),
+                sunlit_points,
                 ..Default::default()
             },
             &rays_per_bin,
@@ -552,6 +561,9 @@ fn image_table(
                     ),
                     &errors[size].sun,
                 );
+            }
+            for (label, errors) in &run.sunlit {
+                row(&errors[size], "sun direct", label, &errors[size].sun);
             }
             for (k, (_, errors)) in run.models.iter().enumerate() {
                 row(

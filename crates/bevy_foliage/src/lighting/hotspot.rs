@@ -290,6 +290,7 @@ pub fn crown_hotspot(
         gains,
         &faces,
         HotspotSuns::Sphere,
+        None,
         stored,
         material,
         opacity,
@@ -313,7 +314,10 @@ pub enum HotspotSuns {
 }
 
 /// [`crown_hotspot`] with the bounce factors the shaders give each stored leaf's faces as
-/// `faces(i, to_sun)` (eq. 5.24 alone: `[1, 1]`), for the suns `suns`.
+/// `faces(i, to_sun)` (eq. 5.24 alone: `[1, 1]`), for the suns `suns`, the sun's exponent
+/// fitted against `sun_share(i, to_sun)`, the share of the sun drawn at stored leaf `i` before
+/// its seen-part gain (`None`: the blend of its eight attenuations, as [`crown_hotspot`]; a
+/// leaf's sunlit share, [`super::sunlit_share`], for instance).
 #[allow(clippy::too_many_arguments)]
 pub fn crown_hotspot_for(
     scene: &LeafScene,
@@ -321,6 +325,7 @@ pub fn crown_hotspot_for(
     gains: &[[f32; 8]],
     faces: &(dyn Fn(usize, Vec3) -> [f32; 2] + Sync),
     suns: HotspotSuns,
+    sun_share: Option<&(dyn Fn(usize, Vec3) -> f32 + Sync)>,
     stored: &(dyn Fn(u32) -> Option<usize> + Sync),
     material: &LeafMaterial,
     opacity: &(impl Fn(u32) -> f32 + Sync),
@@ -387,9 +392,10 @@ pub fn crown_hotspot_for(
             // The sun: the leaf's BSDF is a cosine on either side, the same in both sums.
             let cosine = n.dot(to_sun).abs();
             let through = lobe_blend(&e.attenuation, to_sun, 1.0);
+            let share = sun_share.map_or(through, |share| share(i, to_sun));
             sun.push([
                 weight * cosine,
-                (through * gain).min(1.0),
+                (share * gain).min(1.0),
                 scene.transmittance(x, to_sun, leaf, opacity),
             ]);
             // The bounce: the neighbours' sunlight gathered at the point, against eq. 5.24

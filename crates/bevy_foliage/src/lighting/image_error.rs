@@ -65,6 +65,9 @@ pub struct ImageSettings {
     /// Suns on each ring of re-gathered ratios measured ([`ImageComparison::rings`]; none by
     /// default).
     pub sun_rings: Vec<usize>,
+    /// Points per leaf for each leaf's sunlit share traced for the sun and on each ring of
+    /// `sun_rings` ([`super::sunlit_share`], [`ImageComparison::sunlit`]; 0: not measured).
+    pub sunlit_points: u32,
 }
 
 impl Default for ImageSettings {
@@ -81,6 +84,7 @@ impl Default for ImageSettings {
             bounce_rays: 0,
             bounce_pools: vec![DEFAULT_BOUNCE_POOL],
             sun_rings: Vec::new(),
+            sunlit_points: 0,
         }
     }
 }
@@ -166,6 +170,15 @@ pub struct ImageComparison {
     /// ([`super::sun_maps::shadow_map_trust`]), sky and bounce `hotspot`'s; per texel side
     /// (with the trust), per pixel size. Empty unless [`ImageSettings::hotspot`].
     pub drawn: Vec<(f32, f32, Vec<ImageError>)>,
+    /// The sun through the crown from each leaf's sunlit share ([`super::sunlit_share`],
+    /// [`ImageSettings::sunlit_points`] points a leaf) in place of the baked attenuations'
+    /// blend, under a label: traced for the image's sun, then on each ring of
+    /// [`ImageSettings::sun_rings`] with the sun midway between two nodes (read linearly in
+    /// azimuth); each as it is, scaled by the leaf's seen-part gain towards the eye (capped at
+    /// 1, where the gains were measured) and with that the crown's hotspot exponent (where
+    /// measured; fitted against the blend). Sky and bounce are the first model's; per pixel
+    /// size. Empty unless `sunlit_points`.
+    pub sunlit: Vec<(String, Vec<ImageError>)>,
     /// The hotspot measured, when it was.
     pub hotspot_factors: Option<super::hotspot::Hotspot>,
     /// Eye rays that hit a leaf.
@@ -628,6 +641,7 @@ pub fn images_against_tracer(
                         gains.as_deref().unwrap_or(&[]),
                         &|leaf, to_sun| ratio_on_ring(&ring[leaf], phase, to_sun),
                         super::hotspot::HotspotSuns::Height(light.to_sun.y),
+                        None,
                         &|l| Some(l as usize),
                         material,
                         &|_| 1.0,
@@ -656,7 +670,7 @@ pub fn images_against_tracer(
         }
         _ => Vec::new(),
     };
-    let (seen, hotspot, drawn) = match last_model {
+    let (seen, hotspot, drawn) = match &last_model {
         Some(([sky, sun, bounce], envelope)) => {
             // The images with the gains (where measured), the sun through the crown as
             // `through(leaf, blend, gain)` makes the leaf's share of it (the gain applied), and
@@ -722,7 +736,99 @@ pub fn images_against_tracer(
         }
         _ => (Vec::new(), Vec::new(), Vec::new()),
     };
+    let mut sunlit = Vec::new();
+    if settings.sunlit_points > 0 {
+        use super::gathered_bounce::sun_ring;
+        use super::sunlit_share::{share_on_ring, sunlit_shares};
+        let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
+        // Per source: its label, each leaf's share towards the image's sun, and for a ring its
+        // phase and each leaf's shares on it.
+        type Ring = Option<(f32, Vec<Vec<f32>>)>;
+        let mut sources: Vec<(String, Vec<f32>, Ring)> = Vec::new();
+        let exact = sunlit_shares(
+            &scene,
+            &all,
+            &[light.to_sun],
+            settings.sunlit_points,
+            &|_| 1.0,
+            threads,
+        );
+        sources.push((
+            "leaf's sunlit share, traced for this sun".into(),
+            exact.iter().map(|s| s[0]).collect(),
+            None,
+        ));
+        for &count in &settings.sun_rings {
+            let phase = light.to_sun.z.atan2(light.to_sun.x) + std::f32::consts::PI / count as f32;
+            let ring = sunlit_shares(
+                &scene,
+                &all,
+                &sun_ring(light.to_sun, count, phase),
+                settings.sunlit_points,
+                &|_| 1.0,
+                threads,
+            );
+            sources.push((
+                format!("leaf's sunlit share on a ring of {count}, the sun midway"),
+                ring.iter()
+                    .map(|r| share_on_ring(r, phase, light.to_sun))
+                    .collect(),
+                Some((phase, ring)),
+            ));
+        }
+        for (label, share, ring) in sources {
+            let image = |through: &dyn Fn(usize, f32) -> f32| {
+                let sun: Vec<f32> = samples
+                    .iter()
+                    .map(|s| {
+                        s.as_ref().map_or(0.0, |s| {
+                            let leaf = s.leaf as usize;
+                            let n = scene.normal(leaf);
+                            let t = through(leaf, share[leaf]);
+                            luminance(sun_radiance(material, n, view, light.to_sun, t, light.sun))
+                        })
+                    })
+                    .collect();
+                measure(&[model_sky.clone(), sun, model_bounce.clone()])
+            };
+            sunlit.push((label.clone(), image(&|_, t| t)));
+            if let Some(g) = &gains {
+                let gained = |leaf: usize, t: f32| (t * seen_gain(&g[leaf], view)).min(1.0);
+                sunlit.push((format!("{label}, seen-part gain"), image(&gained)));
+                if let Some(h) = &hotspot_factors {
+                    sunlit.push((
+                        format!("{label}, seen-part gain, the crown's hotspot"),
+                        image(&|leaf, t| h.sun_through(gained(leaf, t), view, light.to_sun)),
+                    ));
+                }
+                // The ring's own hotspot: fitted for suns at the sun's height against the
+                // shares read on the ring.
+                if let (Some((phase, ring)), Some((_, envelope)), true) =
+                    (&ring, &last_model, settings.hotspot)
+                {
+                    let own = super::hotspot::crown_hotspot_for(
+                        &scene,
+                        envelope,
+                        g,
+                        &|_, _| [1.0; 2],
+                        super::hotspot::HotspotSuns::Height(light.to_sun.y),
+                        Some(&|leaf, to_sun| share_on_ring(&ring[leaf], *phase, to_sun)),
+                        &|l| Some(l as usize),
+                        material,
+                        &|_| 1.0,
+                        &super::hotspot::HotspotSettings::OFFLINE,
+                        threads,
+                    );
+                    sunlit.push((
+                        format!("{label}, seen-part gain, its own hotspot (at the sun's height)"),
+                        image(&|leaf, t| own.sun_through(gained(leaf, t), view, light.to_sun)),
+                    ));
+                }
+            }
+        }
+    }
     ImageComparison {
+        sunlit,
         models,
         seen,
         hotspot,

@@ -30,6 +30,7 @@ pub mod path_trace;
 pub mod seen_part;
 pub mod settings;
 pub mod sun_maps;
+pub mod sunlit_share;
 pub mod traced_bins;
 
 /// `f` of each of `items`, in order, on up to `threads` scoped threads (the bakes' and the
