@@ -613,7 +613,10 @@ impl RenderHarness {
             .observe(move |captured: On<ScreenshotCaptured>| {
                 *sink.lock().unwrap() = Some(captured.image.clone());
             });
-        let image = self.step_until(&slot, 30)?;
+        // Up to 120 frames: after a settings change the next frame may wait on a new pipeline
+        // variant, compiled asynchronously, which on a software adapter shared with other
+        // tests' threads has outlasted 30 frames. Frames after the capture are not stepped.
+        let image = self.step_until(&slot, 120)?;
         RgbaImage::from_bevy(image).map_err(HarnessError::Readback)
     }
 
