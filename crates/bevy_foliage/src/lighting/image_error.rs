@@ -175,9 +175,11 @@ pub struct ImageComparison {
     /// blend, under a label: traced for the image's sun, then on each ring of
     /// [`ImageSettings::sun_rings`] with the sun midway between two nodes (read linearly in
     /// azimuth); each as it is, scaled by the leaf's seen-part gain towards the eye (capped at
-    /// 1, where the gains were measured) and with that the crown's hotspot exponent (where
-    /// measured; fitted against the blend). Sky and bounce are the first model's; per pixel
-    /// size. Empty unless `sunlit_points`.
+    /// 1, where the gains were measured), with that the crown's hotspot exponent (where
+    /// measured; fitted against the blend), and for a ring with [`ImageSettings::hotspot`] a
+    /// hotspot fitted against the ring's own shares for suns at the sun's height
+    /// ([`super::hotspot::HotspotSuns::Height`]). Sky and bounce are the first model's; per
+    /// pixel size. Empty unless `sunlit_points`.
     pub sunlit: Vec<(String, Vec<ImageError>)>,
     /// The hotspot measured, when it was.
     pub hotspot_factors: Option<super::hotspot::Hotspot>,
