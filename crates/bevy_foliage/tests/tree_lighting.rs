@@ -9,7 +9,7 @@ use bevy::light::{CascadeShadowConfig, CascadeShadowConfigBuilder, Cascades};
 use bevy::prelude::*;
 use bevy_foliage::lighting::bins::{DARKEST_LIGHT, light_of};
 use bevy_foliage::lighting::bounce_ring::{
-    BounceRing, RING_NODES, ratio_with_ring, ratio_with_ring_nodes,
+    BounceRing, RING_NODES, ratio_with_ring, ratio_with_ring_nodes, sun_through_with_ring,
 };
 use bevy_foliage::lighting::gathered_bounce::BounceRatios;
 use bevy_foliage::lighting::hotspot::{HOTSPOT_NODES, Hotspot};
@@ -259,6 +259,8 @@ struct Check {
     /// Compared pixels the type's ring of re-gathered ratios moves by more than 3/255 from the
     /// bake's blend.
     ring_visible: u32,
+    /// Compared pixels the ring's sunlit shares move by more than 3/255 from the bake's blend.
+    shares_visible: u32,
     /// Compared pixels the crown's hotspot moves by more than 3/255, and those its exponent on
     /// the sun alone moves so.
     hotspot_visible: u32,
@@ -351,6 +353,7 @@ fn compare_with_model(
                     hotspot_on: bool,
                     ratios_on: bool,
                     ring_on: bool,
+                    shares_on: bool,
                     outside: f32,
                     at_leaf: Option<f32>|
      -> Vec3 {
@@ -374,8 +377,14 @@ fn compare_with_model(
         } else {
             Hotspot::default()
         };
-        let through = at_leaf
-            .unwrap_or(spot.sun_through((baked_through * seen).min(1.0), wo, to_sun) * outside);
+        // Where the type's ring holds the leaves' sunlit shares, those at its elevation.
+        let shares = ring
+            .filter(|r| lighting.bounce_ring.enabled && shares_on && !r.sunlit.is_empty())
+            .map(|r| (r.sun_height, &r.sunlit[leaf as usize]));
+        let blend = spot.sun_through((baked_through * seen).min(1.0), wo, to_sun);
+        let through = at_leaf.unwrap_or(
+            sun_through_with_ring(blend, shares, seen, spot.sun_at(wo, to_sun), to_sun) * outside,
+        );
         let bounced = if bounce_on {
             let covered = if lighting.seen_part && covered_on {
                 covered_gain(seen, open_share(n, &a))
@@ -453,6 +462,7 @@ fn compare_with_model(
         covered_visible: 0,
         ratios_visible: 0,
         ring_visible: 0,
+        shares_visible: 0,
         hotspot_visible: 0,
         hotspot_sun_visible: 0,
         sunlit: 0,
@@ -505,20 +515,26 @@ fn compare_with_model(
             }
             // The pixel the model gives with the bounce, the covered part's gain and the
             // hotspot each on or off, in 255ths of sRGB.
-            let pixel = |bounce: bool, covered: bool, hotspot: bool, ratios: bool, ring: bool| {
+            let pixel = |bounce: bool,
+                         covered: bool,
+                         hotspot: bool,
+                         ratios: bool,
+                         ring: bool,
+                         shares: bool| {
                 expected(
-                    leaf, bounce, covered, hotspot, ratios, ring, outside, at_leaf,
+                    leaf, bounce, covered, hotspot, ratios, ring, shares, outside, at_leaf,
                 )
                 .to_array()
                 .map(|c| srgb(c) * 255.0)
             };
-            let want = pixel(true, true, true, true, true);
-            let plain = pixel(false, true, true, true, true);
-            let uncovered = pixel(true, false, true, true, true);
-            let no_hotspot = pixel(true, true, false, true, true);
-            let plain_no_hotspot = pixel(false, true, false, true, true);
-            let no_ratios = pixel(true, true, true, false, true);
-            let no_ring = pixel(true, true, true, true, false);
+            let want = pixel(true, true, true, true, true, true);
+            let plain = pixel(false, true, true, true, true, true);
+            let uncovered = pixel(true, false, true, true, true, true);
+            let no_hotspot = pixel(true, true, false, true, true, true);
+            let plain_no_hotspot = pixel(false, true, false, true, true, true);
+            let no_ratios = pixel(true, true, true, false, true, true);
+            let no_ring = pixel(true, true, true, true, false, true);
+            let no_shares = pixel(true, true, true, true, true, false);
             let got = image.pixel(x, y);
             let [r, g, b] = want.map(|c| c.round() as u8);
             check.reference.set_pixel(x, y, [r, g, b, 255]);
@@ -545,6 +561,9 @@ fn compare_with_model(
             }
             if (0..3).any(|c| (want[c] - no_ring[c]).abs() > 3.0) {
                 check.ring_visible += 1;
+            }
+            if (0..3).any(|c| (want[c] - no_shares[c]).abs() > 3.0) {
+                check.shares_visible += 1;
             }
             if (0..3).any(|c| (want[c] - no_hotspot[c]).abs() > 3.0) {
                 check.hotspot_visible += 1;
@@ -844,8 +863,8 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         );
         check.save(name);
         println!(
-            "{name}: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1}/255); the ring moves {} of them from the bake's blend by > 3/255",
-            check.within, check.compared, check.worst, check.ring_visible
+            "{name}: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1}/255); the ring moves {} of them from the bake's blend by > 3/255, its sunlit shares {}",
+            check.within, check.compared, check.worst, check.ring_visible, check.shares_visible
         );
         assert!(
             check.compared >= 800,
@@ -874,6 +893,7 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         baked.extinction,
         ring.sun_height,
         lighting.bounce_ring.rays,
+        lighting.bounce_ring.sunlit_points,
         &|_| opacity,
         2,
     );
@@ -895,6 +915,15 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         baked.leaf_count(),
         "leaves whose ring ratios the app gathered as the CPU does"
     );
+    assert_eq!(
+        ring.sunlit.len(),
+        baked.leaf_count(),
+        "the ring holds sunlit shares"
+    );
+    assert!(
+        ring.sunlit == cpu.sunlit,
+        "the leaves' sunlit shares on the ring as the CPU traces them"
+    );
     for _ in 0..4 {
         harness.step();
     }
@@ -914,6 +943,11 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
             });
             baked.leaf_count()
         ],
+        // Sunlit shares distinct per node and per leaf (a shader that reads another leaf's,
+        // another node's or none fails).
+        sunlit: (0..baked.leaf_count())
+            .map(|l| std::array::from_fn(|k| (20 + (l * 37 + k * 61) % 215) as u8))
+            .collect(),
     };
     harness
         .world_mut()
@@ -935,6 +969,85 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         strong_check.ring_visible,
         strong_check.compared
     );
+    assert!(
+        strong_check.shares_visible * 2 >= strong_check.compared,
+        "the ring's sunlit shares show in too few pixels ({} of {}) for the test to see them",
+        strong_check.shares_visible,
+        strong_check.compared
+    );
+
+    // The crown's hotspot on the ring's shares: the same tree with a strong sun exponent, its
+    // strong ring put in for it, against the model with that exponent (a shader that left the
+    // hotspot off the ring's shares fails).
+    let hot = BakedFoliage {
+        hotspot: Hotspot {
+            sun: [STRONG_HOTSPOT.0; HOTSPOT_NODES],
+            bounce: [1.0; HOTSPOT_NODES],
+        }
+        .sanitized()
+        .0,
+        ..baked.clone()
+    };
+    let material = harness
+        .world_mut()
+        .get::<PrunedFoliage>(tree)
+        .unwrap()
+        .material
+        .clone();
+    let hot_handle = harness
+        .world_mut()
+        .resource_mut::<Assets<BakedFoliage>>()
+        .add(hot.clone());
+    harness
+        .world_mut()
+        .resource_mut::<BounceRings>()
+        .insert(hot_handle.id(), strong.clone());
+    let original = harness
+        .world_mut()
+        .get::<PrunedFoliage>(tree)
+        .unwrap()
+        .clone();
+    harness.world_mut().entity_mut(tree).insert(PrunedFoliage {
+        baked: hot_handle,
+        material,
+    });
+    for _ in 0..4 {
+        harness.step();
+    }
+    let hot_check = compare_with_model(
+        &mut harness,
+        &hot,
+        &lighting,
+        instance,
+        to_sun_world,
+        eye,
+        |_| false,
+        false,
+        0.0,
+        Some(&strong),
+    );
+    hot_check.save("tree_ring_hotspot");
+    println!(
+        "tree_ring_hotspot: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1}/255); the hotspot's sun exponent moves {} of them",
+        hot_check.within, hot_check.compared, hot_check.worst, hot_check.hotspot_sun_visible
+    );
+    assert!(
+        hot_check.compared >= 800 && hot_check.within as f32 >= 0.99 * hot_check.compared as f32,
+        "with the hotspot on the ring's shares: {} of {} leaf pixels within 3/255 (worst {:.1})",
+        hot_check.within,
+        hot_check.compared,
+        hot_check.worst
+    );
+    assert!(
+        hot_check.hotspot_sun_visible * 4 >= hot_check.compared,
+        "the hotspot on the ring's shares shows in too few pixels ({} of {})",
+        hot_check.hotspot_sun_visible,
+        hot_check.compared
+    );
+    harness.world_mut().entity_mut(tree).insert(original);
+    for _ in 0..4 {
+        harness.step();
+    }
 
     // Tilted so that the sun stands midway between the ring's whole and gone spans of elevation
     // in the instance's frame: half ring, half blend.
@@ -997,6 +1110,57 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         lower.y
     );
     assert!(moved.leaves != strong.leaves && moved.leaves != ring.leaves);
+
+    // Sunlit shares turned off: the ring is gathered again without them, and the leaves take
+    // the bake's blend for the sun (a shader that read the missing shares as zeros would draw
+    // the sun out).
+    harness
+        .world_mut()
+        .resource_mut::<TreeLightingSettings>()
+        .bounce_ring
+        .sunlit_points = 0;
+    let started = std::time::Instant::now();
+    let bare = loop {
+        harness.step();
+        let rings = harness.world_mut().resource::<BounceRings>();
+        match rings.ring(id) {
+            Some(r) if r.sunlit.is_empty() && !rings.is_gathering(id) => break r.clone(),
+            _ => assert!(
+                started.elapsed().as_secs() < 60,
+                "no ring without shares within a minute"
+            ),
+        }
+    };
+    assert_eq!(bare.leaves, moved.leaves, "the same ratios, gathered again");
+    for _ in 0..4 {
+        harness.step();
+    }
+    let mut bare_lighting = lighting.clone();
+    bare_lighting.bounce_ring.sunlit_points = 0;
+    let check = compare_with_model(
+        &mut harness,
+        &baked,
+        &bare_lighting,
+        tilted,
+        lower,
+        eye,
+        |_| false,
+        false,
+        0.0,
+        Some(&bare),
+    );
+    check.save("tree_ring_no_shares");
+    println!(
+        "no shares: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1}/255)",
+        check.within, check.compared, check.worst
+    );
+    assert!(
+        check.compared >= 800 && check.within as f32 >= 0.99 * check.compared as f32,
+        "without shares: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1})",
+        check.within,
+        check.compared,
+        check.worst
+    );
 }
 
 /// The crown's light summed over the image: the mean linear luminance of every pixel (the black

@@ -676,6 +676,12 @@ fn image_table(
                 );
             }
         }
+        for (count, seconds) in &run.sunlit_seconds {
+            eprintln!(
+                "{name}: sunlit shares of {} leaves traced on a ring of {count} suns in {seconds:.2} s on {threads} threads",
+                crown.len()
+            );
+        }
         eprintln!("{name}: {:.1} s", started.elapsed().as_secs_f32());
     }
 }

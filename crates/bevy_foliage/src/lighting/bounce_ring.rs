@@ -24,6 +24,14 @@
 //! gathered fall back to the bake's ratios without a jump. [`needs_regather`] says when the sun
 //! has moved far enough for a new ring.
 //!
+//! The same ring carries each leaf's sunlit share towards its suns ([`super::sunlit_share`],
+//! traced in the same task), the leaves' sun where the shadow map's texels are too coarse to
+//! resolve leaves ([`sun_through_with_ring`]): the blend of eight octants loses a sunfleck a
+//! few degrees wide, and on the four procedural trees at pixels 1.4–2.5 leaves wide the shares
+//! with the seen-part gain and the crown's hotspot put the sun's image error at 4.8–8.5 % with
+//! the sun behind, beside or above the eye and 21–24 % against it, where the blend is at
+//! 8–29 % and 52–57 % (`tree_lighting_error --images --sun-ring 14 --sunlit-points 16`).
+//!
 //! Plain Rust, no render types.
 
 use super::envelope::LeafEnvelope;
@@ -32,6 +40,7 @@ use super::gathered_bounce::{
 };
 use super::leaf_scene::LeafScene;
 use super::model::LeafMaterial;
+use super::sunlit_share::{quantize_share, share_of, share_on_ring, sunlit_shares};
 use bevy::math::Vec3;
 use std::f32::consts::TAU;
 
@@ -55,13 +64,18 @@ pub const NO_RING: f32 = 2.0;
 /// A tree type's ring: the height of the suns it was gathered for (the y of the direction
 /// towards them in the model's frame, +y up: the sine of their elevation) and, per stored leaf,
 /// its ratios for the [`RING_NODES`] suns of [`ring_suns`] as a bake stores ratios
-/// ([`quantize_ratio`]): node `k`'s front face at byte `k`, its back face at `RING_NODES + k`.
-#[derive(Clone, Debug, PartialEq)]
+/// ([`quantize_ratio`]): node `k`'s front face at byte `k`, its back face at `RING_NODES + k`;
+/// and, where traced, its sunlit share for each of those suns ([`super::sunlit_share`],
+/// [`quantize_share`]: node `k` at byte `k`).
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct BounceRing {
     /// The sine of the ring's elevation.
     pub sun_height: f32,
     /// Per stored leaf, its ring ratios.
     pub leaves: Vec<[u8; STORED_RATIOS]>,
+    /// Per stored leaf, its sunlit shares on the ring; empty where none were traced (the sun
+    /// through the crown then stays the bake's blend, [`sun_through_with_ring`]).
+    pub sunlit: Vec<[u8; RING_NODES]>,
 }
 
 /// The elevation (radians) of a direction whose y is `height` (clamped to [−1, 1]).
@@ -88,8 +102,10 @@ pub fn ring_suns(height: f32) -> Vec<Vec3> {
 
 /// The ring at sun height `height` for `leaves` (indices into `scene`, in the order the ring
 /// stores them; `envelopes[i]` the envelope of `leaves[i]`) of a crown of extinction `tau`:
-/// [`sun_ratios_of`] for [`ring_suns`], `rays` rays a leaf, quantised. A leaf without an
-/// envelope or outside `scene`: ratios of 1 (eq. 5.24 unchanged).
+/// [`sun_ratios_of`] for [`ring_suns`], `rays` rays a leaf, quantised; and with
+/// `sunlit_points` above 0 each leaf's [`sunlit_shares`] for the same suns from that many
+/// points on it (0: none traced). A leaf without an envelope or outside `scene`: ratios of 1
+/// (eq. 5.24 unchanged).
 #[allow(clippy::too_many_arguments)]
 pub fn gather_ring(
     scene: &LeafScene,
@@ -99,6 +115,7 @@ pub fn gather_ring(
     tau: f32,
     height: f32,
     rays: u32,
+    sunlit_points: u32,
     opacity: &(impl Fn(u32) -> f32 + Sync),
     threads: usize,
 ) -> BounceRing {
@@ -106,6 +123,14 @@ pub fn gather_ring(
     let ratios = sun_ratios_of(
         scene, material, leaves, envelopes, tau, &suns, rays, opacity, threads,
     );
+    let sunlit = if sunlit_points > 0 && !suns.is_empty() {
+        sunlit_shares(scene, leaves, &suns, sunlit_points, opacity, threads)
+            .iter()
+            .map(|shares| std::array::from_fn(|k| quantize_share(shares[k])))
+            .collect()
+    } else {
+        Vec::new()
+    };
     BounceRing {
         sun_height: height.clamp(-1.0, 1.0),
         leaves: ratios
@@ -117,6 +142,7 @@ pub fn gather_ring(
                 })
             })
             .collect(),
+        sunlit,
     }
 }
 
@@ -197,6 +223,45 @@ pub fn ratio_with_ring_nodes(
     }
     let on_ring = ratio_on_ring(nodes, to_sun);
     [0, 1].map(|f| blend[f] + w * (on_ring[f] - blend[f]))
+}
+
+/// The sun's share through the crown at a leaf for the sun towards `to_sun` (unit, model
+/// space) where the shadow map does not resolve leaves: `blend`, the bake's blend of
+/// attenuations (with the seen-part gain and the crown's hotspot), where the sun is off the
+/// ring's elevation; the leaf's sunlit shares on its type's ring (`ring`: the ring's sun height
+/// and the leaf's stored shares), read linearly in azimuth, scaled by the seen-part gain
+/// towards the eye `gain` (1 without it), capped at 1 and raised to the crown's hotspot
+/// exponent for the eye and the sun `exponent` (1 without it,
+/// [`super::hotspot::Hotspot::sun_at`]), where the sun is at it; mixed by [`ring_weight`]
+/// between. What the leaf vertex shader gives the sun (`tree_lighting.wgsl`'s
+/// `through_with_ring`).
+///
+/// The ring's shares are traced for the sun itself at every turn of the instance, where the
+/// blend's eight directions are octants a sunfleck a few degrees wide is lost in. The mean of
+/// a leaf is not the part of it in view, least of all with the sun behind the eye, where the
+/// eye's and the sun's paths share their gaps: without a hotspot the ring is 26–29 % too dark
+/// on the olive there. The bake's hotspot (fitted against the blend) serves it; one fitted
+/// against the ring itself does better against the sun (`tree_lighting_error --images
+/// --sunlit-points`) but would have to be fitted with each ring.
+pub fn sun_through_with_ring(
+    blend: f32,
+    ring: Option<(f32, &[u8; RING_NODES])>,
+    gain: f32,
+    exponent: f32,
+    to_sun: Vec3,
+) -> f32 {
+    let Some((height, stored)) = ring else {
+        return blend;
+    };
+    let w = ring_weight(height, to_sun);
+    if w <= 0.0 {
+        return blend;
+    }
+    let nodes = stored.map(share_of);
+    let on_ring = (share_on_ring(&nodes, 0.0, to_sun) * gain)
+        .clamp(0.0, 1.0)
+        .powf(exponent);
+    blend + w * (on_ring - blend)
 }
 
 /// Whether a tree type needs a new ring for the sun at height `sun_height` (the sine of its
@@ -341,6 +406,7 @@ mod tests {
         let ring = BounceRing {
             sun_height: 0.2,
             leaves: vec![a, b],
+            sunlit: Vec::new(),
         };
         let mean = crown_mean_ring(&ring);
         let (na, nb) = (ring_nodes_of(&a), ring_nodes_of(&b));
@@ -351,9 +417,66 @@ mod tests {
         }
         let none = BounceRing {
             sun_height: 0.2,
-            leaves: Vec::new(),
+            ..BounceRing::default()
         };
         assert_eq!(crown_mean_ring(&none), [[1.0; 2]; RING_NODES]);
+    }
+
+    /// The sun through the crown: the ring's shares at its elevation (linear in azimuth, the
+    /// gain applied, capped at 1), the blend off it, half and half midway; no ring: the blend.
+    #[test]
+    fn the_sun_takes_the_rings_shares_at_its_elevation() {
+        let stored: [u8; RING_NODES] = std::array::from_fn(|k| (10 + 17 * k) as u8);
+        let h = 30f32.to_radians().sin();
+        let sun_at = |elevation: f32, azimuth: f32| {
+            let (e, a) = (elevation.to_radians(), azimuth);
+            Vec3::new(e.cos() * a.cos(), e.sin(), e.cos() * a.sin())
+        };
+        let step = TAU / RING_NODES as f32;
+        let node3 = sun_at(30.0, 3.0 * step);
+        assert!(
+            (sun_through_with_ring(0.9, Some((h, &stored)), 1.0, 1.0, node3) - share_of(stored[3]))
+                .abs()
+                < 1e-5
+        );
+        let between = sun_at(30.0, 3.25 * step);
+        let want = share_of(stored[3]) + 0.25 * (share_of(stored[4]) - share_of(stored[3]));
+        assert!(
+            (sun_through_with_ring(0.9, Some((h, &stored)), 1.0, 1.0, between) - want).abs() < 1e-4
+        );
+        // The gain towards the eye scales it, up to full light.
+        assert!(
+            (sun_through_with_ring(0.9, Some((h, &stored)), 1.5, 1.0, node3)
+                - 1.5 * share_of(stored[3]))
+            .abs()
+                < 1e-5
+        );
+        assert_eq!(
+            sun_through_with_ring(0.9, Some((h, &stored)), 100.0, 1.0, node3),
+            1.0
+        );
+        // The hotspot's exponent on the share (gain applied first).
+        let raised = sun_through_with_ring(0.9, Some((h, &stored)), 1.2, 2.0, node3);
+        assert!((raised - (1.2 * share_of(stored[3])).min(1.0).powi(2)).abs() < 1e-5);
+        // Far from the ring's elevation, or no ring: the blend.
+        assert_eq!(
+            sun_through_with_ring(0.9, Some((h, &stored)), 1.0, 1.0, sun_at(50.0, 3.0 * step)),
+            0.9
+        );
+        assert_eq!(sun_through_with_ring(0.9, None, 1.0, 1.0, node3), 0.9);
+        assert_eq!(
+            sun_through_with_ring(0.9, Some((NO_RING, &stored)), 1.0, 1.0, node3),
+            0.9
+        );
+        // Midway between the ring's whole and gone spans: half and half.
+        let mid = sun_at(
+            30.0 + 0.5 * (RING_FULL_DEGREES + RING_GONE_DEGREES),
+            3.0 * step,
+        );
+        let half = 0.5 * (0.9 + share_of(stored[3]));
+        assert!(
+            (sun_through_with_ring(0.9, Some((h, &stored)), 1.0, 1.0, mid) - half).abs() < 1e-3
+        );
     }
 
     #[test]
@@ -388,10 +511,23 @@ mod tests {
             envelope.tau,
             0.0,
             DEFAULT_BOUNCE_RAYS,
+            16,
             &|_| 1.0,
             2,
         );
         assert_eq!(ring.leaves.len(), leaves.len());
+        // The sunlit shares: each leaf's for each node's sun, traced as `sunlit_shares` does.
+        assert_eq!(ring.sunlit.len(), leaves.len());
+        let suns = ring_suns(0.0);
+        for leaf in [0usize, 57, 299] {
+            let traced = sunlit_shares(&scene, &[leaf as u32], &suns, 16, &|_| 1.0, 1);
+            let want: Vec<u8> = traced[0].iter().map(|&t| quantize_share(t)).collect();
+            assert_eq!(ring.sunlit[leaf].as_slice(), want.as_slice(), "leaf {leaf}");
+        }
+        // Inside a ball of leaves the sun reaches some leaves and not others, by node.
+        let lit: usize = ring.sunlit.iter().map(|s| (s[0] > 200) as usize).sum();
+        let dark: usize = ring.sunlit.iter().map(|s| (s[0] < 50) as usize).sum();
+        assert!(lit > 30 && dark > 30, "lit {lit}, dark {dark}");
         assert_eq!(ring.sun_height, 0.0);
         assert_eq!(SUN_BASIS[8], Vec3::X);
         let bounces = basis_bounces(&material, envelope.tau);
@@ -428,11 +564,13 @@ mod tests {
             envelope.tau,
             0.0,
             8,
+            0,
             &|_| 1.0,
             1,
         );
         for stored in &outside.leaves {
             assert!(stored.iter().all(|&q| q == quantize_ratio(1.0)));
         }
+        assert!(outside.sunlit.is_empty(), "no points: no shares traced");
     }
 }

@@ -499,19 +499,28 @@ pub fn sun_ring(to_sun: Vec3, count: usize, phase: f32) -> Vec<Vec3> {
 /// at azimuths from `phase`: linear in azimuth between the two nodes either side (a sun on a
 /// node takes its ratios; continuous all round). No ring: eq. 5.24 unchanged (1, 1).
 pub fn ratio_on_ring(ring: &[[f32; 2]], phase: f32, to_sun: Vec3) -> [f32; 2] {
-    let count = ring.len();
-    if count == 0 {
+    let Some((i, j, f)) = nodes_either_side(ring.len(), phase, to_sun) else {
         return [1.0; 2];
+    };
+    let (a, b) = (ring[i], ring[j]);
+    [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])]
+}
+
+/// Where `to_sun`'s azimuth falls on a [`sun_ring`] of `count` suns at azimuths from `phase`:
+/// the nodes either side, `(i, j)`, and how far from `i` towards `j` it lies, `f` in [0, 1]
+/// (a value on the ring is `v[i] + f · (v[j] − v[i])`). A sun whose azimuth is not finite
+/// takes node 0 alone. No ring: `None`.
+pub fn nodes_either_side(count: usize, phase: f32, to_sun: Vec3) -> Option<(usize, usize, f32)> {
+    if count == 0 {
+        return None;
     }
     let azimuth = to_sun.z.atan2(to_sun.x) - phase;
     let x = (azimuth / (std::f32::consts::TAU / count as f32)).rem_euclid(count as f32);
     if !x.is_finite() {
-        return ring[0];
+        return Some((0, 0, 0.0));
     }
     let i = (x.floor() as usize).min(count - 1);
-    let f = (x - i as f32).clamp(0.0, 1.0);
-    let (a, b) = (ring[i], ring[(i + 1) % count]);
-    [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])]
+    Some((i, (i + 1) % count, (x - i as f32).clamp(0.0, 1.0)))
 }
 
 /// [`bounce_ratios`] of each of `leaves` (indices into `scene`; `envelopes[i]` the envelope of

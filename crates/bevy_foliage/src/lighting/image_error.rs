@@ -181,6 +181,9 @@ pub struct ImageComparison {
     /// ([`super::hotspot::HotspotSuns::Height`]). Sky and bounce are the first model's; per
     /// pixel size. Empty unless `sunlit_points`.
     pub sunlit: Vec<(String, Vec<ImageError>)>,
+    /// Per ring of [`ImageSettings::sun_rings`] with [`ImageSettings::sunlit_points`]: its
+    /// count and the seconds every leaf's shares on it took to trace (on the threads given).
+    pub sunlit_seconds: Vec<(usize, f32)>,
     /// The hotspot measured, when it was.
     pub hotspot_factors: Option<super::hotspot::Hotspot>,
     /// Eye rays that hit a leaf.
@@ -739,6 +742,7 @@ pub fn images_against_tracer(
         _ => (Vec::new(), Vec::new(), Vec::new()),
     };
     let mut sunlit = Vec::new();
+    let mut sunlit_seconds = Vec::new();
     if settings.sunlit_points > 0 {
         use super::gathered_bounce::sun_ring;
         use super::sunlit_share::{share_on_ring, sunlit_shares};
@@ -762,6 +766,7 @@ pub fn images_against_tracer(
         ));
         for &count in &settings.sun_rings {
             let phase = light.to_sun.z.atan2(light.to_sun.x) + std::f32::consts::PI / count as f32;
+            let started = std::time::Instant::now();
             let ring = sunlit_shares(
                 &scene,
                 &all,
@@ -770,6 +775,7 @@ pub fn images_against_tracer(
                 &|_| 1.0,
                 threads,
             );
+            sunlit_seconds.push((count, started.elapsed().as_secs_f32()));
             sources.push((
                 format!("leaf's sunlit share on a ring of {count}, the sun midway"),
                 ring.iter()
@@ -831,6 +837,7 @@ pub fn images_against_tracer(
     }
     ImageComparison {
         sunlit,
+        sunlit_seconds,
         models,
         seen,
         hotspot,

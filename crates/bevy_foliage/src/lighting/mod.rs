@@ -12,7 +12,9 @@
 //! dependence on the angle between the eye and the sun (the eye's and the sun's paths share
 //! their gaps), and [`gathered_bounce`] the bounce gathered from each leaf's own neighbours as
 //! ratios to eq. 5.24 (baked with the bins, drawn by the leaf shaders), re-gathered while an
-//! app runs on a ring of suns at the sun's elevation by [`bounce_ring`];
+//! app runs on a ring of suns at the sun's elevation by [`bounce_ring`], which also holds each
+//! leaf's [`sunlit_share`] towards those suns, the leaves' sun where the shadow map does not
+//! resolve leaves;
 //! [`settings`] switches the leaf
 //! shaders between it and Bevy's lighting; [`sun_maps`] measures maps rendered from the sun (shadow map, foliage
 //! maps) as the leaves' sun against the same tracer.

@@ -73,6 +73,11 @@ pub struct BounceRingSettings {
     /// Rays a leaf casts over its two sides; each neighbour hit casts a shadow ray towards each
     /// of the ring's fourteen suns (the cost of one bake's bounce gather).
     pub rays: u32,
+    /// Points a leaf its sunlit share towards each of the ring's suns is traced from
+    /// ([`crate::lighting::sunlit_share`]), which the leaves take for the sun through the crown
+    /// where the sun's shadow map does not resolve leaves; 0: none traced, the bake's blend
+    /// there (a ring gathered with or without shares is gathered again when this changes).
+    pub sunlit_points: u32,
     /// Degrees of elevation the sun moves from a tree type's ring before a new one is gathered.
     pub regather_degrees: f32,
     /// Threads each re-gather runs on (0: half the machine's, at least one).
@@ -84,6 +89,7 @@ impl Default for BounceRingSettings {
         Self {
             enabled: true,
             rays: crate::lighting::gathered_bounce::DEFAULT_BOUNCE_RAYS,
+            sunlit_points: crate::lighting::sunlit_share::DEFAULT_SUNLIT_POINTS,
             regather_degrees: crate::lighting::bounce_ring::DEFAULT_REGATHER_DEGREES,
             threads: 0,
         }
@@ -171,6 +177,14 @@ impl TreeLightingSettings {
             ));
             out.bounce_ring.regather_degrees = fixed;
         }
+        use crate::lighting::sunlit_share::MAX_SUNLIT_POINTS;
+        if ring.sunlit_points > MAX_SUNLIT_POINTS {
+            fixes.push(format!(
+                "bounce ring sunlit points {} must be at most {MAX_SUNLIT_POINTS}: clamped",
+                ring.sunlit_points
+            ));
+            out.bounce_ring.sunlit_points = MAX_SUNLIT_POINTS;
+        }
         if ring.threads > 1024 {
             fixes.push(format!(
                 "bounce ring threads {} is absurd: 0 (half the machine's)",
@@ -222,14 +236,19 @@ mod tests {
             bounce_ring: BounceRingSettings {
                 enabled: true,
                 rays: 0,
+                sunlit_points: u32::MAX,
                 regather_degrees: f32::NAN,
                 threads: 1 << 20,
             },
             ..default()
         };
         let (fixed, fixes) = bad.sanitized();
-        assert_eq!(fixes.len(), 3, "{fixes:?}");
+        assert_eq!(fixes.len(), 4, "{fixes:?}");
         assert_eq!(fixed.bounce_ring.rays, 1);
+        assert_eq!(
+            fixed.bounce_ring.sunlit_points,
+            crate::lighting::sunlit_share::MAX_SUNLIT_POINTS
+        );
         assert_eq!(
             fixed.bounce_ring.regather_degrees,
             crate::lighting::bounce_ring::DEFAULT_REGATHER_DEGREES

@@ -8,7 +8,9 @@
 //! most any one value per leaf can know of the sun through the crown; traced on a ring of
 //! suns at the sun's elevation ([`super::gathered_bounce::sun_ring`]), as the bounce's ratios
 //! are re-gathered while an app runs ([`super::bounce_ring`]), it serves every upright
-//! instance however turned. [`super::image_error`] measures both against the path tracer.
+//! instance however turned. [`super::image_error`] measures both against the path tracer;
+//! [`super::bounce_ring::gather_ring`] traces the ring beside the bounce ratios while an app
+//! runs, and the leaf vertex shader reads it ([`super::bounce_ring::sun_through_with_ring`]).
 //!
 //! Plain Rust, no render types.
 
@@ -64,8 +66,31 @@ pub fn sunlit_shares(
 /// from `phase` ([`super::gathered_bounce::sun_ring`]): linear in azimuth between the two
 /// nodes either side. No ring: fully lit.
 pub fn share_on_ring(ring: &[f32], phase: f32, to_sun: Vec3) -> f32 {
-    let pairs: Vec<[f32; 2]> = ring.iter().map(|&s| [s, s]).collect();
-    super::gathered_bounce::ratio_on_ring(&pairs, phase, to_sun)[0]
+    match super::gathered_bounce::nodes_either_side(ring.len(), phase, to_sun) {
+        Some((i, j, f)) => ring[i] + f * (ring[j] - ring[i]),
+        None => 1.0,
+    }
+}
+
+/// Points a leaf a ring of sunlit shares is traced from by default while an app runs
+/// (`BounceRingSettings::sunlit_points`): the 16 measured in `tree_lighting_error --images
+/// --sunlit-points 16`.
+pub const DEFAULT_SUNLIT_POINTS: u32 = 16;
+
+/// The most points a leaf a ring's shares are traced from.
+pub const MAX_SUNLIT_POINTS: u32 = 1024;
+
+/// A share as stored: a byte, 255ths (clamped to [0, 1]; not a number: 0).
+pub fn quantize_share(share: f32) -> u8 {
+    if share.is_nan() {
+        return 0;
+    }
+    (share.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// A stored share read back.
+pub fn share_of(stored: u8) -> f32 {
+    stored as f32 / 255.0
 }
 
 #[cfg(test)]
@@ -119,5 +144,16 @@ mod tests {
         let midway = (suns[0] + suns[1]).normalize();
         assert!((share_on_ring(&ring, 0.0, midway) - 0.5).abs() < 1e-4);
         assert_eq!(share_on_ring(&[], 0.0, to_sun), 1.0);
+    }
+
+    #[test]
+    fn a_stored_share_reads_back_within_half_a_step() {
+        for k in 0..=100 {
+            let s = k as f32 / 100.0;
+            assert!((share_of(quantize_share(s)) - s).abs() <= 0.5 / 255.0 + 1e-6);
+        }
+        assert_eq!(quantize_share(-1.0), 0);
+        assert_eq!(quantize_share(2.0), 255);
+        assert_eq!(quantize_share(f32::NAN), 0);
     }
 }

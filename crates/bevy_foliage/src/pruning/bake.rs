@@ -352,13 +352,13 @@ impl BakedFoliage {
     /// light (attenuations, seen-part gains, bounce ratios and their ring;
     /// `store::LEAF_LIGHT_WORDS`).
     pub fn gpu_bytes(&self) -> usize {
-        // 16 words a vertex and 24 a leaf (`store::LEAF_VERTEX_WORDS`, `LEAF_LIGHT_WORDS`).
+        // 16 words a vertex and 28 a leaf (`store::LEAF_VERTEX_WORDS`, `LEAF_LIGHT_WORDS`).
         self.positions.len() * 16 * 4
             + self.indices.len() * 4
             + self.leaf_index_start.len() * 4
             + self.cell_first_leaf.len() * 4
             + self.visibility.len() * 2
-            + self.leaf_count() * 24 * 4
+            + self.leaf_count() * 28 * 4
     }
 }
 

@@ -6,8 +6,8 @@
 #import bevy_foliage::leaf_pulling::{SlotVertex, pull_leaf_vertex}
 #ifdef TREE_LIGHTING
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
-#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_bounce_ratios, leaf_params, leaf_ring_height, leaf_ring_ratios, leaf_seen_gains}
-#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, ratio_with_ring, seen_gain}
+#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_bounce_ratios, leaf_has_ring_shares, leaf_params, leaf_ring_height, leaf_ring_ratios, leaf_ring_shares, leaf_seen_gains}
+#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, ratio_with_ring, seen_gain, through_with_ring}
 
 // The tree instance's frame, read once per vertex: world directions into the model's frame
 // (the transpose undoes a rotation and, once normalised, a uniform scale), the instance's scale
@@ -64,12 +64,23 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
     // its bounce, from the covered rest of the sphere, by the covered part's gain. Then the
     // crown's hotspot (`lighting::hotspot`) by the angle between the eye and the sun: the
     // blended sun raised to its exponent, the bounce scaled.
+    var seen = 1.0;
+    var sun_exponent = 1.0;
     if leaf_params.seen_part != 0u {
-        let seen = seen_gain(leaf_seen_gains(leaf.leaf), to_eye);
+        seen = seen_gain(leaf_seen_gains(leaf.leaf), to_eye);
         let cos_alpha = dot(to_eye, frame.to_sun);
+        sun_exponent = hotspot_at(leaf.hotspot.xy, cos_alpha);
         light.sky *= seen;
-        light.through = pow(min(light.through * seen, 1.0), hotspot_at(leaf.hotspot.xy, cos_alpha));
+        light.through = pow(min(light.through * seen, 1.0), sun_exponent);
         light.bounce *= covered_gain(seen, light.open) * hotspot_at(leaf.hotspot.zw, cos_alpha);
+    }
+    // Where the sun is at the elevation of the type's ring and the ring holds the leaves'
+    // sunlit shares traced for its suns (`lighting::sunlit_share`), those in place of the blend,
+    // with the gain towards the eye and the crown's hotspot: the sun where the shadow map does
+    // not resolve leaves.
+    if leaf_params.bounce_ring != 0u && leaf_has_ring_shares(leaf.leaf) {
+        light.through = through_with_ring(light.through, leaf_ring_height(leaf.leaf),
+            leaf_ring_shares(leaf.leaf), seen, sun_exponent, frame.to_sun);
     }
     // A channel the base colour lacks sends no light either.
     let lacks = albedo <= vec3(0.0);

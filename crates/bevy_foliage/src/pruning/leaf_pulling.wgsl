@@ -63,9 +63,10 @@ struct LeafParams {
 // Per (instance, cell): kept index count, output offset, LoD(cell), 0.
 @group(#{MATERIAL_BIND_GROUP}) @binding(103) var<storage, read> cell_offsets: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(104) var<storage, read> leaf_vertices: array<LeafVertex>;
-// Per leaf, six vec4s: its eight attenuations then its eight seen-part gains, as u16 pairs; its 28
-// bounce ratios as bytes and its type's ring's sun height (f32 bits); its 28 ring ratios as
-// bytes and a word of padding (`store::LEAF_LIGHT_WORDS`).
+// Per leaf, seven vec4s: its eight attenuations then its eight seen-part gains, as u16 pairs; its
+// 28 bounce ratios as bytes and its type's ring's sun height (f32 bits); its 28 ring ratios as
+// bytes and a word of padding; its 14 sunlit shares on the ring as bytes, a byte 1 where the
+// ring has them, one of padding (`store::LEAF_LIGHT_WORDS`).
 @group(#{MATERIAL_BIND_GROUP}) @binding(105) var<storage, read> leaf_light: array<vec4<u32>>;
 @group(#{MATERIAL_BIND_GROUP}) @binding(106) var<uniform> leaf_params: LeafParams;
 
@@ -181,7 +182,7 @@ fn leaf_seen_gains(leaf: u32) -> array<f32, 8> {
 const SEEN_GAIN_MAX: f32 = 4.0;
 
 // vec4s per leaf in `leaf_light` (`store::LEAF_LIGHT_WORDS` / 4).
-const LEAF_LIGHT_VECS: u32 = 6u;
+const LEAF_LIGHT_VECS: u32 = 7u;
 
 // 28 ratios stored a byte each in two vec4s (the last word not read): code 0 is 0, codes 1–255
 // the ratio's base-2 logarithm from −4 to 4 (`lighting::gathered_bounce::ratio_of`).
@@ -213,4 +214,20 @@ fn leaf_ring_height(leaf: u32) -> f32 {
 fn leaf_ring_ratios(leaf: u32) -> array<f32, 28> {
     return unpack_ratios(array<vec4<u32>, 2>(
         leaf_light[LEAF_LIGHT_VECS * leaf + 4u], leaf_light[LEAF_LIGHT_VECS * leaf + 5u]));
+}
+
+// Whether leaf `leaf`'s type's ring holds its sunlit shares.
+fn leaf_has_ring_shares(leaf: u32) -> bool {
+    return ((leaf_light[LEAF_LIGHT_VECS * leaf + 6u].w >> 16u) & 0xffu) != 0u;
+}
+
+// The sunlit shares of leaf `leaf` on its type's ring, node k at k, in 255ths
+// (`lighting::sunlit_share::share_of`).
+fn leaf_ring_shares(leaf: u32) -> array<f32, 14> {
+    let words = leaf_light[LEAF_LIGHT_VECS * leaf + 6u];
+    var s: array<f32, 14>;
+    for (var k = 0u; k < 14u; k += 1u) {
+        s[k] = f32((words[k / 4u] >> (8u * (k % 4u))) & 0xffu) / 255.0;
+    }
+    return s;
 }

@@ -6,7 +6,8 @@
 // The sun's share at the leaf. Where Bevy's shadow map of the sun resolves leaves (its texels at
 // most `LEAF_SHADOW_FINE` of the leaf's size) it is read at the leaf itself: leaf-on-leaf
 // shadows and whatever else stands in the way. Where the texels grow to `LEAF_SHADOW_COARSE`
-// of a leaf the eight baked attenuations' blend takes over, times the shadow map read where the
+// of a leaf the vertex stage's share takes over (the leaf's sunlit shares on its type's ring
+// where the sun is at the ring's elevation, the eight baked attenuations' blend where not), times the shadow map read where the
 // sun's light enters the crown (on the plane touching its bounding sphere on the sun's side:
 // what stands outside the crown, the crown's own leaves not counted twice), with a smooth
 // hand-over between. Both sizes are measured against a path tracer on the procedural trees

@@ -1,5 +1,6 @@
-//! Re-gathering each tree type's bounce ratios on a ring of suns at the sun's elevation while
-//! the app runs ([`crate::lighting::bounce_ring`]): when the sun's elevation has moved
+//! Re-gathering each tree type's bounce ratios and its leaves' sunlit shares on a ring of suns
+//! at the sun's elevation while the app runs ([`crate::lighting::bounce_ring`],
+//! [`crate::lighting::sunlit_share`]): when the sun's elevation has moved
 //! [`BounceRingSettings::regather_degrees`] from a type's ring, a background task gathers the
 //! next one from the type's loaded bake (its leaves as a scene, its envelopes read back, the
 //! opacity it was traced with); when it lands, the leaves' light buffer is rewritten with it.
@@ -140,12 +141,14 @@ enum Leaves {
 }
 
 /// The re-gather of a tree type's ring at sun height `height`: [`gather_ring`] of its stored
-/// leaves with the lighting's optics, `rays` rays a leaf and `threads` threads.
+/// leaves with the lighting's optics, `rays` rays a leaf, their sunlit shares from
+/// `sunlit_points` points a leaf (0: none) and `threads` threads.
 fn regather(
     leaves: Leaves,
     optics: &crate::lighting::model::LeafMaterial,
     height: f32,
     rays: u32,
+    sunlit_points: u32,
     threads: usize,
 ) -> Gathered {
     let started = std::time::Instant::now();
@@ -163,6 +166,7 @@ fn regather(
         source.tau,
         height,
         rays,
+        sunlit_points,
         &|_| opacity,
         threads,
     );
@@ -224,8 +228,17 @@ pub fn regather_bounce_rings(
             if rings.in_flight.contains_key(&id) {
                 continue;
             }
-            let ring = rings.rings.get(&id).map(|r| r.sun_height);
-            if !needs_regather(height, ring, settings.regather_degrees) {
+            let ring = rings.rings.get(&id);
+            // A ring whose sunlit shares the settings no longer want (or now want) is gathered
+            // again too.
+            let shares_as_set =
+                ring.is_none_or(|r| r.sunlit.is_empty() == (settings.sunlit_points == 0));
+            if !needs_regather(
+                height,
+                ring.map(|r| r.sun_height),
+                settings.regather_degrees,
+            ) && shares_as_set
+            {
                 continue;
             }
             let leaves = match rings.sources.get(&id) {
@@ -235,11 +248,12 @@ pub fn regather_bounce_rings(
                     _ => continue,
                 },
             };
-            let (optics, rays) = (lighting.optics, settings.rays);
+            let (optics, rays, points) = (lighting.optics, settings.rays, settings.sunlit_points);
             match AsyncComputeTaskPool::try_get() {
                 Some(pool) => {
-                    let task =
-                        pool.spawn(async move { regather(leaves, &optics, height, rays, threads) });
+                    let task = pool.spawn(async move {
+                        regather(leaves, &optics, height, rays, points, threads)
+                    });
                     rings.in_flight.insert(id, task);
                 }
                 None => {
@@ -250,7 +264,7 @@ pub fn regather_bounce_rings(
                         );
                         *warned = true;
                     }
-                    rings.land(id, regather(leaves, &optics, height, rays, threads));
+                    rings.land(id, regather(leaves, &optics, height, rays, points, threads));
                 }
             }
         }

@@ -6,7 +6,7 @@
 
 use super::bake::BakedFoliage;
 use super::components::{FoliageShadowLight, PrunedFoliage, PruningParams};
-use crate::lighting::bounce_ring::{BounceRing, NO_RING};
+use crate::lighting::bounce_ring::{BounceRing, NO_RING, RING_NODES};
 use crate::lighting::gathered_bounce::{BounceRatios, STORED_RATIOS};
 use crate::settings::FoliagePruningSettings;
 use bevy::asset::{AssetId, RenderAssetUsages};
@@ -91,17 +91,23 @@ pub const LEAF_VERTEX_WORDS: usize = 16;
 /// (`BakedFoliage::leaf_bounce`), four bytes a word, low byte first; the sun height of its
 /// type's ring of re-gathered ratios (`f32` bits; [`NO_RING`] for none,
 /// [`crate::lighting::bounce_ring`]); its 28 ring ratios, as the bounce ratios; a word of
-/// padding.
-pub const LEAF_LIGHT_WORDS: usize = 24;
+/// padding; its 14 sunlit shares on the ring (bytes, node `k` at byte `k`,
+/// [`crate::lighting::sunlit_share::quantize_share`]), then a byte 1 where the ring has them
+/// (0: none, the bake's blend) and one of padding.
+pub const LEAF_LIGHT_WORDS: usize = 28;
 
 // `BakedFoliage::gpu_bytes` counts these sizes.
-const _: () = assert!(LEAF_VERTEX_WORDS == 16 && LEAF_LIGHT_WORDS == 24);
+const _: () = assert!(LEAF_VERTEX_WORDS == 16 && LEAF_LIGHT_WORDS == 28);
 
 /// Appends the [`LEAF_LIGHT_WORDS`] words of each of `tree`'s leaves to `out`, with `ring` (its
-/// sun height and per leaf its ratios) as the type's ring; `None`, or a ring for another number
-/// of leaves: no ring.
+/// sun height and per leaf its ratios and sunlit shares) as the type's ring; `None`, or a ring
+/// for another number of leaves: no ring (and a ring's shares for another number of leaves:
+/// no shares).
 pub fn push_leaf_light(tree: &BakedFoliage, ring: Option<&BounceRing>, out: &mut Vec<u32>) {
     let ring = ring.filter(|r| r.leaves.len() == tree.leaf_count() && r.sun_height.abs() <= 1.0);
+    let shares = ring
+        .map(|r| r.sunlit.as_slice())
+        .filter(|s| s.len() == tree.leaf_count());
     let no_ratios = BounceRatios::default().quantized();
     let ratio_words = |r: &[u8; STORED_RATIOS]| {
         r.chunks_exact(4)
@@ -135,6 +141,16 @@ pub fn push_leaf_light(tree: &BakedFoliage, ring: Option<&BounceRing>, out: &mut
             }
         }
         out.push(0);
+        let mut sunlit = [0u8; 16];
+        if let Some(shares) = shares {
+            sunlit[..RING_NODES].copy_from_slice(&shares[leaf]);
+            sunlit[RING_NODES] = 1;
+        }
+        out.extend(
+            sunlit
+                .chunks_exact(4)
+                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+        );
     }
 }
 
@@ -462,6 +478,9 @@ mod tests {
             leaves: (0..n)
                 .map(|l| std::array::from_fn(|i| (l * 7 + i) as u8))
                 .collect(),
+            sunlit: (0..n)
+                .map(|l| std::array::from_fn(|k| (l * 5 + 3 * k + 1) as u8))
+                .collect(),
         };
         let (mut with, mut without, mut wrong) = (Vec::new(), Vec::new(), Vec::new());
         push_leaf_light(&tree, Some(&ring), &mut with);
@@ -469,8 +488,23 @@ mod tests {
         let short = BounceRing {
             sun_height: 0.25,
             leaves: ring.leaves[1..].to_vec(),
+            sunlit: ring.sunlit[1..].to_vec(),
         };
         push_leaf_light(&tree, Some(&short), &mut wrong);
+        // A ring without shares, or with shares for another number of leaves: the ratios, no
+        // shares.
+        let (mut unshared, mut short_shares) = (Vec::new(), Vec::new());
+        let bare = BounceRing {
+            sunlit: Vec::new(),
+            ..ring.clone()
+        };
+        push_leaf_light(&tree, Some(&bare), &mut unshared);
+        let odd = BounceRing {
+            sunlit: ring.sunlit[1..].to_vec(),
+            ..ring.clone()
+        };
+        push_leaf_light(&tree, Some(&odd), &mut short_shares);
+        assert_eq!(unshared, short_shares);
         assert_eq!(with.len(), n * LEAF_LIGHT_WORDS);
         assert_eq!(without, wrong);
         let one = u32::from_le_bytes([quantize_ratio(1.0); 4]);
@@ -488,6 +522,17 @@ mod tests {
                 assert_eq!(o[16 + k], one);
             }
             assert_eq!((w[23], o[23]), (0, 0));
+            let s = &ring.sunlit[leaf];
+            for k in 0..3 {
+                let b = &s[4 * k..4 * k + 4];
+                assert_eq!(w[24 + k], u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+                assert_eq!(o[24 + k], 0);
+            }
+            assert_eq!(w[27], u32::from_le_bytes([s[12], s[13], 1, 0]));
+            assert_eq!(o[27], 0);
+            let u = &unshared[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
+            assert_eq!(u[..24], w[..24]);
+            assert!(u[24..].iter().all(|&x| x == 0));
         }
     }
 }

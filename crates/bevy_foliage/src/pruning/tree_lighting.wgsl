@@ -219,19 +219,53 @@ fn ring_weight(ring_height: f32, to_sun: vec3<f32>) -> f32 {
     return 1.0 - t * t * (3.0 - 2.0 * t);
 }
 
-// The ratios towards `to_sun` from a leaf's ring (node k's front face at k, its back face at
-// 14 + k; node k at azimuth 2πk/14 from +x towards +z): linear in azimuth between the nodes
-// either side (`lighting::bounce_ring::ratio_on_ring`).
-fn ratio_on_ring(ring: array<f32, 28>, to_sun: vec3<f32>) -> vec2<f32> {
+// Where the azimuth of `to_sun` falls on the ring (node k at azimuth 2πk/14 from +x towards
+// +z): the nodes either side and how far from the first towards the second it lies
+// (`lighting::gathered_bounce::nodes_either_side`).
+struct RingSpan {
+    i: u32,
+    j: u32,
+    f: f32,
+}
+
+fn ring_span(to_sun: vec3<f32>) -> RingSpan {
     let step = 2.0 * PI / f32(RING_NODES);
     var x = atan2(to_sun.z, to_sun.x) / step;
     x = x - f32(RING_NODES) * floor(x / f32(RING_NODES));
     let i = min(u32(floor(x)), RING_NODES - 1u);
-    let f = clamp(x - f32(i), 0.0, 1.0);
-    let j = (i + 1u) % RING_NODES;
-    let a = vec2(ring[i], ring[RING_NODES + i]);
-    let b = vec2(ring[j], ring[RING_NODES + j]);
-    return a + f * (b - a);
+    return RingSpan(i, (i + 1u) % RING_NODES, clamp(x - f32(i), 0.0, 1.0));
+}
+
+// The ratios towards `to_sun` from a leaf's ring (node k's front face at k, its back face at
+// 14 + k): linear in azimuth between the nodes either side
+// (`lighting::bounce_ring::ratio_on_ring`).
+fn ratio_on_ring(ring: array<f32, 28>, to_sun: vec3<f32>) -> vec2<f32> {
+    let at = ring_span(to_sun);
+    let a = vec2(ring[at.i], ring[RING_NODES + at.i]);
+    let b = vec2(ring[at.j], ring[RING_NODES + at.j]);
+    return a + at.f * (b - a);
+}
+
+// The sun's share through the crown where the shadow map does not resolve leaves: `blend` (the
+// bake's blend of attenuations with its gain and hotspot) off the ring's elevation; the leaf's
+// sunlit shares on its type's ring, linear in azimuth, times the seen-part gain `gain`, capped
+// at 1, raised to the crown's hotspot exponent `exponent`, at it; mixed by `ring_weight` between
+// (`lighting::bounce_ring::sun_through_with_ring`).
+fn through_with_ring(
+    blend: f32,
+    ring_height: f32,
+    shares: array<f32, 14>,
+    gain: f32,
+    exponent: f32,
+    to_sun: vec3<f32>,
+) -> f32 {
+    let w = ring_weight(ring_height, to_sun);
+    if w <= 0.0 {
+        return blend;
+    }
+    let at = ring_span(to_sun);
+    let share = shares[at.i] + at.f * (shares[at.j] - shares[at.i]);
+    return blend + w * (pow(clamp(share * gain, 0.0, 1.0), exponent) - blend);
 }
 
 // A leaf's bounce factors (front, back) for the sun towards `to_sun`: its type's ring where the
