@@ -48,8 +48,10 @@
 //! `--sunlit-points P` (with `--images`): rows of the sun through the crown from each leaf's
 //! sunlit share traced from P points on it (`lighting::sunlit_share`) for the image's sun and,
 //! per `--sun-ring N`, on a ring of N suns at its elevation read with the sun midway between
-//! two nodes; as it is, with the seen-part gain, with the crown's hotspot, and (rings, with
-//! `--hotspot`) with a hotspot fitted against the ring's shares at the sun's height.
+//! two nodes; each as the leaf's share and as the share's plane over the leaf (the
+//! least-squares fit to the same points, `SharePlane`) read at the eye ray's point; as it is,
+//! with the seen-part gain, with the crown's hotspot, and (rings' shares, with `--hotspot`)
+//! with a hotspot fitted against the ring's shares at the sun's height.
 //!
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
 //! map at five texel sizes, 1/16 to one leaf, read as the leaf shaders read it and with a 3×3 filter, the crown's extinction over its depth, eq. 5.3's foliage maps)

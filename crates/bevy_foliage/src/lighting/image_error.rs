@@ -174,12 +174,13 @@ pub struct ImageComparison {
     /// [`ImageSettings::sunlit_points`] points a leaf) in place of the baked attenuations'
     /// blend, under a label: traced for the image's sun, then on each ring of
     /// [`ImageSettings::sun_rings`] with the sun midway between two nodes (read linearly in
-    /// azimuth); each as it is, scaled by the leaf's seen-part gain towards the eye (capped at
-    /// 1, where the gains were measured), with that the crown's hotspot exponent (where
-    /// measured; fitted against the blend), and for a ring with [`ImageSettings::hotspot`] a
-    /// hotspot fitted against the ring's own shares for suns at the sun's height
-    /// ([`super::hotspot::HotspotSuns::Height`]). Sky and bounce are the first model's; per
-    /// pixel size. Empty unless `sunlit_points`.
+    /// azimuth); each as the leaf's share (one value a leaf) and as its share's plane over
+    /// the leaf read at the eye ray's point ([`super::sunlit_share::SharePlane`]); each as it
+    /// is, scaled by the leaf's seen-part gain towards the eye (capped at 1, where the gains
+    /// were measured), with that the crown's hotspot exponent (where measured; fitted against
+    /// the blend), and for a ring's shares with [`ImageSettings::hotspot`] a hotspot fitted
+    /// against them for suns at the sun's height ([`super::hotspot::HotspotSuns::Height`]).
+    /// Sky and bounce are the first model's; per pixel size. Empty unless `sunlit_points`.
     pub sunlit: Vec<(String, Vec<ImageError>)>,
     /// Per ring of [`ImageSettings::sun_rings`] with [`ImageSettings::sunlit_points`]: its
     /// count and the seconds every leaf's shares on it took to trace (on the threads given).
@@ -745,13 +746,14 @@ pub fn images_against_tracer(
     let mut sunlit_seconds = Vec::new();
     if settings.sunlit_points > 0 {
         use super::gathered_bounce::sun_ring;
-        use super::sunlit_share::{share_on_ring, sunlit_shares};
+        use super::sunlit_share::{SharePlane, plane_on_ring, sunlit_planes};
         let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
-        // Per source: its label, each leaf's share towards the image's sun, and for a ring its
-        // phase and each leaf's shares on it.
-        type Ring = Option<(f32, Vec<Vec<f32>>)>;
-        let mut sources: Vec<(String, Vec<f32>, Ring)> = Vec::new();
-        let exact = sunlit_shares(
+        // Per source: its label, each leaf's plane towards the image's sun, and for a ring its
+        // phase and each leaf's planes on it. Each source is drawn twice: the leaf's share
+        // alone (the plane's mean over the whole leaf) and the plane at the eye ray's point.
+        type Ring = Option<(f32, Vec<Vec<SharePlane>>)>;
+        let mut sources: Vec<(String, Vec<SharePlane>, Ring)> = Vec::new();
+        let exact = sunlit_planes(
             &scene,
             &all,
             &[light.to_sun],
@@ -760,14 +762,14 @@ pub fn images_against_tracer(
             threads,
         );
         sources.push((
-            "leaf's sunlit share, traced for this sun".into(),
+            "traced for this sun".into(),
             exact.iter().map(|s| s[0]).collect(),
             None,
         ));
         for &count in &settings.sun_rings {
             let phase = light.to_sun.z.atan2(light.to_sun.x) + std::f32::consts::PI / count as f32;
             let started = std::time::Instant::now();
-            let ring = sunlit_shares(
+            let ring = sunlit_planes(
                 &scene,
                 &all,
                 &sun_ring(light.to_sun, count, phase),
@@ -777,30 +779,48 @@ pub fn images_against_tracer(
             );
             sunlit_seconds.push((count, started.elapsed().as_secs_f32()));
             sources.push((
-                format!("leaf's sunlit share on a ring of {count}, the sun midway"),
+                format!("on a ring of {count}, the sun midway"),
                 ring.iter()
-                    .map(|r| share_on_ring(r, phase, light.to_sun))
+                    .map(|r| plane_on_ring(r, phase, light.to_sun))
                     .collect(),
                 Some((phase, ring)),
             ));
         }
-        for (label, share, ring) in sources {
-            let image = |through: &dyn Fn(usize, f32) -> f32| {
-                let sun: Vec<f32> = samples
-                    .iter()
-                    .map(|s| {
-                        s.as_ref().map_or(0.0, |s| {
-                            let leaf = s.leaf as usize;
-                            let n = scene.normal(leaf);
-                            let t = through(leaf, share[leaf]);
-                            luminance(sun_radiance(material, n, view, light.to_sun, t, light.sun))
+        for (source, planes, ring) in sources {
+            for plane in [false, true] {
+                let label = if plane {
+                    format!("leaf's sunlit plane {source}")
+                } else {
+                    format!("leaf's sunlit share {source}")
+                };
+                let image = |through: &dyn Fn(usize, f32) -> f32| {
+                    let sun: Vec<f32> = samples
+                        .iter()
+                        .map(|s| {
+                            s.as_ref().map_or(0.0, |s| {
+                                let leaf = s.leaf as usize;
+                                let n = scene.normal(leaf);
+                                let share = if plane {
+                                    planes[leaf].at(s.point)
+                                } else {
+                                    planes[leaf].mean
+                                };
+                                let t = through(leaf, share);
+                                luminance(sun_radiance(
+                                    material,
+                                    n,
+                                    view,
+                                    light.to_sun,
+                                    t,
+                                    light.sun,
+                                ))
+                            })
                         })
-                    })
-                    .collect();
-                measure(&[model_sky.clone(), sun, model_bounce.clone()])
-            };
-            sunlit.push((label.clone(), image(&|_, t| t)));
-            if let Some(g) = &gains {
+                        .collect();
+                    measure(&[model_sky.clone(), sun, model_bounce.clone()])
+                };
+                sunlit.push((label.clone(), image(&|_, t| t)));
+                let Some(g) = &gains else { continue };
                 let gained = |leaf: usize, t: f32| (t * seen_gain(&g[leaf], view)).min(1.0);
                 sunlit.push((format!("{label}, seen-part gain"), image(&gained)));
                 if let Some(h) = &hotspot_factors {
@@ -811,8 +831,8 @@ pub fn images_against_tracer(
                 }
                 // The ring's own hotspot: fitted for suns at the sun's height against the
                 // shares read on the ring.
-                if let (Some((phase, ring)), Some((_, envelope)), true) =
-                    (&ring, &last_model, settings.hotspot)
+                if let (Some((phase, ring)), Some((_, envelope)), true, false) =
+                    (&ring, &last_model, settings.hotspot, plane)
                 {
                     let own = super::hotspot::crown_hotspot_for(
                         &scene,
@@ -820,7 +840,7 @@ pub fn images_against_tracer(
                         g,
                         &|_, _| [1.0; 2],
                         super::hotspot::HotspotSuns::Height(light.to_sun.y),
-                        Some(&|leaf, to_sun| share_on_ring(&ring[leaf], *phase, to_sun)),
+                        Some(&|leaf, to_sun| plane_on_ring(&ring[leaf], *phase, to_sun).mean),
                         &|l| Some(l as usize),
                         material,
                         &|_| 1.0,

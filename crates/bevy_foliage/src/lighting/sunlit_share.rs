@@ -24,7 +24,7 @@ use bevy::math::Vec3;
 /// sun, so that neighbouring suns' shares differ by the crown, not by the points), the leaf's
 /// own triangles not counted and a leaf `l` letting `1 − opacity(l)` through. `out[i][s]`
 /// belongs to `leaves[i]` and `suns[s]`; in `[0, 1]`. Deterministic: each leaf's points are
-/// seeded by its index.
+/// seeded by its index. The means of [`sunlit_planes`].
 pub fn sunlit_shares(
     scene: &LeafScene,
     leaves: &[u32],
@@ -33,6 +33,56 @@ pub fn sunlit_shares(
     opacity: &(dyn Fn(u32) -> f32 + Sync),
     threads: usize,
 ) -> Vec<Vec<f32>> {
+    sunlit_planes(scene, leaves, suns, points, opacity, threads)
+        .into_iter()
+        .map(|planes| planes.iter().map(|p| p.mean).collect())
+        .collect()
+}
+
+/// A leaf's sunlit share towards one sun as a plane over the leaf: the share `mean` at the
+/// centroid `centre` of the points it was traced from, changing by `gradient` (in the leaf's
+/// plane, per unit of length) across it — the least-squares fit to the light let through at
+/// each point. Where a sunfleck's edge crosses a leaf, one value per leaf gives the whole
+/// leaf its mean; the plane keeps which side is lit, as values at the leaf's vertices
+/// interpolated across it would.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SharePlane {
+    /// The share at `centre`: the leaf's sunlit share ([`sunlit_shares`]).
+    pub mean: f32,
+    /// The centroid of the points it was fitted on.
+    pub centre: Vec3,
+    /// How the share changes across the leaf, per unit of length (zero for a lone point).
+    pub gradient: Vec3,
+}
+
+impl SharePlane {
+    /// The share at point `at` of the leaf, in [0, 1].
+    pub fn at(&self, at: Vec3) -> f32 {
+        (self.mean + self.gradient.dot(at - self.centre)).clamp(0.0, 1.0)
+    }
+
+    /// The plane a fraction `f` of the way to `other` (the same leaf's, for another sun):
+    /// mean and gradient linearly.
+    pub fn lerp(&self, other: &SharePlane, f: f32) -> SharePlane {
+        SharePlane {
+            mean: self.mean + f * (other.mean - self.mean),
+            centre: self.centre,
+            gradient: self.gradient + f * (other.gradient - self.gradient),
+        }
+    }
+}
+
+/// Each leaf's [`SharePlane`] for each of `suns`, traced as [`sunlit_shares`] (the same
+/// points, so the planes' means are those shares): `out[i][s]` belongs to `leaves[i]` and
+/// `suns[s]`. A leaf outside `scene`: all 0.
+pub fn sunlit_planes(
+    scene: &LeafScene,
+    leaves: &[u32],
+    suns: &[Vec3],
+    points: u32,
+    opacity: &(dyn Fn(u32) -> f32 + Sync),
+    threads: usize,
+) -> Vec<Vec<SharePlane>> {
     let side = (points.max(1) as f32).sqrt().ceil() as u32;
     let suns: Vec<Vec3> = suns
         .iter()
@@ -40,7 +90,7 @@ pub fn sunlit_shares(
         .collect();
     super::par_map(leaves, threads, |&leaf| {
         if leaf as usize >= scene.leaf_count() {
-            return vec![0.0; suns.len()];
+            return vec![SharePlane::default(); suns.len()];
         }
         let mut rng = SplitMix64::new(0x51A1_5EED ^ (leaf as u64).wrapping_mul(0x9E37_79B9));
         let spots: Vec<Vec3> = (0..side * side)
@@ -50,16 +100,55 @@ pub fn sunlit_shares(
                 scene.point_at(leaf as usize, (u, v))
             })
             .collect();
+        // The points in the leaf's plane about their centroid, and the least-squares normal
+        // equations' matrix [[sxx, sxy], [sxy, syy]] of a share linear across it.
+        let centre = spots.iter().copied().sum::<Vec3>() / spots.len() as f32;
+        let (t1, t2) = scene.normal(leaf as usize).any_orthonormal_pair();
+        let xy: Vec<(f32, f32)> = spots
+            .iter()
+            .map(|p| ((*p - centre).dot(t1), (*p - centre).dot(t2)))
+            .collect();
+        let (sxx, sxy, syy) = xy.iter().fold((0.0, 0.0, 0.0), |(a, b, c), (x, y)| {
+            (a + x * x, b + x * y, c + y * y)
+        });
+        let det = sxx * syy - sxy * sxy;
         suns.iter()
             .map(|&sun| {
-                let lit: f32 = spots
+                let lit: Vec<f32> = spots
                     .iter()
                     .map(|&p| scene.transmittance(p, sun, leaf, opacity))
-                    .sum();
-                (lit / spots.len() as f32).clamp(0.0, 1.0)
+                    .collect();
+                let mean = lit.iter().sum::<f32>() / lit.len() as f32;
+                let (bx, by) = xy.iter().zip(&lit).fold((0.0, 0.0), |(a, b), ((x, y), v)| {
+                    (a + x * (v - mean), b + y * (v - mean))
+                });
+                // Points all on a line (or one point) fit no plane: the mean alone.
+                let gradient = if det > 1e-6 * (sxx + syy).powi(2) && det > 0.0 {
+                    t1 * ((syy * bx - sxy * by) / det) + t2 * ((sxx * by - sxy * bx) / det)
+                } else {
+                    Vec3::ZERO
+                };
+                SharePlane {
+                    mean: mean.clamp(0.0, 1.0),
+                    centre,
+                    gradient,
+                }
             })
             .collect()
     })
+}
+
+/// Each leaf's plane towards `to_sun` from planes traced on a ring of `ring.len()` suns at
+/// azimuths from `phase`: linear in azimuth between the two nodes either side, as
+/// [`share_on_ring`]. No ring: fully lit.
+pub fn plane_on_ring(ring: &[SharePlane], phase: f32, to_sun: Vec3) -> SharePlane {
+    match super::gathered_bounce::nodes_either_side(ring.len(), phase, to_sun) {
+        Some((i, j, f)) => ring[i].lerp(&ring[j], f),
+        None => SharePlane {
+            mean: 1.0,
+            ..Default::default()
+        },
+    }
 }
 
 /// The share towards `to_sun` from shares traced on a ring of `ring.len()` suns at azimuths
@@ -131,6 +220,43 @@ mod tests {
             (through[0][0] - (shares[0][0] + 0.4 * (1.0 - shares[0][0]))).abs() < 1e-4,
             "{through:?}"
         );
+    }
+
+    #[test]
+    fn a_leaf_half_under_another_has_its_lit_half_on_the_plane() {
+        let mut leaves = LeafSet::default();
+        square(&mut leaves, Vec3::ZERO, 1.0);
+        square(&mut leaves, Vec3::new(0.5, 1.0, 0.0), 1.0);
+        let scene = LeafScene::new(&leaves);
+        let suns = [Vec3::Y, Vec3::X];
+        let planes = sunlit_planes(&scene, &[0, 1], &suns, 64, &|_| 1.0, 1);
+        let shares = sunlit_shares(&scene, &[0, 1], &suns, 64, &|_| 1.0, 1);
+        // The planes' means are the shares, from the same points.
+        for (p, s) in planes.iter().zip(&shares) {
+            assert_eq!(p.iter().map(|p| p.mean).collect::<Vec<_>>(), *s);
+        }
+        let down = planes[0][0];
+        // A step from lit (x < 0) to shaded (x > 0) across a unit square: the least-squares
+        // line through it falls by 1.5 a unit (the step's covariance with x over x's
+        // variance, (1/8) / (1/12)), along −x only.
+        assert!((down.gradient.x + 1.5).abs() < 0.2, "{down:?}");
+        assert!(
+            down.gradient.y.abs() < 1e-5 && down.gradient.z.abs() < 0.2,
+            "{down:?}"
+        );
+        assert!(down.at(Vec3::new(-0.4, 0.0, 0.0)) > 0.9);
+        assert!(down.at(Vec3::new(0.4, 0.0, 0.0)) < 0.1);
+        // Fully lit leaves: flat planes at 1.
+        for p in [planes[0][1], planes[1][0]] {
+            assert_eq!(p.mean, 1.0);
+            assert!(p.gradient.length() < 1e-5, "{p:?}");
+        }
+        // Read on a ring: the planes either side blended, a missing ring fully lit.
+        let ring = [down, planes[0][1]];
+        let half = ring[0].lerp(&ring[1], 0.5);
+        assert!((half.mean - 0.5 * (down.mean + 1.0)).abs() < 1e-6);
+        assert!((half.gradient - 0.5 * down.gradient).length() < 1e-6);
+        assert_eq!(plane_on_ring(&[], 0.0, Vec3::Y).at(Vec3::ZERO), 1.0);
     }
 
     #[test]
