@@ -9,7 +9,8 @@ use bevy::light::{CascadeShadowConfig, CascadeShadowConfigBuilder, Cascades};
 use bevy::prelude::*;
 use bevy_foliage::lighting::bins::{DARKEST_LIGHT, light_of};
 use bevy_foliage::lighting::bounce_ring::{
-    BounceRing, RING_NODES, ratio_with_ring, ratio_with_ring_nodes, sun_through_with_ring,
+    BounceRing, RING_NODES, ratio_with_ring, ratio_with_ring_nodes, ring_shares_at,
+    sun_through_with_ring,
 };
 use bevy_foliage::lighting::gathered_bounce::BounceRatios;
 use bevy_foliage::lighting::hotspot::{HOTSPOT_NODES, Hotspot};
@@ -261,6 +262,9 @@ struct Check {
     ring_visible: u32,
     /// Compared pixels the ring's sunlit shares move by more than 3/255 from the bake's blend.
     shares_visible: u32,
+    /// Compared pixels the shares' slopes across their leaves move by more than 3/255 from
+    /// the shares alone.
+    slopes_visible: u32,
     /// Compared pixels the crown's hotspot moves by more than 3/255, and those its exponent on
     /// the sun alone moves so.
     hotspot_visible: u32,
@@ -345,6 +349,40 @@ fn compare_with_model(
     let bounce = SunBounce::new(&optics, to_sun, tau);
     let eye_local = from_world.transform_point3(eye);
     let e_sun = Vec3::splat(SUN);
+    // Where model point `p` of `leaf` lies among the vertices of its triangle: each vertex's
+    // offset from the leaf's centroid in units of the leaf's radius (what the leaf vertex
+    // shader reads the ring's sunlit shares along) with its barycentric weight, with which
+    // the rasteriser carries the vertices' shares to the pixel.
+    let radii = baked.leaf_radii();
+    let corners_at = |leaf: u32, p: Vec3| -> Vec<(Vec3, f32)> {
+        let leaf = leaf as usize;
+        let range =
+            baked.leaf_index_start[leaf] as usize..baked.leaf_index_start[leaf + 1] as usize;
+        let mut best: Option<(f32, [u32; 3], [f32; 3])> = None;
+        for t in baked.indices[range].chunks_exact(3) {
+            let [a, b, c] = [t[0], t[1], t[2]].map(|i| baked.positions[i as usize]);
+            let (v0, v1, v2) = (b - a, c - a, p - a);
+            let (d00, d01, d11) = (v0.dot(v0), v0.dot(v1), v1.dot(v1));
+            let (d20, d21) = (v2.dot(v0), v2.dot(v1));
+            let det = d00 * d11 - d01 * d01;
+            if det <= 0.0 {
+                continue;
+            }
+            let v = (d11 * d20 - d01 * d21) / det;
+            let w = (d00 * d21 - d01 * d20) / det;
+            let weights = [1.0 - v - w, v, w];
+            let inside = weights.iter().copied().fold(f32::INFINITY, f32::min);
+            if best.is_none_or(|(b, _, _)| inside > b) {
+                best = Some((inside, [t[0], t[1], t[2]], weights));
+            }
+        }
+        let radius = radii[leaf].max(1e-6);
+        best.map_or(vec![(Vec3::ZERO, 1.0)], |(_, t, weights)| {
+            (0..3)
+                .map(|i| (baked.centroid_offsets[t[i] as usize] / radius, weights[i]))
+                .collect()
+        })
+    };
     // The light of `leaf` when the sun reaches it from outside the crown by `outside` and, with
     // leaf shadows, reaches the point by `at_leaf`.
     let expected = |leaf: u32,
@@ -354,6 +392,8 @@ fn compare_with_model(
                     ratios_on: bool,
                     ring_on: bool,
                     shares_on: bool,
+                    slopes_on: bool,
+                    corners: &[(Vec3, f32)],
                     outside: f32,
                     at_leaf: Option<f32>|
      -> Vec3 {
@@ -377,14 +417,35 @@ fn compare_with_model(
         } else {
             Hotspot::default()
         };
-        // Where the type's ring holds the leaves' sunlit shares, those at its elevation.
+        // Where the type's ring holds the leaves' sunlit shares, those at its elevation, read
+        // at each vertex of the pixel's triangle along their slopes across the leaf and
+        // carried to the pixel by its barycentric weights (the fragment then caps and bends
+        // the share there).
         let shares = ring
             .filter(|r| lighting.bounce_ring.enabled && shares_on && !r.sunlit.is_empty())
-            .map(|r| (r.sun_height, &r.sunlit[leaf as usize]));
+            .map(|r| {
+                let slopes = r.sunlit_slopes.get(leaf as usize).filter(|_| slopes_on);
+                (r.sun_height, &r.sunlit[leaf as usize], slopes)
+            });
         let blend = spot.sun_through((baked_through * seen).min(1.0), wo, to_sun);
-        let through = at_leaf.unwrap_or(
-            sun_through_with_ring(blend, shares, seen, spot.sun_at(wo, to_sun), to_sun) * outside,
-        );
+        let through = at_leaf.unwrap_or_else(|| {
+            let read = shares.map(|(h, s, slopes)| {
+                let mut at = [0.0; RING_NODES];
+                for &(across, weight) in corners {
+                    for (a, v) in at.iter_mut().zip(ring_shares_at(s, slopes, across)) {
+                        *a += weight * v;
+                    }
+                }
+                (h, at)
+            });
+            sun_through_with_ring(
+                blend,
+                read.as_ref().map(|(h, s)| (*h, s)),
+                seen,
+                spot.sun_at(wo, to_sun),
+                to_sun,
+            ) * outside
+        });
         let bounced = if bounce_on {
             let covered = if lighting.seen_part && covered_on {
                 covered_gain(seen, open_share(n, &a))
@@ -463,6 +524,7 @@ fn compare_with_model(
         ratios_visible: 0,
         ring_visible: 0,
         shares_visible: 0,
+        slopes_visible: 0,
         hotspot_visible: 0,
         hotspot_sun_visible: 0,
         sunlit: 0,
@@ -515,26 +577,30 @@ fn compare_with_model(
             }
             // The pixel the model gives with the bounce, the covered part's gain and the
             // hotspot each on or off, in 255ths of sRGB.
+            let corners = corners_at(leaf, from_world.transform_point3(point));
             let pixel = |bounce: bool,
                          covered: bool,
                          hotspot: bool,
                          ratios: bool,
                          ring: bool,
-                         shares: bool| {
+                         shares: bool,
+                         slopes: bool| {
                 expected(
-                    leaf, bounce, covered, hotspot, ratios, ring, shares, outside, at_leaf,
+                    leaf, bounce, covered, hotspot, ratios, ring, shares, slopes, &corners,
+                    outside, at_leaf,
                 )
                 .to_array()
                 .map(|c| srgb(c) * 255.0)
             };
-            let want = pixel(true, true, true, true, true, true);
-            let plain = pixel(false, true, true, true, true, true);
-            let uncovered = pixel(true, false, true, true, true, true);
-            let no_hotspot = pixel(true, true, false, true, true, true);
-            let plain_no_hotspot = pixel(false, true, false, true, true, true);
-            let no_ratios = pixel(true, true, true, false, true, true);
-            let no_ring = pixel(true, true, true, true, false, true);
-            let no_shares = pixel(true, true, true, true, true, false);
+            let want = pixel(true, true, true, true, true, true, true);
+            let plain = pixel(false, true, true, true, true, true, true);
+            let uncovered = pixel(true, false, true, true, true, true, true);
+            let no_hotspot = pixel(true, true, false, true, true, true, true);
+            let plain_no_hotspot = pixel(false, true, false, true, true, true, true);
+            let no_ratios = pixel(true, true, true, false, true, true, true);
+            let no_ring = pixel(true, true, true, true, false, true, true);
+            let no_shares = pixel(true, true, true, true, true, false, true);
+            let no_slopes = pixel(true, true, true, true, true, true, false);
             let got = image.pixel(x, y);
             let [r, g, b] = want.map(|c| c.round() as u8);
             check.reference.set_pixel(x, y, [r, g, b, 255]);
@@ -564,6 +630,9 @@ fn compare_with_model(
             }
             if (0..3).any(|c| (want[c] - no_shares[c]).abs() > 3.0) {
                 check.shares_visible += 1;
+            }
+            if (0..3).any(|c| (want[c] - no_slopes[c]).abs() > 3.0) {
+                check.slopes_visible += 1;
             }
             if (0..3).any(|c| (want[c] - no_hotspot[c]).abs() > 3.0) {
                 check.hotspot_visible += 1;
@@ -863,8 +932,13 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         );
         check.save(name);
         println!(
-            "{name}: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1}/255); the ring moves {} of them from the bake's blend by > 3/255, its sunlit shares {}",
-            check.within, check.compared, check.worst, check.ring_visible, check.shares_visible
+            "{name}: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1}/255); the ring moves {} of them from the bake's blend by > 3/255, its sunlit shares {}, their slopes across the leaves {}",
+            check.within,
+            check.compared,
+            check.worst,
+            check.ring_visible,
+            check.shares_visible,
+            check.slopes_visible
         );
         assert!(
             check.compared >= 800,
@@ -894,6 +968,7 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         ring.sun_height,
         lighting.bounce_ring.rays,
         lighting.bounce_ring.sunlit_points,
+        &baked.leaf_radii(),
         &|_| opacity,
         2,
     );
@@ -924,6 +999,10 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         ring.sunlit == cpu.sunlit,
         "the leaves' sunlit shares on the ring as the CPU traces them"
     );
+    assert!(
+        ring.sunlit_slopes.len() == baked.leaf_count() && ring.sunlit_slopes == cpu.sunlit_slopes,
+        "the shares' slopes across the leaves as the CPU fits them"
+    );
     for _ in 0..4 {
         harness.step();
     }
@@ -947,6 +1026,15 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         // another node's or none fails).
         sunlit: (0..baked.leaf_count())
             .map(|l| std::array::from_fn(|k| (20 + (l * 37 + k * 61) % 215) as u8))
+            .collect(),
+        // Slopes distinct per leaf, node and component (a shader that reads them from another
+        // place, another component or with the wrong sign fails).
+        sunlit_slopes: (0..baked.leaf_count())
+            .map(|l| {
+                std::array::from_fn(|k| {
+                    [0usize, 1, 2].map(|c| (((l * 29 + k * 47 + c * 83) % 161) as i32 - 80) as i8)
+                })
+            })
             .collect(),
     };
     harness
@@ -975,10 +1063,21 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         strong_check.shares_visible,
         strong_check.compared
     );
+    assert!(
+        strong_check.slopes_visible * 3 >= strong_check.compared,
+        "the shares' slopes show in too few pixels ({} of {}) for the test to see them",
+        strong_check.slopes_visible,
+        strong_check.compared
+    );
 
     // The crown's hotspot on the ring's shares: the same tree with a strong sun exponent, its
-    // strong ring put in for it, against the model with that exponent (a shader that left the
-    // hotspot off the ring's shares fails).
+    // strong ring put in for it (without slopes, which would carry most vertices' shares to 0
+    // or 1, where no exponent shows), against the model with that exponent (a shader that left
+    // the hotspot off the ring's shares fails).
+    let flat = BounceRing {
+        sunlit_slopes: Vec::new(),
+        ..strong.clone()
+    };
     let hot = BakedFoliage {
         hotspot: Hotspot {
             sun: [STRONG_HOTSPOT.0; HOTSPOT_NODES],
@@ -1001,7 +1100,7 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
     harness
         .world_mut()
         .resource_mut::<BounceRings>()
-        .insert(hot_handle.id(), strong.clone());
+        .insert(hot_handle.id(), flat.clone());
     let original = harness
         .world_mut()
         .get::<PrunedFoliage>(tree)
@@ -1024,7 +1123,7 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         |_| false,
         false,
         0.0,
-        Some(&strong),
+        Some(&flat),
     );
     hot_check.save("tree_ring_hotspot");
     println!(

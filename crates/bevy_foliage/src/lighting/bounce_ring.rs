@@ -25,12 +25,14 @@
 //! has moved far enough for a new ring.
 //!
 //! The same ring carries each leaf's sunlit share towards its suns ([`super::sunlit_share`],
-//! traced in the same task), the leaves' sun where the shadow map's texels are too coarse to
-//! resolve leaves ([`sun_through_with_ring`]): the blend of eight octants loses a sunfleck a
-//! few degrees wide, and on the four procedural trees at pixels 1.4–2.5 leaves wide the shares
-//! with the seen-part gain and the crown's hotspot put the sun's image error at 4.8–8.5 % with
-//! the sun behind, beside or above the eye and 21–24 % against it, where the blend is at
-//! 8–29 % and 52–57 % (`tree_lighting_error --images --sun-ring 14 --sunlit-points 16`).
+//! traced in the same task) with the share's slope across the leaf, the leaves' sun where the
+//! shadow map's texels are too coarse to resolve leaves ([`sun_through_with_ring`],
+//! [`ring_shares_at`]): the blend of eight octants loses a sunfleck a few degrees wide, and on
+//! the four procedural trees at pixels 1.4–2.5 leaves wide the shares so drawn, with the
+//! seen-part gain and the crown's hotspot, put the sun's image error at 4.0–7.8 % with the sun
+//! behind, beside or above the eye and 14–17 % against it, where the blend is at 8–29 % and
+//! 52–57 % and the shares without their slopes at 4.8–8.5 % and 21–24 %
+//! (`tree_lighting_error --images --sun-ring 14 --sunlit-points 16`).
 //!
 //! Plain Rust, no render types.
 
@@ -40,7 +42,9 @@ use super::gathered_bounce::{
 };
 use super::leaf_scene::LeafScene;
 use super::model::LeafMaterial;
-use super::sunlit_share::{quantize_share, share_of, share_on_ring, sunlit_shares};
+use super::sunlit_share::{
+    quantize_share, quantize_slope, share_of, share_on_ring, slope_of, sunlit_planes,
+};
 use bevy::math::Vec3;
 use std::f32::consts::TAU;
 
@@ -66,7 +70,7 @@ pub const NO_RING: f32 = 2.0;
 /// its ratios for the [`RING_NODES`] suns of [`ring_suns`] as a bake stores ratios
 /// ([`quantize_ratio`]): node `k`'s front face at byte `k`, its back face at `RING_NODES + k`;
 /// and, where traced, its sunlit share for each of those suns ([`super::sunlit_share`],
-/// [`quantize_share`]: node `k` at byte `k`).
+/// [`quantize_share`]: node `k` at byte `k`) with the share's slope across the leaf.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct BounceRing {
     /// The sine of the ring's elevation.
@@ -76,6 +80,12 @@ pub struct BounceRing {
     /// Per stored leaf, its sunlit shares on the ring; empty where none were traced (the sun
     /// through the crown then stays the bake's blend, [`sun_through_with_ring`]).
     pub sunlit: Vec<[u8; RING_NODES]>,
+    /// Per stored leaf and node, the gradient of its share's plane over the leaf
+    /// ([`super::sunlit_share::SharePlane`]) times the leaf's radius (its farthest vertex
+    /// from its vertices' centroid), model space, a [`quantize_slope`] a component: how much
+    /// the share changes from the leaf's centre towards a vertex ([`ring_shares_at`]). Beside
+    /// [`BounceRing::sunlit`]; all zero, or empty, for none.
+    pub sunlit_slopes: Vec<[[i8; 3]; RING_NODES]>,
 }
 
 /// The elevation (radians) of a direction whose y is `height` (clamped to [−1, 1]).
@@ -103,9 +113,10 @@ pub fn ring_suns(height: f32) -> Vec<Vec3> {
 /// The ring at sun height `height` for `leaves` (indices into `scene`, in the order the ring
 /// stores them; `envelopes[i]` the envelope of `leaves[i]`) of a crown of extinction `tau`:
 /// [`sun_ratios_of`] for [`ring_suns`], `rays` rays a leaf, quantised; and with
-/// `sunlit_points` above 0 each leaf's [`sunlit_shares`] for the same suns from that many
-/// points on it (0: none traced). A leaf without an envelope or outside `scene`: ratios of 1
-/// (eq. 5.24 unchanged).
+/// `sunlit_points` above 0 each leaf's sunlit share for the same suns from that many points on
+/// it, as its plane over the leaf ([`sunlit_planes`]: the share, and its gradient times the
+/// leaf's radius `radii[l]` for scene leaf `l`, 0 where missing; 0 points: none traced). A
+/// leaf without an envelope or outside `scene`: ratios of 1 (eq. 5.24 unchanged).
 #[allow(clippy::too_many_arguments)]
 pub fn gather_ring(
     scene: &LeafScene,
@@ -116,6 +127,7 @@ pub fn gather_ring(
     height: f32,
     rays: u32,
     sunlit_points: u32,
+    radii: &[f32],
     opacity: &(impl Fn(u32) -> f32 + Sync),
     threads: usize,
 ) -> BounceRing {
@@ -123,13 +135,23 @@ pub fn gather_ring(
     let ratios = sun_ratios_of(
         scene, material, leaves, envelopes, tau, &suns, rays, opacity, threads,
     );
-    let sunlit = if sunlit_points > 0 && !suns.is_empty() {
-        sunlit_shares(scene, leaves, &suns, sunlit_points, opacity, threads)
+    let (sunlit, sunlit_slopes) = if sunlit_points > 0 && !suns.is_empty() {
+        let planes = sunlit_planes(scene, leaves, &suns, sunlit_points, opacity, threads);
+        let shares = planes
             .iter()
-            .map(|shares| std::array::from_fn(|k| quantize_share(shares[k])))
-            .collect()
+            .map(|p| std::array::from_fn(|k| quantize_share(p[k].mean)))
+            .collect();
+        let slopes = planes
+            .iter()
+            .zip(leaves)
+            .map(|(p, &leaf)| {
+                let radius = radii.get(leaf as usize).copied().unwrap_or(0.0);
+                std::array::from_fn(|k| (p[k].gradient * radius).to_array().map(quantize_slope))
+            })
+            .collect();
+        (shares, slopes)
     } else {
-        Vec::new()
+        (Vec::new(), Vec::new())
     };
     BounceRing {
         sun_height: height.clamp(-1.0, 1.0),
@@ -143,6 +165,7 @@ pub fn gather_ring(
             })
             .collect(),
         sunlit,
+        sunlit_slopes,
     }
 }
 
@@ -229,39 +252,62 @@ pub fn ratio_with_ring_nodes(
 /// space) where the shadow map does not resolve leaves: `blend`, the bake's blend of
 /// attenuations (with the seen-part gain and the crown's hotspot), where the sun is off the
 /// ring's elevation; the leaf's sunlit shares on its type's ring (`ring`: the ring's sun height
-/// and the leaf's stored shares), read linearly in azimuth, scaled by the seen-part gain
-/// towards the eye `gain` (1 without it), capped at 1 and raised to the crown's hotspot
+/// and the leaf's shares where it is read, [`ring_shares_at`]), read linearly in azimuth,
+/// scaled by the seen-part gain towards the eye `gain` (1 without it), capped at 1 and raised
+/// to the crown's hotspot
 /// exponent for the eye and the sun `exponent` (1 without it,
 /// [`super::hotspot::Hotspot::sun_at`]), where the sun is at it; mixed by [`ring_weight`]
-/// between. What the leaf vertex shader gives the sun (`tree_lighting.wgsl`'s
-/// `through_with_ring`).
+/// between. What the leaf shaders give the sun (`tree_lighting.wgsl`: `ring_sun_at` at each
+/// vertex, the share carried across the leaf, then `through_on_ring` per fragment).
 ///
 /// The ring's shares are traced for the sun itself at every turn of the instance, where the
 /// blend's eight directions are octants a sunfleck a few degrees wide is lost in. The mean of
 /// a leaf is not the part of it in view, least of all with the sun behind the eye, where the
 /// eye's and the sun's paths share their gaps: without a hotspot the ring is 26–29 % too dark
-/// on the olive there. The bake's hotspot (fitted against the blend) serves it; one fitted
-/// against the ring itself does better against the sun (`tree_lighting_error --images
-/// --sunlit-points`) but would have to be fitted with each ring.
+/// on the olive there. The bake's hotspot (fitted against the blend) serves it; for the
+/// shares without their slopes one fitted against the ring itself did better against the sun
+/// (`tree_lighting_error --images --sunlit-points`) but would have to be fitted with each
+/// ring, and the slopes took more off there.
 pub fn sun_through_with_ring(
     blend: f32,
-    ring: Option<(f32, &[u8; RING_NODES])>,
+    ring: Option<(f32, &[f32; RING_NODES])>,
     gain: f32,
     exponent: f32,
     to_sun: Vec3,
 ) -> f32 {
-    let Some((height, stored)) = ring else {
+    let Some((height, nodes)) = ring else {
         return blend;
     };
     let w = ring_weight(height, to_sun);
     if w <= 0.0 {
         return blend;
     }
-    let nodes = stored.map(share_of);
-    let on_ring = (share_on_ring(&nodes, 0.0, to_sun) * gain)
+    let on_ring = (share_on_ring(nodes, 0.0, to_sun) * gain)
         .clamp(0.0, 1.0)
         .powf(exponent);
     blend + w * (on_ring - blend)
+}
+
+/// A leaf's stored sunlit shares on its ring read at a point of it `across` from its vertices'
+/// centroid, in units of its radius (a vertex's `offset / radius`): each node's share plus
+/// its stored slope ([`BounceRing::sunlit_slopes`]; none: the share alone) along `across`, not
+/// yet clamped. The leaf vertex shader reads it at each vertex (`leaf_ring_shares`) and the
+/// rasteriser carries the shares so read across the leaf, linear as they are, to each
+/// fragment ([`sun_through_with_ring`] there): where a sunfleck's edge crosses a leaf,
+/// one share a leaf gives it all its mean, and against the sun, where the part of a leaf in
+/// view and its sunlit part are least alike, that is most of what the shares miss — on the
+/// four procedural trees at pixels 1.4–2.5 leaves wide the sun's image error against it goes
+/// from 20.8–23.6 % to 14.3–16.6 % (`tree_lighting_error --images --sun-ring 14
+/// --sunlit-points 16`, the row as the leaf shaders draw it).
+pub fn ring_shares_at(
+    stored: &[u8; RING_NODES],
+    slopes: Option<&[[i8; 3]; RING_NODES]>,
+    across: Vec3,
+) -> [f32; RING_NODES] {
+    std::array::from_fn(|k| {
+        let slope = slopes.map_or(Vec3::ZERO, |s| Vec3::from_array(s[k].map(slope_of)));
+        share_of(stored[k]) + slope.dot(across)
+    })
 }
 
 /// Whether a tree type needs a new ring for the sun at height `sun_height` (the sine of its
@@ -406,7 +452,7 @@ mod tests {
         let ring = BounceRing {
             sun_height: 0.2,
             leaves: vec![a, b],
-            sunlit: Vec::new(),
+            ..Default::default()
         };
         let mean = crown_mean_ring(&ring);
         let (na, nb) = (ring_nodes_of(&a), ring_nodes_of(&b));
@@ -427,6 +473,7 @@ mod tests {
     #[test]
     fn the_sun_takes_the_rings_shares_at_its_elevation() {
         let stored: [u8; RING_NODES] = std::array::from_fn(|k| (10 + 17 * k) as u8);
+        let shares = stored.map(share_of);
         let h = 30f32.to_radians().sin();
         let sun_at = |elevation: f32, azimuth: f32| {
             let (e, a) = (elevation.to_radians(), azimuth);
@@ -435,37 +482,37 @@ mod tests {
         let step = TAU / RING_NODES as f32;
         let node3 = sun_at(30.0, 3.0 * step);
         assert!(
-            (sun_through_with_ring(0.9, Some((h, &stored)), 1.0, 1.0, node3) - share_of(stored[3]))
+            (sun_through_with_ring(0.9, Some((h, &shares)), 1.0, 1.0, node3) - share_of(stored[3]))
                 .abs()
                 < 1e-5
         );
         let between = sun_at(30.0, 3.25 * step);
         let want = share_of(stored[3]) + 0.25 * (share_of(stored[4]) - share_of(stored[3]));
         assert!(
-            (sun_through_with_ring(0.9, Some((h, &stored)), 1.0, 1.0, between) - want).abs() < 1e-4
+            (sun_through_with_ring(0.9, Some((h, &shares)), 1.0, 1.0, between) - want).abs() < 1e-4
         );
         // The gain towards the eye scales it, up to full light.
         assert!(
-            (sun_through_with_ring(0.9, Some((h, &stored)), 1.5, 1.0, node3)
+            (sun_through_with_ring(0.9, Some((h, &shares)), 1.5, 1.0, node3)
                 - 1.5 * share_of(stored[3]))
             .abs()
                 < 1e-5
         );
         assert_eq!(
-            sun_through_with_ring(0.9, Some((h, &stored)), 100.0, 1.0, node3),
+            sun_through_with_ring(0.9, Some((h, &shares)), 100.0, 1.0, node3),
             1.0
         );
         // The hotspot's exponent on the share (gain applied first).
-        let raised = sun_through_with_ring(0.9, Some((h, &stored)), 1.2, 2.0, node3);
+        let raised = sun_through_with_ring(0.9, Some((h, &shares)), 1.2, 2.0, node3);
         assert!((raised - (1.2 * share_of(stored[3])).min(1.0).powi(2)).abs() < 1e-5);
         // Far from the ring's elevation, or no ring: the blend.
         assert_eq!(
-            sun_through_with_ring(0.9, Some((h, &stored)), 1.0, 1.0, sun_at(50.0, 3.0 * step)),
+            sun_through_with_ring(0.9, Some((h, &shares)), 1.0, 1.0, sun_at(50.0, 3.0 * step)),
             0.9
         );
         assert_eq!(sun_through_with_ring(0.9, None, 1.0, 1.0, node3), 0.9);
         assert_eq!(
-            sun_through_with_ring(0.9, Some((NO_RING, &stored)), 1.0, 1.0, node3),
+            sun_through_with_ring(0.9, Some((NO_RING, &shares)), 1.0, 1.0, node3),
             0.9
         );
         // Midway between the ring's whole and gone spans: half and half.
@@ -475,7 +522,7 @@ mod tests {
         );
         let half = 0.5 * (0.9 + share_of(stored[3]));
         assert!(
-            (sun_through_with_ring(0.9, Some((h, &stored)), 1.0, 1.0, mid) - half).abs() < 1e-3
+            (sun_through_with_ring(0.9, Some((h, &shares)), 1.0, 1.0, mid) - half).abs() < 1e-3
         );
     }
 
@@ -493,6 +540,28 @@ mod tests {
         assert!(!needs_regather(f32::NAN, None, 1.0));
     }
 
+    /// A leaf's shares read across it: each node's share plus its slope along the point's
+    /// place in radii; no slopes, or at the centre, the shares alone.
+    #[test]
+    fn the_rings_shares_are_read_along_their_slopes_across_the_leaf() {
+        let stored: [u8; RING_NODES] = std::array::from_fn(|k| (10 + 17 * k) as u8);
+        let slopes: [[i8; 3]; RING_NODES] =
+            std::array::from_fn(|k| [k as i8 * 9 - 60, 40, -(k as i8) * 5]);
+        let across = Vec3::new(0.5, -0.25, 1.0);
+        let read = ring_shares_at(&stored, Some(&slopes), across);
+        for k in 0..RING_NODES {
+            let slope = Vec3::from_array(slopes[k].map(slope_of));
+            assert!((read[k] - (share_of(stored[k]) + slope.dot(across))).abs() < 1e-6);
+        }
+        // Not clamped here: the sun through the crown caps it after the gain.
+        assert!(read.iter().any(|&s| s < 0.0) || read.iter().any(|&s| s > 1.0));
+        assert_eq!(
+            ring_shares_at(&stored, Some(&slopes), Vec3::ZERO),
+            stored.map(share_of)
+        );
+        assert_eq!(ring_shares_at(&stored, None, across), stored.map(share_of));
+    }
+
     /// A ring at the horizon has its node 0 at +x, a basis sun: the leaves' ring ratios there
     /// are the bake's ratios for +x (the same rays), quantised as stored.
     #[test]
@@ -503,6 +572,9 @@ mod tests {
         let all: Vec<u32> = (0..leaves.len() as u32).collect();
         let envelope = crown_envelope_traced(&proxies, &scene, &all, &|_| 1.0, 16, 2, &|_| {});
         let material = crate::lighting::settings::TreeLightingSettings::default().optics;
+        let radii: Vec<f32> = (0..leaves.len())
+            .map(|l| 0.5 * leaves.diameter(l))
+            .collect();
         let ring = gather_ring(
             &scene,
             &material,
@@ -512,18 +584,34 @@ mod tests {
             0.0,
             DEFAULT_BOUNCE_RAYS,
             16,
+            &radii,
             &|_| 1.0,
             2,
         );
         assert_eq!(ring.leaves.len(), leaves.len());
-        // The sunlit shares: each leaf's for each node's sun, traced as `sunlit_shares` does.
+        // The sunlit shares: each leaf's for each node's sun, traced as `sunlit_planes` does,
+        // with the planes' slopes at the leaf's radius.
         assert_eq!(ring.sunlit.len(), leaves.len());
+        assert_eq!(ring.sunlit_slopes.len(), leaves.len());
         let suns = ring_suns(0.0);
         for leaf in [0usize, 57, 299] {
-            let traced = sunlit_shares(&scene, &[leaf as u32], &suns, 16, &|_| 1.0, 1);
-            let want: Vec<u8> = traced[0].iter().map(|&t| quantize_share(t)).collect();
+            let traced = sunlit_planes(&scene, &[leaf as u32], &suns, 16, &|_| 1.0, 1);
+            let want: Vec<u8> = traced[0].iter().map(|t| quantize_share(t.mean)).collect();
             assert_eq!(ring.sunlit[leaf].as_slice(), want.as_slice(), "leaf {leaf}");
+            for (k, plane) in traced[0].iter().enumerate() {
+                let slope = (plane.gradient * radii[leaf])
+                    .to_array()
+                    .map(quantize_slope);
+                assert_eq!(ring.sunlit_slopes[leaf][k], slope, "leaf {leaf} node {k}");
+            }
         }
+        // Partly shaded leaves have their lit side: slopes of a tenth of a share and more.
+        let sloped = ring
+            .sunlit_slopes
+            .iter()
+            .filter(|s| s[0].iter().any(|&c| slope_of(c).abs() > 0.1))
+            .count();
+        assert!(sloped > 30, "{sloped}");
         // Inside a ball of leaves the sun reaches some leaves and not others, by node.
         let lit: usize = ring.sunlit.iter().map(|s| (s[0] > 200) as usize).sum();
         let dark: usize = ring.sunlit.iter().map(|s| (s[0] < 50) as usize).sum();
@@ -565,6 +653,7 @@ mod tests {
             0.0,
             8,
             0,
+            &radii,
             &|_| 1.0,
             1,
         );
@@ -572,5 +661,6 @@ mod tests {
             assert!(stored.iter().all(|&q| q == quantize_ratio(1.0)));
         }
         assert!(outside.sunlit.is_empty(), "no points: no shares traced");
+        assert!(outside.sunlit_slopes.is_empty());
     }
 }

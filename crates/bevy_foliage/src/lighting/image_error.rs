@@ -13,6 +13,7 @@
 //! Plain Rust, no render types.
 
 use super::bins::proxies;
+use super::bounce_ring::RING_NODES;
 use super::envelope::CrownEnvelope;
 use super::gathered_bounce::DEFAULT_BOUNCE_POOL;
 use super::leaf_scene::LeafScene;
@@ -829,6 +830,38 @@ pub fn images_against_tracer(
                         image(&|leaf, t| h.sun_through(gained(leaf, t), view, light.to_sun)),
                     ));
                 }
+                // As the leaf shaders draw a ring of the leaf store's size: each node's share
+                // and slope quantised as stored, read at the vertices of the eye ray's
+                // triangle (`bounce_ring::ring_shares_at`) and carried to the point by its
+                // barycentric weights, where the gain and the hotspot bend it.
+                if let (Some((phase, ring)), Some(h), true) = (&ring, &hotspot_factors, plane)
+                    && ring.first().is_some_and(|r| r.len() == RING_NODES)
+                {
+                    let drawn = image_as_drawn(
+                        leaves,
+                        &samples,
+                        ring,
+                        *phase,
+                        &|leaf, share| {
+                            h.sun_through(
+                                (share * seen_gain(&g[leaf], view)).min(1.0),
+                                view,
+                                light.to_sun,
+                            )
+                        },
+                        &|leaf, t| {
+                            let n = scene.normal(leaf);
+                            luminance(sun_radiance(material, n, view, light.to_sun, t, light.sun))
+                        },
+                        light.to_sun,
+                    );
+                    sunlit.push((
+                            format!(
+                                "{label}, seen-part gain, the crown's hotspot, as the leaf shaders draw it (stored, read at the vertices)"
+                            ),
+                            measure(&[model_sky.clone(), drawn, model_bounce.clone()]),
+                        ));
+                }
                 // The ring's own hotspot: fitted for suns at the sun's height against the
                 // shares read on the ring.
                 if let (Some((phase, ring)), Some((_, envelope)), true, false) =
@@ -874,6 +907,63 @@ pub fn images_against_tracer(
         noise,
         hits: samples.iter().flatten().count(),
     }
+}
+
+/// The sun per eye ray as the leaf shaders draw a ring of sunlit shares with their slopes
+/// ([`super::bounce_ring::ring_shares_at`]): each leaf's planes on `ring` (at azimuths from
+/// `phase`) stored as shares and slopes per the leaf's radius, read at each vertex of the
+/// triangle the ray hit along the vertex's offset from the leaf's centroid, on the ring
+/// towards `to_sun`, carried to the hit point by its barycentric weights and there turned
+/// into the sun through the crown by `through(leaf, share)`; `radiance(leaf, through)` the
+/// pixel.
+#[allow(clippy::too_many_arguments)]
+fn image_as_drawn(
+    leaves: &LeafSet,
+    samples: &[Option<Sample>],
+    ring: &[Vec<super::sunlit_share::SharePlane>],
+    phase: f32,
+    through: &(dyn Fn(usize, f32) -> f32 + Sync),
+    radiance: &(dyn Fn(usize, f32) -> f32 + Sync),
+    to_sun: Vec3,
+) -> Vec<f32> {
+    use super::bounce_ring::ring_shares_at;
+    use super::sunlit_share::{quantize_share, quantize_slope, share_on_ring};
+    samples
+        .iter()
+        .map(|s| {
+            let Some(s) = s else { return 0.0 };
+            let leaf = s.leaf as usize;
+            let radius = (0.5 * leaves.diameter(leaf)).max(1e-6);
+            let centroid = leaves.centroid(leaf);
+            let planes = &ring[leaf];
+            let stored: [u8; RING_NODES] = std::array::from_fn(|k| quantize_share(planes[k].mean));
+            let slopes: [[i8; 3]; RING_NODES] = std::array::from_fn(|k| {
+                (planes[k].gradient * radius).to_array().map(quantize_slope)
+            });
+            let at_vertex = |v: Vec3| {
+                let nodes = ring_shares_at(&stored, Some(&slopes), (v - centroid) / radius);
+                share_on_ring(&nodes, phase, to_sun)
+            };
+            // The triangle the point lies in (the one it is least outside of).
+            let mut best: Option<(f32, f32)> = None;
+            for [a, b, c] in leaves.triangles(leaf) {
+                let (v0, v1, v2) = (b - a, c - a, s.point - a);
+                let (d00, d01, d11) = (v0.dot(v0), v0.dot(v1), v1.dot(v1));
+                let det = d00 * d11 - d01 * d01;
+                if det <= 0.0 {
+                    continue;
+                }
+                let v = (d11 * v2.dot(v0) - d01 * v2.dot(v1)) / det;
+                let w = (d00 * v2.dot(v1) - d01 * v2.dot(v0)) / det;
+                let inside = (1.0 - v - w).min(v).min(w);
+                if best.is_none_or(|(b, _)| inside > b) {
+                    let share = (1.0 - v - w) * at_vertex(a) + v * at_vertex(b) + w * at_vertex(c);
+                    best = Some((inside, share));
+                }
+            }
+            radiance(leaf, best.map_or(0.0, |(_, share)| through(leaf, share)))
+        })
+        .collect()
 }
 
 #[cfg(test)]

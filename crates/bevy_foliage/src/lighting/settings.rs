@@ -73,10 +73,11 @@ pub struct BounceRingSettings {
     /// Rays a leaf casts over its two sides; each neighbour hit casts a shadow ray towards each
     /// of the ring's fourteen suns (the cost of one bake's bounce gather).
     pub rays: u32,
-    /// Points a leaf its sunlit share towards each of the ring's suns is traced from
-    /// ([`crate::lighting::sunlit_share`]), which the leaves take for the sun through the crown
-    /// where the sun's shadow map does not resolve leaves; 0: none traced, the bake's blend
-    /// there (a ring gathered with or without shares is gathered again when this changes).
+    /// Points a leaf its sunlit share towards each of the ring's suns is traced from, the share
+    /// fitted with a plane over the leaf ([`crate::lighting::sunlit_share`]), which the leaves
+    /// take for the sun through the crown where the sun's shadow map does not resolve leaves;
+    /// 0: none traced, the bake's blend there (a ring gathered with or without shares is
+    /// gathered again when this changes).
     pub sunlit_points: u32,
     /// Degrees of elevation the sun moves from a tree type's ring before a new one is gathered.
     pub regather_degrees: f32,

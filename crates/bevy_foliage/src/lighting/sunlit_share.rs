@@ -10,7 +10,15 @@
 //! are re-gathered while an app runs ([`super::bounce_ring`]), it serves every upright
 //! instance however turned. [`super::image_error`] measures both against the path tracer;
 //! [`super::bounce_ring::gather_ring`] traces the ring beside the bounce ratios while an app
-//! runs, and the leaf vertex shader reads it ([`super::bounce_ring::sun_through_with_ring`]).
+//! runs, and the leaf shaders read it ([`super::bounce_ring::sun_through_with_ring`]).
+//!
+//! One value a leaf is still its mean: where a sunfleck's edge crosses the leaf it cannot say
+//! which side is lit, and with the sun against the eye, where the part of a leaf in view and
+//! its sunlit part are least alike, that is most of what is left — the share traced for the
+//! image's own sun is 20–22 % off there. So each share is fitted with a plane over the leaf
+//! ([`SharePlane`], [`sunlit_planes`]: least squares over the same points), which the leaf
+//! vertex shader reads at each vertex and the rasteriser carries across the leaf
+//! ([`super::bounce_ring::ring_shares_at`]).
 //!
 //! Plain Rust, no render types.
 
@@ -182,6 +190,25 @@ pub fn share_of(stored: u8) -> f32 {
     stored as f32 / 255.0
 }
 
+/// The largest share change from a leaf's centre to its farthest corner a stored slope holds
+/// ([`quantize_slope`]): a sunfleck's edge across the leaf's middle changes it by 1.5 a leaf
+/// side, about 1.1 from the centre to a square leaf's corner.
+pub const SLOPE_RANGE: f32 = 2.0;
+
+/// A component of a plane's gradient times its leaf's radius, as stored: a signed byte,
+/// [`SLOPE_RANGE`]`/127` a step (clamped; not a number: 0).
+pub fn quantize_slope(slope: f32) -> i8 {
+    if slope.is_nan() {
+        return 0;
+    }
+    (slope.clamp(-SLOPE_RANGE, SLOPE_RANGE) / SLOPE_RANGE * 127.0).round() as i8
+}
+
+/// A stored slope read back.
+pub fn slope_of(stored: i8) -> f32 {
+    stored as f32 * (SLOPE_RANGE / 127.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -270,6 +297,17 @@ mod tests {
         let midway = (suns[0] + suns[1]).normalize();
         assert!((share_on_ring(&ring, 0.0, midway) - 0.5).abs() < 1e-4);
         assert_eq!(share_on_ring(&[], 0.0, to_sun), 1.0);
+    }
+
+    #[test]
+    fn a_stored_slope_reads_back_within_half_a_step() {
+        for k in -100..=100 {
+            let s = k as f32 / 50.0;
+            assert!((slope_of(quantize_slope(s)) - s).abs() <= 0.5 * SLOPE_RANGE / 127.0 + 1e-6);
+        }
+        assert_eq!(quantize_slope(-9.0), -127);
+        assert_eq!(quantize_slope(9.0), 127);
+        assert_eq!(quantize_slope(f32::NAN), 0);
     }
 
     #[test]

@@ -317,6 +317,27 @@ impl BakedFoliage {
         crate::lighting::leaf_scene::LeafScene::from_triangles(triangles, leaf_of, normals)
     }
 
+    /// Per stored leaf, its radius as the leaf shaders have it: its farthest vertex from its
+    /// vertices' centroid (`centroid_offsets`); 0 for a leaf without vertices.
+    pub fn leaf_radii(&self) -> Vec<f32> {
+        let mut corners: Vec<u32> = Vec::new();
+        (0..self.leaf_count())
+            .map(|leaf| {
+                let start = self.leaf_index_start[leaf] as usize;
+                let end = (self.leaf_index_start[leaf + 1] as usize).min(self.indices.len());
+                corners.clear();
+                corners.extend_from_slice(self.indices.get(start..end).unwrap_or(&[]));
+                corners.sort_unstable();
+                corners.dedup();
+                corners
+                    .iter()
+                    .filter_map(|&v| self.centroid_offsets.get(v as usize))
+                    .map(|e| e.length())
+                    .fold(0.0f32, f32::max)
+            })
+            .collect()
+    }
+
     /// Per stored leaf, its envelope as the leaf shaders read it from the stored attenuations
     /// and the crown's τ ([`crate::lighting::envelope::LeafEnvelope::from_stored`]); a leaf the
     /// bake stored none for lets all light through.
@@ -349,16 +370,16 @@ impl BakedFoliage {
 
     /// Bytes the GPU holds for this tree type: the packed leaf vertices, the stored index
     /// list, per-leaf index starts, per-cell leaf starts and visibility, and each leaf's
-    /// light (attenuations, seen-part gains, bounce ratios and their ring;
-    /// `store::LEAF_LIGHT_WORDS`).
+    /// light (attenuations, seen-part gains, bounce ratios and their ring, the ring's sunlit
+    /// shares and their slopes; `store::LEAF_LIGHT_WORDS`).
     pub fn gpu_bytes(&self) -> usize {
-        // 16 words a vertex and 28 a leaf (`store::LEAF_VERTEX_WORDS`, `LEAF_LIGHT_WORDS`).
+        // 16 words a vertex and 40 a leaf (`store::LEAF_VERTEX_WORDS`, `LEAF_LIGHT_WORDS`).
         self.positions.len() * 16 * 4
             + self.indices.len() * 4
             + self.leaf_index_start.len() * 4
             + self.cell_first_leaf.len() * 4
             + self.visibility.len() * 2
-            + self.leaf_count() * 28 * 4
+            + self.leaf_count() * 40 * 4
     }
 }
 

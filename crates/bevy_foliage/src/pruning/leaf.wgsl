@@ -7,7 +7,7 @@
 #ifdef TREE_LIGHTING
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
 #import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_bounce_ratios, leaf_has_ring_shares, leaf_params, leaf_ring_height, leaf_ring_ratios, leaf_ring_shares, leaf_seen_gains}
-#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, ratio_with_ring, seen_gain, through_with_ring}
+#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, ratio_with_ring, ring_sun_at, seen_gain}
 
 // The tree instance's frame, read once per vertex: world directions into the model's frame
 // (the transpose undoes a rotation and, once normalised, a uniform scale), the instance's scale
@@ -29,10 +29,17 @@ fn tree_frame(instance_index: u32) -> TreeFrame {
     return frame;
 }
 
+// A tree-lit leaf vertex: its light, and what the fragment needs to draw the sun from its
+// leaf's sunlit shares on the ring (`ring_sun_at`; weight 0 where the blend stands).
+struct LitLeafVertex {
+    light: LeafLight,
+    ring_sun: vec4<f32>,
+}
+
 // The light leaf vertex `leaf` sends to the eye, worked out in the tree's frame for a leaf of
 // the material's base colour, then divided by that colour (the fragment stage multiplies it
 // back in with the texture).
-fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
+fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LitLeafVertex {
     let to_eye = normalize(frame.local_from_world * (view.world_position - leaf.world_position.xyz));
     let albedo = leaf_params.albedo.rgb;
     // Eq. 5.24 on each face scaled by what the leaf's own neighbours bring it
@@ -77,10 +84,14 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
     // Where the sun is at the elevation of the type's ring and the ring holds the leaves'
     // sunlit shares traced for its suns (`lighting::sunlit_share`), those in place of the blend,
     // with the gain towards the eye and the crown's hotspot: the sun where the shadow map does
-    // not resolve leaves.
+    // not resolve leaves. Each share is read at the vertex along its slope across the leaf
+    // (which side of the leaf a sunfleck's edge lights), the rasteriser carries it across the
+    // leaf, and the fragment bends it by the gain's cap and the exponent (`through_on_ring`).
+    var ring_sun = vec4(0.0, 1.0, 1.0, 0.0);
     if leaf_params.bounce_ring != 0u && leaf_has_ring_shares(leaf.leaf) {
-        light.through = through_with_ring(light.through, leaf_ring_height(leaf.leaf),
-            leaf_ring_shares(leaf.leaf), seen, sun_exponent, frame.to_sun);
+        let across = leaf.offset / max(leaf.leaf_radius, 1e-6);
+        ring_sun = ring_sun_at(leaf_ring_height(leaf.leaf), leaf_ring_shares(leaf.leaf, across),
+            seen, sun_exponent, frame.to_sun);
     }
     // A channel the base colour lacks sends no light either.
     let lacks = albedo <= vec3(0.0);
@@ -88,7 +99,7 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LeafLight {
     light.sky = select(light.sky * inverse, vec3(0.0), lacks);
     light.sun = select(light.sun * inverse, vec3(0.0), lacks);
     light.bounce = select(light.bounce * inverse, vec3(0.0), lacks);
-    return light;
+    return LitLeafVertex(light, ring_sun);
 }
 
 // How far the sun's light travels from the leaf vertex after entering the crown from outside:
@@ -113,7 +124,9 @@ fn vertex(in: SlotVertex) -> TreeLitVertexOutput {
     out.world_normal = leaf.world_normal;
     out.uv = leaf.uv;
     let frame = tree_frame(in.instance_index);
-    let light = tree_light(leaf, frame);
+    let lit = tree_light(leaf, frame);
+    let light = lit.light;
+    out.ring_sun = lit.ring_sun;
     out.sky = light.sky;
     out.sun = light.sun;
     out.bounce = light.bounce;

@@ -87,6 +87,9 @@ struct PulledLeafVertex {
     hotspot: vec4<u32>,
     // The largest distance of the leaf's corners from its centre, in model space.
     leaf_radius: f32,
+    // The vertex's offset from its leaf's centroid as stored, before any area compensation
+    // (model space): where on the leaf the vertex is.
+    offset: vec3<f32>,
 }
 
 // Pulls the vertex and places it in the world; `clip_position` is CULLED for dropped vertices.
@@ -145,6 +148,7 @@ fn pull_leaf_vertex(instance_index: u32, slot_position: vec3<f32>) -> PulledLeaf
     out.crown_sphere = bitcast<vec4<f32>>(inst.crown_sphere_bits);
     out.hotspot = inst.hotspot;
     out.leaf_radius = v.leaf_radius;
+    out.offset = v.offset;
     out.world_position = mesh_functions::mesh_position_local_to_world(world_from_local, vec4<f32>(out.local_position, 1.0));
     out.clip_position = position_world_to_clip(out.world_position.xyz);
     out.world_normal = mesh_functions::mesh_normal_local_to_world(out.local_normal, instance_index);
@@ -182,7 +186,7 @@ fn leaf_seen_gains(leaf: u32) -> array<f32, 8> {
 const SEEN_GAIN_MAX: f32 = 4.0;
 
 // vec4s per leaf in `leaf_light` (`store::LEAF_LIGHT_WORDS` / 4).
-const LEAF_LIGHT_VECS: u32 = 7u;
+const LEAF_LIGHT_VECS: u32 = 10u;
 
 // 28 ratios stored a byte each in two vec4s (the last word not read): code 0 is 0, codes 1–255
 // the ratio's base-2 logarithm from −4 to 4 (`lighting::gathered_bounce::ratio_of`).
@@ -221,13 +225,28 @@ fn leaf_has_ring_shares(leaf: u32) -> bool {
     return ((leaf_light[LEAF_LIGHT_VECS * leaf + 6u].w >> 16u) & 0xffu) != 0u;
 }
 
-// The sunlit shares of leaf `leaf` on its type's ring, node k at k, in 255ths
-// (`lighting::sunlit_share::share_of`).
-fn leaf_ring_shares(leaf: u32) -> array<f32, 14> {
+// The sunlit shares of leaf `leaf` on its type's ring, node k at k, read `across` from the
+// leaf's centroid in units of its radius: each share in 255ths
+// (`lighting::sunlit_share::share_of`) plus its slope across the leaf, three signed bytes a
+// node (`slope_of`), along `across`; not clamped (`lighting::bounce_ring::ring_shares_at`).
+fn leaf_ring_shares(leaf: u32, across: vec3<f32>) -> array<f32, 14> {
     let words = leaf_light[LEAF_LIGHT_VECS * leaf + 6u];
+    var slopes = array<vec4<u32>, 3>(leaf_light[LEAF_LIGHT_VECS * leaf + 7u],
+        leaf_light[LEAF_LIGHT_VECS * leaf + 8u], leaf_light[LEAF_LIGHT_VECS * leaf + 9u]);
     var s: array<f32, 14>;
     for (var k = 0u; k < 14u; k += 1u) {
-        s[k] = f32((words[k / 4u] >> (8u * (k % 4u))) & 0xffu) / 255.0;
+        var slope: vec3<f32>;
+        for (var c = 0u; c < 3u; c += 1u) {
+            let b = 3u * k + c;
+            // The byte as a signed one: moved to the top and shifted back arithmetically.
+            let q = bitcast<i32>(((slopes[b / 16u][(b / 4u) % 4u] >> (8u * (b % 4u))) & 0xffu) << 24u) >> 24u;
+            slope[c] = f32(q) * (SLOPE_RANGE / 127.0);
+        }
+        s[k] = f32((words[k / 4u] >> (8u * (k % 4u))) & 0xffu) / 255.0 + dot(slope, across);
     }
     return s;
 }
+
+// The largest stored slope of a sunlit share across a leaf
+// (`lighting::sunlit_share::SLOPE_RANGE`).
+const SLOPE_RANGE: f32 = 2.0;

@@ -32,7 +32,7 @@
     shadows::{fetch_directional_shadow, get_cascade_index, world_to_directional_light_local},
 }
 #import bevy_foliage::leaf_pulling::leaf_params
-#import bevy_foliage::tree_lighting::TreeLitVertexOutput
+#import bevy_foliage::tree_lighting::{TreeLitVertexOutput, through_on_ring}
 
 // How the shadow map is read at the leaf, measured in `lighting::sun_maps`
 // (`LeafShadowPlane::SHADERS`): the slack, in texels, by which a texel's nearest leaf may lie in
@@ -188,7 +188,10 @@ fn fragment(in: TreeLitVertexOutput, @builtin(front_facing) is_front: bool) -> F
         in.position.xy,
         pbr_input.flags,
     );
-    let through = mix(in.through_reach_size.x * shadow.outside, shadow.at_leaf, shadow.trust);
+    // The crown's share of the sun where the map does not resolve leaves: the blend, or the
+    // leaf's sunlit share on the ring here.
+    let crown = through_on_ring(in.through_reach_size.x, in.ring_sun);
+    let through = mix(crown * shadow.outside, shadow.at_leaf, shadow.trust);
     let light = (in.sky + in.sun * through + in.bounce * shadow.outside) * base.rgb;
     var out: FragmentOutput;
     out.color = main_pass_post_lighting_processing(

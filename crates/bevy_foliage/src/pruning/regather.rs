@@ -41,6 +41,9 @@ pub const BOUNCE_RINGS_GATHERING: DiagnosticPath =
 struct RingSource {
     scene: LeafScene,
     envelopes: Vec<LeafEnvelope>,
+    /// Per stored leaf, its radius as the leaf shaders have it (the sunlit shares' slopes
+    /// are per radius).
+    radii: Vec<f32>,
     tau: f32,
     opacity: f32,
 }
@@ -50,6 +53,7 @@ impl RingSource {
         Self {
             scene: tree.leaf_scene(),
             envelopes: tree.leaf_envelopes(),
+            radii: tree.leaf_radii(),
             tau: tree.extinction,
             opacity: tree.leaf_opacity,
         }
@@ -167,6 +171,7 @@ fn regather(
         height,
         rays,
         sunlit_points,
+        &source.radii,
         &|_| opacity,
         threads,
     );

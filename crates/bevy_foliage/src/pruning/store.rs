@@ -93,21 +93,26 @@ pub const LEAF_VERTEX_WORDS: usize = 16;
 /// [`crate::lighting::bounce_ring`]); its 28 ring ratios, as the bounce ratios; a word of
 /// padding; its 14 sunlit shares on the ring (bytes, node `k` at byte `k`,
 /// [`crate::lighting::sunlit_share::quantize_share`]), then a byte 1 where the ring has them
-/// (0: none, the bake's blend) and one of padding.
-pub const LEAF_LIGHT_WORDS: usize = 28;
+/// (0: none, the bake's blend) and one of padding; the shares' slopes across the leaf
+/// ([`BounceRing::sunlit_slopes`], signed bytes, node `k`'s component `c` at byte `3k + c`;
+/// 0 where the ring has none) and six bytes of padding.
+pub const LEAF_LIGHT_WORDS: usize = 40;
 
 // `BakedFoliage::gpu_bytes` counts these sizes.
-const _: () = assert!(LEAF_VERTEX_WORDS == 16 && LEAF_LIGHT_WORDS == 28);
+const _: () = assert!(LEAF_VERTEX_WORDS == 16 && LEAF_LIGHT_WORDS == 40);
 
 /// Appends the [`LEAF_LIGHT_WORDS`] words of each of `tree`'s leaves to `out`, with `ring` (its
 /// sun height and per leaf its ratios and sunlit shares) as the type's ring; `None`, or a ring
 /// for another number of leaves: no ring (and a ring's shares for another number of leaves:
-/// no shares).
+/// no shares; their slopes for another number of leaves: none, the shares alone).
 pub fn push_leaf_light(tree: &BakedFoliage, ring: Option<&BounceRing>, out: &mut Vec<u32>) {
     let ring = ring.filter(|r| r.leaves.len() == tree.leaf_count() && r.sun_height.abs() <= 1.0);
     let shares = ring
         .map(|r| r.sunlit.as_slice())
         .filter(|s| s.len() == tree.leaf_count());
+    let slopes = ring
+        .map(|r| r.sunlit_slopes.as_slice())
+        .filter(|s| shares.is_some() && s.len() == tree.leaf_count());
     let no_ratios = BounceRatios::default().quantized();
     let ratio_words = |r: &[u8; STORED_RATIOS]| {
         r.chunks_exact(4)
@@ -148,6 +153,19 @@ pub fn push_leaf_light(tree: &BakedFoliage, ring: Option<&BounceRing>, out: &mut
         }
         out.extend(
             sunlit
+                .chunks_exact(4)
+                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+        );
+        let mut sloped = [0u8; 48];
+        if let Some(slopes) = slopes {
+            for (k, node) in slopes[leaf].iter().enumerate() {
+                for (c, &q) in node.iter().enumerate() {
+                    sloped[3 * k + c] = q as u8;
+                }
+            }
+        }
+        out.extend(
+            sloped
                 .chunks_exact(4)
                 .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
         );
@@ -331,7 +349,8 @@ pub fn update_foliage_store(
             let mut uv_centre = vec![Vec2::ZERO; tree.positions.len()];
             let mut vertex_leaf = vec![light_base; tree.positions.len()];
             let mut corners: Vec<u32> = Vec::new();
-            for leaf in 0..tree.leaf_count() {
+            let radii = tree.leaf_radii();
+            for (leaf, &radius) in radii.iter().enumerate() {
                 let (start, end) = (
                     tree.leaf_index_start[leaf] as usize,
                     tree.leaf_index_start[leaf + 1] as usize,
@@ -340,10 +359,6 @@ pub fn update_foliage_store(
                 corners.extend_from_slice(&tree.indices[start..end]);
                 corners.sort_unstable();
                 corners.dedup();
-                let radius = corners
-                    .iter()
-                    .map(|&v| tree.centroid_offsets[v as usize].length())
-                    .fold(0.0f32, f32::max);
                 let centre = corners.iter().map(|&v| tree.uvs[v as usize]).sum::<Vec2>()
                     / corners.len().max(1) as f32;
                 for &v in &corners {
@@ -481,6 +496,11 @@ mod tests {
             sunlit: (0..n)
                 .map(|l| std::array::from_fn(|k| (l * 5 + 3 * k + 1) as u8))
                 .collect(),
+            sunlit_slopes: (0..n)
+                .map(|l| {
+                    std::array::from_fn(|k| [k as i8 - 7, -((l % 100) as i8), 3 * k as i8 + 1])
+                })
+                .collect(),
         };
         let (mut with, mut without, mut wrong) = (Vec::new(), Vec::new(), Vec::new());
         push_leaf_light(&tree, Some(&ring), &mut with);
@@ -489,6 +509,7 @@ mod tests {
             sun_height: 0.25,
             leaves: ring.leaves[1..].to_vec(),
             sunlit: ring.sunlit[1..].to_vec(),
+            sunlit_slopes: ring.sunlit_slopes[1..].to_vec(),
         };
         push_leaf_light(&tree, Some(&short), &mut wrong);
         // A ring without shares, or with shares for another number of leaves: the ratios, no
@@ -498,6 +519,20 @@ mod tests {
             sunlit: Vec::new(),
             ..ring.clone()
         };
+        // Shares without slopes, or with slopes for another number of leaves: the shares
+        // alone.
+        let (mut flat, mut short_slopes) = (Vec::new(), Vec::new());
+        let unsloped = BounceRing {
+            sunlit_slopes: Vec::new(),
+            ..ring.clone()
+        };
+        push_leaf_light(&tree, Some(&unsloped), &mut flat);
+        let odd_slopes = BounceRing {
+            sunlit_slopes: ring.sunlit_slopes[1..].to_vec(),
+            ..ring.clone()
+        };
+        push_leaf_light(&tree, Some(&odd_slopes), &mut short_slopes);
+        assert_eq!(flat, short_slopes);
         push_leaf_light(&tree, Some(&bare), &mut unshared);
         let odd = BounceRing {
             sunlit: ring.sunlit[1..].to_vec(),
@@ -530,6 +565,18 @@ mod tests {
             }
             assert_eq!(w[27], u32::from_le_bytes([s[12], s[13], 1, 0]));
             assert_eq!(o[27], 0);
+            // The slopes: node k's components at bytes 3k..3k + 3, two's complement.
+            let bytes: Vec<u8> = w[28..40].iter().flat_map(|x| x.to_le_bytes()).collect();
+            for k in 0..RING_NODES {
+                for c in 0..3 {
+                    assert_eq!(bytes[3 * k + c] as i8, ring.sunlit_slopes[leaf][k][c]);
+                }
+            }
+            assert!(bytes[42..].iter().all(|&b| b == 0));
+            assert!(o[28..].iter().all(|&x| x == 0));
+            let f = &flat[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
+            assert_eq!(f[..28], w[..28]);
+            assert!(f[28..].iter().all(|&x| x == 0));
             let u = &unshared[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
             assert_eq!(u[..24], w[..24]);
             assert!(u[24..].iter().all(|&x| x == 0));

@@ -246,26 +246,40 @@ fn ratio_on_ring(ring: array<f32, 28>, to_sun: vec3<f32>) -> vec2<f32> {
     return a + at.f * (b - a);
 }
 
-// The sun's share through the crown where the shadow map does not resolve leaves: `blend` (the
-// bake's blend of attenuations with its gain and hotspot) off the ring's elevation; the leaf's
-// sunlit shares on its type's ring, linear in azimuth, times the seen-part gain `gain`, capped
-// at 1, raised to the crown's hotspot exponent `exponent`, at it; mixed by `ring_weight` between
-// (`lighting::bounce_ring::sun_through_with_ring`).
-fn through_with_ring(
-    blend: f32,
+// What the fragment needs of the leaf's sunlit shares on its type's ring to draw the sun where
+// the shadow map does not resolve leaves (`through_on_ring`): the share read on the ring,
+// linear in azimuth, from the leaf's shares at this vertex (`leaf_ring_shares`, linear across
+// the leaf, so the rasteriser carries it to each fragment exactly), the seen-part gain `gain`,
+// the crown's hotspot exponent `exponent` and the ring's weight (`ring_weight`; 0: the blend
+// alone).
+fn ring_sun_at(
     ring_height: f32,
     shares: array<f32, 14>,
     gain: f32,
     exponent: f32,
     to_sun: vec3<f32>,
-) -> f32 {
+) -> vec4<f32> {
     let w = ring_weight(ring_height, to_sun);
     if w <= 0.0 {
-        return blend;
+        return vec4(0.0, 1.0, 1.0, 0.0);
     }
     let at = ring_span(to_sun);
     let share = shares[at.i] + at.f * (shares[at.j] - shares[at.i]);
-    return blend + w * (pow(clamp(share * gain, 0.0, 1.0), exponent) - blend);
+    return vec4(share, gain, exponent, w);
+}
+
+// The sun's share through the crown where the shadow map does not resolve leaves: `blend` (the
+// bake's blend of attenuations with its gain and hotspot) off the ring's elevation; the leaf's
+// sunlit share on its type's ring where the fragment is (`ring_sun.x`, from `ring_sun_at`),
+// times the seen-part gain, capped at 1, raised to the crown's hotspot exponent, at it; mixed
+// by the ring's weight between (`lighting::bounce_ring::sun_through_with_ring`). Per fragment:
+// the cap and the exponent bend the share, which the rasteriser carries across the leaf only
+// while it is linear.
+fn through_on_ring(blend: f32, ring_sun: vec4<f32>) -> f32 {
+    if ring_sun.w <= 0.0 {
+        return blend;
+    }
+    return blend + ring_sun.w * (pow(clamp(ring_sun.x * ring_sun.y, 0.0, 1.0), ring_sun.z) - blend);
 }
 
 // A leaf's bounce factors (front, back) for the sun towards `to_sun`: its type's ring where the
@@ -421,4 +435,7 @@ struct TreeLitVertexOutput {
     // world units.
     @location(6) through_reach_size: vec3<f32>,
     @location(7) @interpolate(flat) instance_index: u32,
+    // The leaf's sunlit share on its type's ring here, its seen-part gain, the crown's hotspot
+    // exponent and the ring's weight (`ring_sun_at`; weight 0: `through` alone).
+    @location(8) ring_sun: vec4<f32>,
 }
