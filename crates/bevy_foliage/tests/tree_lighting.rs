@@ -265,6 +265,9 @@ struct Check {
     /// Compared pixels the shares' slopes across their leaves move by more than 3/255 from
     /// the shares alone.
     slopes_visible: u32,
+    /// Compared pixels the ring's own hotspot on its shares moves by more than 3/255 from the
+    /// bake's hotspot on them.
+    ring_hotspot_visible: u32,
     /// Compared pixels the crown's hotspot moves by more than 3/255, and those its exponent on
     /// the sun alone moves so.
     hotspot_visible: u32,
@@ -393,6 +396,7 @@ fn compare_with_model(
                     ring_on: bool,
                     shares_on: bool,
                     slopes_on: bool,
+                    ring_spot_on: bool,
                     corners: &[(Vec3, f32)],
                     outside: f32,
                     at_leaf: Option<f32>|
@@ -438,11 +442,18 @@ fn compare_with_model(
                 }
                 (h, at)
             });
+            // The shares' exponent: the ring's own hotspot where it has one, else the bake's.
+            let exponent = match ring {
+                Some(r) if lighting.seen_part && hotspot_on && ring_spot_on => {
+                    r.sun_exponent(spot.sun_at(wo, to_sun), wo, to_sun)
+                }
+                _ => spot.sun_at(wo, to_sun),
+            };
             sun_through_with_ring(
                 blend,
                 read.as_ref().map(|(h, s)| (*h, s)),
                 seen,
-                spot.sun_at(wo, to_sun),
+                exponent,
                 to_sun,
             ) * outside
         });
@@ -524,6 +535,7 @@ fn compare_with_model(
         ratios_visible: 0,
         ring_visible: 0,
         shares_visible: 0,
+        ring_hotspot_visible: 0,
         slopes_visible: 0,
         hotspot_visible: 0,
         hotspot_sun_visible: 0,
@@ -586,12 +598,17 @@ fn compare_with_model(
                          shares: bool,
                          slopes: bool| {
                 expected(
-                    leaf, bounce, covered, hotspot, ratios, ring, shares, slopes, &corners,
+                    leaf, bounce, covered, hotspot, ratios, ring, shares, slopes, true, &corners,
                     outside, at_leaf,
                 )
                 .to_array()
                 .map(|c| srgb(c) * 255.0)
             };
+            let bake_spot_on_shares = expected(
+                leaf, true, true, true, true, true, true, true, false, &corners, outside, at_leaf,
+            )
+            .to_array()
+            .map(|c| srgb(c) * 255.0);
             let want = pixel(true, true, true, true, true, true, true);
             let plain = pixel(false, true, true, true, true, true, true);
             let uncovered = pixel(true, false, true, true, true, true, true);
@@ -633,6 +650,9 @@ fn compare_with_model(
             }
             if (0..3).any(|c| (want[c] - no_slopes[c]).abs() > 3.0) {
                 check.slopes_visible += 1;
+            }
+            if (0..3).any(|c| (want[c] - bake_spot_on_shares[c]).abs() > 3.0) {
+                check.ring_hotspot_visible += 1;
             }
             if (0..3).any(|c| (want[c] - no_hotspot[c]).abs() > 3.0) {
                 check.hotspot_visible += 1;
@@ -882,8 +902,10 @@ fn wait_for_ring(harness: &mut RenderHarness, id: AssetId<BakedFoliage>) -> Boun
 
 /// The leaves read the bounce ratios their type's ring holds where the sun is at its elevation:
 /// the ring the app re-gathers is the CPU's [`gather_ring`] of the loaded bake for the sun's
-/// elevation, byte for byte; the render matches the CPU model with it; a ring of strong ratios,
-/// distinct per node and face, moves many pixels and the render follows; and an instance tilted
+/// elevation, byte for byte (its ratios, its sunlit shares and their slopes, its own hotspot
+/// on them); the render matches the CPU model with it; a ring of strong ratios, shares, slopes
+/// and hotspot, distinct per node and face, moves many pixels and the render follows; the
+/// bake's hotspot bends the shares of a ring without one; and an instance tilted
 /// so that the sun stands 4° off the ring's elevation in its frame takes the ring and the
 /// bake's blend half and half, as the model does. Then the sun's elevation moves and a new
 /// ring is gathered for it.
@@ -892,7 +914,7 @@ fn wait_for_ring(harness: &mut RenderHarness, id: AssetId<BakedFoliage>) -> Boun
 #[test]
 fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
     use bevy_foliage::lighting::bounce_ring::{
-        RING_FULL_DEGREES, RING_GONE_DEGREES, gather_ring, ring_weight,
+        RING_FULL_DEGREES, RING_GONE_DEGREES, RING_HOTSPOT, gather_ring, ring_weight,
     };
     use bevy_foliage::lighting::gathered_bounce::quantize_ratio;
     use bevy_foliage::pruning::regather::BounceRings;
@@ -932,13 +954,14 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         );
         check.save(name);
         println!(
-            "{name}: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1}/255); the ring moves {} of them from the bake's blend by > 3/255, its sunlit shares {}, their slopes across the leaves {}",
+            "{name}: {} of {} leaf pixels within 3/255 of the CPU model (worst {:.1}/255); the ring moves {} of them from the bake's blend by > 3/255, its sunlit shares {}, their slopes across the leaves {}, its own hotspot on them (against the bake's) {}",
             check.within,
             check.compared,
             check.worst,
             check.ring_visible,
             check.shares_visible,
-            check.slopes_visible
+            check.slopes_visible,
+            check.ring_hotspot_visible
         );
         assert!(
             check.compared >= 800,
@@ -969,6 +992,8 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         lighting.bounce_ring.rays,
         lighting.bounce_ring.sunlit_points,
         &baked.leaf_radii(),
+        &baked.leaf_seen_gains(),
+        &RING_HOTSPOT,
         &|_| opacity,
         2,
     );
@@ -1003,6 +1028,12 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         ring.sunlit_slopes.len() == baked.leaf_count() && ring.sunlit_slopes == cpu.sunlit_slopes,
         "the shares' slopes across the leaves as the CPU fits them"
     );
+    assert!(
+        ring.sun_hotspot().is_some() && ring.sunlit_hotspot == cpu.sunlit_hotspot,
+        "the ring's own hotspot on its shares as the CPU fits it: {:?} against {:?}",
+        ring.sunlit_hotspot,
+        cpu.sunlit_hotspot
+    );
     for _ in 0..4 {
         harness.step();
     }
@@ -1036,6 +1067,9 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
                 })
             })
             .collect(),
+        // A hotspot on the shares distinct per node and far from the bake's (a shader that
+        // reads the bake's, or the nodes out of order, fails).
+        sunlit_hotspot: std::array::from_fn(|k| Hotspot::quantize(2.6 - 0.3 * k as f32)),
     };
     harness
         .world_mut()
@@ -1069,13 +1103,21 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         strong_check.slopes_visible,
         strong_check.compared
     );
+    assert!(
+        strong_check.ring_hotspot_visible * 5 >= strong_check.compared,
+        "the ring's own hotspot shows in too few pixels ({} of {}) for the test to see it",
+        strong_check.ring_hotspot_visible,
+        strong_check.compared
+    );
 
-    // The crown's hotspot on the ring's shares: the same tree with a strong sun exponent, its
-    // strong ring put in for it (without slopes, which would carry most vertices' shares to 0
-    // or 1, where no exponent shows), against the model with that exponent (a shader that left
-    // the hotspot off the ring's shares fails).
+    // The crown's hotspot on the ring's shares where the ring has none of its own: the same
+    // tree with a strong sun exponent, its strong ring put in for it (without slopes, which
+    // would carry most vertices' shares to 0 or 1, where no exponent shows, and without its
+    // hotspot), against the model with that exponent (a shader that left the hotspot off the
+    // ring's shares fails).
     let flat = BounceRing {
         sunlit_slopes: Vec::new(),
+        sunlit_hotspot: [0; HOTSPOT_NODES],
         ..strong.clone()
     };
     let hot = BakedFoliage {

@@ -684,6 +684,11 @@ fn image_table(
                 crown.len()
             );
         }
+        for seconds in &run.ring_hotspot_seconds {
+            eprintln!(
+                "{name}: the ring's own hotspot on its shares fitted in {seconds:.2} s on {threads} threads"
+            );
+        }
         eprintln!("{name}: {:.1} s", started.elapsed().as_secs_f32());
     }
 }

@@ -38,10 +38,13 @@
 //! moves by −1.0, −0.05, +0.1 and +0.2 points at four suns (α = 68°, 58°, 137°, 148°;
 //! 11.1 → 10.2 % at the best), the sun's by under a point, and traced as a bake made while an
 //! app runs would trace it (half the eye rays and bounce rays) it is worse against the sun
-//! (15.9 → 17.7 %). So the shaders keep the bake's hotspot alone; `tree_lighting_error
-//! --images --hotspot --sun-ring 14` prints the row.
+//! (15.9 → 17.7 %). So the shaders keep the bake's hotspot for the bounce and the blended sun;
+//! `tree_lighting_error --images --hotspot --sun-ring 14` prints the row. The ring's sunlit
+//! shares, read where the eye looks, are another thing than the blend, and the ring fits its
+//! own exponents on them ([`super::bounce_ring::ring_sun_hotspot`]), with the sun alone and
+//! without the bounce's gathers.
 
-use super::envelope::CrownEnvelope;
+use super::envelope::{CrownEnvelope, LeafEnvelope};
 use super::gathered_bounce::{BounceRatios, ratio_towards};
 use super::leaf_scene::{LeafScene, uniform_direction};
 use super::model::{LeafMaterial, SunBounce, bounce_radiance_by_face, lobe_blend, open_share};
@@ -72,7 +75,8 @@ pub struct HotspotSettings {
     pub pairs: u32,
     /// Eye rays cast into the crown per pair.
     pub eye_rays: u32,
-    /// Rays gathered per hit point for the bounce.
+    /// Rays gathered per hit point for the bounce (0: the bounce is not measured, its factors
+    /// stay 1).
     pub bounce_rays: u32,
     /// Seed of the random sequences.
     pub seed: u64,
@@ -286,7 +290,8 @@ pub fn crown_hotspot(
         |i: usize, to_sun: Vec3| ratios.get(i).map_or([1.0; 2], |r| ratio_towards(r, to_sun));
     crown_hotspot_for(
         scene,
-        envelope,
+        &envelope.leaves,
+        envelope.tau,
         gains,
         &faces,
         HotspotSuns::Sphere,
@@ -313,19 +318,23 @@ pub enum HotspotSuns {
     Height(f32),
 }
 
-/// [`crown_hotspot`] with the bounce factors the shaders give each stored leaf's faces as
+/// [`crown_hotspot`] for a crown of extinction `tau` whose stored leaves have the envelopes
+/// `envelopes`, with the bounce factors the shaders give each stored leaf's faces as
 /// `faces(i, to_sun)` (eq. 5.24 alone: `[1, 1]`), for the suns `suns`, the sun's exponent
-/// fitted against `sun_share(i, to_sun)`, the share of the sun drawn at stored leaf `i` before
-/// its seen-part gain (`None`: the blend of its eight attenuations, as [`crown_hotspot`]; a
-/// leaf's sunlit share, [`super::sunlit_share`], for instance).
+/// fitted against `sun_share(i, to_sun, x)`, the share of the sun drawn at point `x` (model
+/// space) of stored leaf `i` before its seen-part gain (`None`: the blend of its eight
+/// attenuations, as [`crown_hotspot`]; a leaf's sunlit share or its plane across the leaf,
+/// [`super::sunlit_share`], for instance). With `settings.bounce_rays` 0 the bounce is not
+/// measured (its factors stay 1).
 #[allow(clippy::too_many_arguments)]
 pub fn crown_hotspot_for(
     scene: &LeafScene,
-    envelope: &CrownEnvelope,
+    envelopes: &[LeafEnvelope],
+    tau: f32,
     gains: &[[f32; 8]],
     faces: &(dyn Fn(usize, Vec3) -> [f32; 2] + Sync),
     suns: HotspotSuns,
-    sun_share: Option<&(dyn Fn(usize, Vec3) -> f32 + Sync)>,
+    sun_share: Option<&(dyn Fn(usize, Vec3, Vec3) -> f32 + Sync)>,
     stored: &(dyn Fn(u32) -> Option<usize> + Sync),
     material: &LeafMaterial,
     opacity: &(impl Fn(u32) -> f32 + Sync),
@@ -333,7 +342,7 @@ pub fn crown_hotspot_for(
     threads: usize,
 ) -> Hotspot {
     let leaves = scene.leaf_count();
-    if leaves == 0 || envelope.leaves.is_empty() || settings.pairs == 0 || settings.eye_rays == 0 {
+    if leaves == 0 || envelopes.is_empty() || settings.pairs == 0 || settings.eye_rays == 0 {
         return Hotspot::default();
     }
     let centre = (0..leaves).map(|l| scene.centre(l)).sum::<Vec3>() / leaves as f32;
@@ -342,7 +351,6 @@ pub fn crown_hotspot_for(
         .fold(0.0f32, f32::max)
         .max(1e-3)
         * 1.05;
-    let tau = envelope.tau;
     // Per job (node, pair): sums of traced and modelled sun and bounce.
     let jobs: Vec<(usize, u32)> = (0..HOTSPOT_NODES)
         .flat_map(|k| (0..settings.pairs).map(move |i| (k, i)))
@@ -380,19 +388,19 @@ pub fn crown_hotspot_for(
                 continue;
             };
             let l = leaf as usize;
-            let Some(i) = stored(leaf).filter(|&i| i < envelope.leaves.len()) else {
+            let Some(i) = stored(leaf).filter(|&i| i < envelopes.len()) else {
                 continue;
             };
             // A card lets part of the eye's rays through: its texels weigh as much as they stop.
             let weight = opacity(leaf).clamp(0.0, 1.0);
             let x = origin - to_eye * t;
             let n = scene.normal(l);
-            let e = &envelope.leaves[i];
+            let e = &envelopes[i];
             let gain = gains.get(i).map_or(1.0, |g| seen_gain(g, to_eye));
             // The sun: the leaf's BSDF is a cosine on either side, the same in both sums.
             let cosine = n.dot(to_sun).abs();
             let through = lobe_blend(&e.attenuation, to_sun, 1.0);
-            let share = sun_share.map_or(through, |share| share(i, to_sun));
+            let share = sun_share.map_or(through, |share| share(i, to_sun, x));
             sun.push([
                 weight * cosine,
                 (share * gain).min(1.0),
@@ -400,6 +408,9 @@ pub fn crown_hotspot_for(
             ]);
             // The bounce: the neighbours' sunlight gathered at the point, against eq. 5.24
             // scaled by the leaf's gathered ratios (where baked) with the covered part's gain.
+            if settings.bounce_rays == 0 {
+                continue;
+            }
             let traced = gather(
                 scene,
                 material,

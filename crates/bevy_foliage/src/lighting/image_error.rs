@@ -186,6 +186,9 @@ pub struct ImageComparison {
     /// Per ring of [`ImageSettings::sun_rings`] with [`ImageSettings::sunlit_points`]: its
     /// count and the seconds every leaf's shares on it took to trace (on the threads given).
     pub sunlit_seconds: Vec<(usize, f32)>,
+    /// Seconds each fit of a ring's own hotspot on its shares took
+    /// ([`super::bounce_ring::ring_sun_hotspot`], on the threads given).
+    pub ring_hotspot_seconds: Vec<f32>,
     /// The hotspot measured, when it was.
     pub hotspot_factors: Option<super::hotspot::Hotspot>,
     /// Eye rays that hit a leaf.
@@ -644,7 +647,8 @@ pub fn images_against_tracer(
                     let started = std::time::Instant::now();
                     let own = super::hotspot::crown_hotspot_for(
                         &scene,
-                        envelope,
+                        &envelope.leaves,
+                        envelope.tau,
                         gains.as_deref().unwrap_or(&[]),
                         &|leaf, to_sun| ratio_on_ring(&ring[leaf], phase, to_sun),
                         super::hotspot::HotspotSuns::Height(light.to_sun.y),
@@ -745,6 +749,7 @@ pub fn images_against_tracer(
     };
     let mut sunlit = Vec::new();
     let mut sunlit_seconds = Vec::new();
+    let mut ring_hotspot_seconds = Vec::new();
     if settings.sunlit_points > 0 {
         use super::gathered_bounce::sun_ring;
         use super::sunlit_share::{SharePlane, plane_on_ring, sunlit_planes};
@@ -833,34 +838,72 @@ pub fn images_against_tracer(
                 // As the leaf shaders draw a ring of the leaf store's size: each node's share
                 // and slope quantised as stored, read at the vertices of the eye ray's
                 // triangle (`bounce_ring::ring_shares_at`) and carried to the point by its
-                // barycentric weights, where the gain and the hotspot bend it.
-                if let (Some((phase, ring)), Some(h), true) = (&ring, &hotspot_factors, plane)
+                // barycentric weights, where the gain and the hotspot bend it — the hotspot
+                // fitted against the ring's planes with the ring (`ring_sun_hotspot`), and for
+                // comparison the bake's.
+                if let (Some((phase, ring)), Some(h), Some((_, envelope)), true) =
+                    (&ring, &hotspot_factors, &last_model, plane)
                     && ring.first().is_some_and(|r| r.len() == RING_NODES)
                 {
-                    let drawn = image_as_drawn(
-                        leaves,
-                        &samples,
+                    let started = std::time::Instant::now();
+                    let own = super::bounce_ring::ring_sun_hotspot(
+                        &scene,
+                        material,
+                        &all,
+                        &envelope.leaves,
+                        envelope.tau,
+                        g,
+                        light.to_sun.y,
                         ring,
                         *phase,
-                        &|leaf, share| {
-                            h.sun_through(
-                                (share * seen_gain(&g[leaf], view)).min(1.0),
-                                view,
-                                light.to_sun,
-                            )
-                        },
-                        &|leaf, t| {
-                            let n = scene.normal(leaf);
-                            luminance(sun_radiance(material, n, view, light.to_sun, t, light.sun))
-                        },
-                        light.to_sun,
+                        &|_| 1.0,
+                        &super::bounce_ring::RING_HOTSPOT,
+                        threads,
                     );
-                    sunlit.push((
+                    ring_hotspot_seconds.push(started.elapsed().as_secs_f32());
+                    let own = super::hotspot::Hotspot {
+                        sun: own.map(|x| {
+                            super::hotspot::Hotspot::dequantize(super::hotspot::Hotspot::quantize(
+                                x,
+                            ))
+                        }),
+                        bounce: [1.0; super::hotspot::HOTSPOT_NODES],
+                    };
+                    for (spot, name) in
+                        [(h, "the crown's hotspot"), (&own, "the ring's own hotspot")]
+                    {
+                        let drawn = image_as_drawn(
+                            leaves,
+                            &samples,
+                            ring,
+                            *phase,
+                            &|leaf, share| {
+                                spot.sun_through(
+                                    (share * seen_gain(&g[leaf], view)).min(1.0),
+                                    view,
+                                    light.to_sun,
+                                )
+                            },
+                            &|leaf, t| {
+                                let n = scene.normal(leaf);
+                                luminance(sun_radiance(
+                                    material,
+                                    n,
+                                    view,
+                                    light.to_sun,
+                                    t,
+                                    light.sun,
+                                ))
+                            },
+                            light.to_sun,
+                        );
+                        sunlit.push((
                             format!(
-                                "{label}, seen-part gain, the crown's hotspot, as the leaf shaders draw it (stored, read at the vertices)"
+                                "{label}, seen-part gain, {name}, as the leaf shaders draw it (stored, read at the vertices)"
                             ),
                             measure(&[model_sky.clone(), drawn, model_bounce.clone()]),
                         ));
+                    }
                 }
                 // The ring's own hotspot: fitted for suns at the sun's height against the
                 // shares read on the ring.
@@ -869,11 +912,12 @@ pub fn images_against_tracer(
                 {
                     let own = super::hotspot::crown_hotspot_for(
                         &scene,
-                        envelope,
+                        &envelope.leaves,
+                        envelope.tau,
                         g,
                         &|_, _| [1.0; 2],
                         super::hotspot::HotspotSuns::Height(light.to_sun.y),
-                        Some(&|leaf, to_sun| plane_on_ring(&ring[leaf], *phase, to_sun).mean),
+                        Some(&|leaf, to_sun, _| plane_on_ring(&ring[leaf], *phase, to_sun).mean),
                         &|l| Some(l as usize),
                         material,
                         &|_| 1.0,
@@ -891,6 +935,7 @@ pub fn images_against_tracer(
     ImageComparison {
         sunlit,
         sunlit_seconds,
+        ring_hotspot_seconds,
         models,
         seen,
         hotspot,

@@ -317,6 +317,19 @@ impl BakedFoliage {
         crate::lighting::leaf_scene::LeafScene::from_triangles(triangles, leaf_of, normals)
     }
 
+    /// Per stored leaf, its eight seen-part gains read back as stored
+    /// ([`crate::lighting::seen_part::gain_of`]); empty for a bake without them (or with them
+    /// for another number of leaves).
+    pub fn leaf_seen_gains(&self) -> Vec<[f32; 8]> {
+        if self.leaf_seen.len() != self.leaf_count() {
+            return Vec::new();
+        }
+        self.leaf_seen
+            .iter()
+            .map(|g| g.map(crate::lighting::seen_part::gain_of))
+            .collect()
+    }
+
     /// Per stored leaf, its radius as the leaf shaders have it: its farthest vertex from its
     /// vertices' centroid (`centroid_offsets`); 0 for a leaf without vertices.
     pub fn leaf_radii(&self) -> Vec<f32> {

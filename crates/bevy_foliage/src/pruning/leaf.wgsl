@@ -6,7 +6,7 @@
 #import bevy_foliage::leaf_pulling::{SlotVertex, pull_leaf_vertex}
 #ifdef TREE_LIGHTING
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
-#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_bounce_ratios, leaf_has_ring_shares, leaf_params, leaf_ring_height, leaf_ring_ratios, leaf_ring_shares, leaf_seen_gains}
+#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_bounce_ratios, leaf_has_ring_shares, leaf_params, leaf_ring_height, leaf_ring_hotspot, leaf_ring_ratios, leaf_ring_shares, leaf_seen_gains}
 #import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, ratio_with_ring, ring_sun_at, seen_gain}
 
 // The tree instance's frame, read once per vertex: world directions into the model's frame
@@ -73,9 +73,9 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LitLeafVertex {
     // blended sun raised to its exponent, the bounce scaled.
     var seen = 1.0;
     var sun_exponent = 1.0;
+    let cos_alpha = dot(to_eye, frame.to_sun);
     if leaf_params.seen_part != 0u {
         seen = seen_gain(leaf_seen_gains(leaf.leaf), to_eye);
-        let cos_alpha = dot(to_eye, frame.to_sun);
         sun_exponent = hotspot_at(leaf.hotspot.xy, cos_alpha);
         light.sky *= seen;
         light.through = pow(min(light.through * seen, 1.0), sun_exponent);
@@ -83,15 +83,21 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LitLeafVertex {
     }
     // Where the sun is at the elevation of the type's ring and the ring holds the leaves'
     // sunlit shares traced for its suns (`lighting::sunlit_share`), those in place of the blend,
-    // with the gain towards the eye and the crown's hotspot: the sun where the shadow map does
+    // with the gain towards the eye and the hotspot fitted against them with the ring (the
+    // bake's where it has none; `BounceRing::sun_exponent`): the sun where the shadow map does
     // not resolve leaves. Each share is read at the vertex along its slope across the leaf
     // (which side of the leaf a sunfleck's edge lights), the rasteriser carries it across the
     // leaf, and the fragment bends it by the gain's cap and the exponent (`through_on_ring`).
     var ring_sun = vec4(0.0, 1.0, 1.0, 0.0);
     if leaf_params.bounce_ring != 0u && leaf_has_ring_shares(leaf.leaf) {
         let across = leaf.offset / max(leaf.leaf_radius, 1e-6);
+        let ring_spot = leaf_ring_hotspot(leaf.leaf);
+        var ring_exponent = sun_exponent;
+        if leaf_params.seen_part != 0u && all(ring_spot != vec2(0u)) {
+            ring_exponent = hotspot_at(ring_spot, cos_alpha);
+        }
         ring_sun = ring_sun_at(leaf_ring_height(leaf.leaf), leaf_ring_shares(leaf.leaf, across),
-            seen, sun_exponent, frame.to_sun);
+            seen, ring_exponent, frame.to_sun);
     }
     // A channel the base colour lacks sends no light either.
     let lacks = albedo <= vec3(0.0);

@@ -220,6 +220,13 @@ fn leaf_ring_ratios(leaf: u32) -> array<f32, 28> {
         leaf_light[LEAF_LIGHT_VECS * leaf + 4u], leaf_light[LEAF_LIGHT_VECS * leaf + 5u]));
 }
 
+// The ring's own hotspot on the sun for leaf `leaf`'s type, packed as `hotspot_at` reads it (a
+// byte a node, nodes 0–3 then 4–7; `lighting::bounce_ring::BounceRing::sunlit_hotspot`): zero
+// where the ring has none, the bake's then.
+fn leaf_ring_hotspot(leaf: u32) -> vec2<u32> {
+    return vec2(leaf_light[LEAF_LIGHT_VECS * leaf + 5u].w, leaf_light[LEAF_LIGHT_VECS * leaf + 9u].w);
+}
+
 // Whether leaf `leaf`'s type's ring holds its sunlit shares.
 fn leaf_has_ring_shares(leaf: u32) -> bool {
     return ((leaf_light[LEAF_LIGHT_VECS * leaf + 6u].w >> 16u) & 0xffu) != 0u;

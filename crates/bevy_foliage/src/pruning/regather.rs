@@ -2,8 +2,10 @@
 //! at the sun's elevation while the app runs ([`crate::lighting::bounce_ring`],
 //! [`crate::lighting::sunlit_share`]): when the sun's elevation has moved
 //! [`BounceRingSettings::regather_degrees`] from a type's ring, a background task gathers the
-//! next one from the type's loaded bake (its leaves as a scene, its envelopes read back, the
-//! opacity it was traced with); when it lands, the leaves' light buffer is rewritten with it.
+//! next one from the type's loaded bake (its leaves as a scene, its envelopes and seen-part
+//! gains read back, the opacity it was traced with), the crown's hotspot on the sunlit shares
+//! fitted with it ([`crate::lighting::bounce_ring::ring_sun_hotspot`]); when it lands, the
+//! leaves' light buffer is rewritten with it.
 //!
 //! The sun's elevation is taken in the world's frame, which is each instance's own for trees
 //! turned about their vertical only; the leaf shaders compare the ring's elevation with the
@@ -15,7 +17,7 @@ use super::bake::BakedFoliage;
 use super::store::FoliageStore;
 use super::systems::tree_lights;
 use crate::lighting::bounce_ring::{
-    BounceRing, RING_NODES, crown_mean_ring, gather_ring, needs_regather,
+    BounceRing, RING_HOTSPOT, RING_NODES, crown_mean_ring, gather_ring, needs_regather,
 };
 use crate::lighting::envelope::LeafEnvelope;
 use crate::lighting::leaf_scene::LeafScene;
@@ -35,8 +37,8 @@ pub const BOUNCE_RING_SECONDS: DiagnosticPath =
 pub const BOUNCE_RINGS_GATHERING: DiagnosticPath =
     DiagnosticPath::const_new("foliage/bounce_rings_gathering");
 
-/// What a tree type's re-gathers trace: its stored leaves as a scene, their envelopes read
-/// back, the crown's τ and the opacity the bake traced the leaves with. Built by the type's
+/// What a tree type's re-gathers trace: its stored leaves as a scene, their envelopes and
+/// seen-part gains read back, the crown's τ and the opacity the bake traced the leaves with. Built by the type's
 /// first re-gather (in its task), kept for the next.
 struct RingSource {
     scene: LeafScene,
@@ -44,6 +46,9 @@ struct RingSource {
     /// Per stored leaf, its radius as the leaf shaders have it (the sunlit shares' slopes
     /// are per radius).
     radii: Vec<f32>,
+    /// Per stored leaf, its seen-part gains read back (empty for a bake without them: no
+    /// hotspot is fitted for the ring's shares).
+    gains: Vec<[f32; 8]>,
     tau: f32,
     opacity: f32,
 }
@@ -54,6 +59,7 @@ impl RingSource {
             scene: tree.leaf_scene(),
             envelopes: tree.leaf_envelopes(),
             radii: tree.leaf_radii(),
+            gains: tree.leaf_seen_gains(),
             tau: tree.extinction,
             opacity: tree.leaf_opacity,
         }
@@ -172,6 +178,8 @@ fn regather(
         rays,
         sunlit_points,
         &source.radii,
+        &source.gains,
+        &RING_HOTSPOT,
         &|_| opacity,
         threads,
     );

@@ -8,6 +8,7 @@ use super::bake::BakedFoliage;
 use super::components::{FoliageShadowLight, PrunedFoliage, PruningParams};
 use crate::lighting::bounce_ring::{BounceRing, NO_RING, RING_NODES};
 use crate::lighting::gathered_bounce::{BounceRatios, STORED_RATIOS};
+use crate::lighting::hotspot::HOTSPOT_NODES;
 use crate::settings::FoliagePruningSettings;
 use bevy::asset::{AssetId, RenderAssetUsages};
 use bevy::platform::collections::HashMap;
@@ -90,12 +91,15 @@ pub const LEAF_VERTEX_WORDS: usize = 16;
 /// in the low half of word `k` of each four; then its 28 bounce ratios
 /// (`BakedFoliage::leaf_bounce`), four bytes a word, low byte first; the sun height of its
 /// type's ring of re-gathered ratios (`f32` bits; [`NO_RING`] for none,
-/// [`crate::lighting::bounce_ring`]); its 28 ring ratios, as the bounce ratios; a word of
-/// padding; its 14 sunlit shares on the ring (bytes, node `k` at byte `k`,
+/// [`crate::lighting::bounce_ring`]); its 28 ring ratios, as the bounce ratios; the first four
+/// nodes of the ring's own hotspot on the sun ([`BounceRing::sunlit_hotspot`], a byte each,
+/// node `k` at byte `k`; 0 where the ring has none or no shares, the bake's then); its 14
+/// sunlit shares on the ring (bytes, node `k` at byte `k`,
 /// [`crate::lighting::sunlit_share::quantize_share`]), then a byte 1 where the ring has them
 /// (0: none, the bake's blend) and one of padding; the shares' slopes across the leaf
 /// ([`BounceRing::sunlit_slopes`], signed bytes, node `k`'s component `c` at byte `3k + c`;
-/// 0 where the ring has none) and six bytes of padding.
+/// 0 where the ring has none), two bytes of padding and the ring's hotspot's last four
+/// nodes.
 pub const LEAF_LIGHT_WORDS: usize = 40;
 
 // `BakedFoliage::gpu_bytes` counts these sizes.
@@ -145,7 +149,12 @@ pub fn push_leaf_light(tree: &BakedFoliage, ring: Option<&BounceRing>, out: &mut
                 out.extend(ratio_words(&no_ratios));
             }
         }
-        out.push(0);
+        // The ring's own hotspot on its shares, where it has one.
+        let spot = match (ring, shares) {
+            (Some(ring), Some(_)) if ring.sun_hotspot().is_some() => ring.sunlit_hotspot,
+            _ => [0; HOTSPOT_NODES],
+        };
+        out.push(u32::from_le_bytes([spot[0], spot[1], spot[2], spot[3]]));
         let mut sunlit = [0u8; 16];
         if let Some(shares) = shares {
             sunlit[..RING_NODES].copy_from_slice(&shares[leaf]);
@@ -164,6 +173,7 @@ pub fn push_leaf_light(tree: &BakedFoliage, ring: Option<&BounceRing>, out: &mut
                 }
             }
         }
+        sloped[44..].copy_from_slice(&spot[4..]);
         out.extend(
             sloped
                 .chunks_exact(4)
@@ -483,7 +493,8 @@ mod tests {
     use crate::lighting::gathered_bounce::quantize_ratio;
 
     /// Each leaf's words: the bake's values where they were, then its type's ring height and
-    /// ring ratios (low byte first), or no ring's — also for a ring of the wrong size.
+    /// ring ratios (low byte first), or no ring's — also for a ring of the wrong size — and the
+    /// ring's shares, their slopes and its hotspot on them where it has them.
     #[test]
     fn the_leaf_light_words_hold_the_types_ring() {
         let tree = crate::pruning::format::tests::sample();
@@ -501,6 +512,7 @@ mod tests {
                     std::array::from_fn(|k| [k as i8 - 7, -((l % 100) as i8), 3 * k as i8 + 1])
                 })
                 .collect(),
+            sunlit_hotspot: std::array::from_fn(|k| 60 + 9 * k as u8),
         };
         let (mut with, mut without, mut wrong) = (Vec::new(), Vec::new(), Vec::new());
         push_leaf_light(&tree, Some(&ring), &mut with);
@@ -510,8 +522,14 @@ mod tests {
             leaves: ring.leaves[1..].to_vec(),
             sunlit: ring.sunlit[1..].to_vec(),
             sunlit_slopes: ring.sunlit_slopes[1..].to_vec(),
+            sunlit_hotspot: ring.sunlit_hotspot,
         };
         push_leaf_light(&tree, Some(&short), &mut wrong);
+        // A ring whose hotspot was not fitted (a node 0): the bake's, words of 0.
+        let mut unfitted = Vec::new();
+        let mut spotless = ring.clone();
+        spotless.sunlit_hotspot[5] = 0;
+        push_leaf_light(&tree, Some(&spotless), &mut unfitted);
         // A ring without shares, or with shares for another number of leaves: the ratios, no
         // shares.
         let (mut unshared, mut short_shares) = (Vec::new(), Vec::new());
@@ -556,7 +574,14 @@ mod tests {
                 assert_eq!(w[16 + k], u32::from_le_bytes([r[0], r[1], r[2], r[3]]));
                 assert_eq!(o[16 + k], one);
             }
-            assert_eq!((w[23], o[23]), (0, 0));
+            // The ring's hotspot: its first four nodes in word 23, its last four in word 39.
+            let h = ring.sunlit_hotspot;
+            assert_eq!(w[23], u32::from_le_bytes([h[0], h[1], h[2], h[3]]));
+            assert_eq!(w[39], u32::from_le_bytes([h[4], h[5], h[6], h[7]]));
+            assert_eq!((o[23], o[39]), (0, 0));
+            let s = &unfitted[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
+            assert_eq!((s[23], s[39]), (0, 0));
+            assert_eq!((&s[..23], &s[24..39]), (&w[..23], &w[24..39]));
             let s = &ring.sunlit[leaf];
             for k in 0..3 {
                 let b = &s[4 * k..4 * k + 4];
@@ -572,14 +597,17 @@ mod tests {
                     assert_eq!(bytes[3 * k + c] as i8, ring.sunlit_slopes[leaf][k][c]);
                 }
             }
-            assert!(bytes[42..].iter().all(|&b| b == 0));
+            assert!(bytes[42..44].iter().all(|&b| b == 0));
             assert!(o[28..].iter().all(|&x| x == 0));
+            // Shares without slopes keep the ring's hotspot.
             let f = &flat[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
             assert_eq!(f[..28], w[..28]);
-            assert!(f[28..].iter().all(|&x| x == 0));
+            assert!(f[28..39].iter().all(|&x| x == 0));
+            assert_eq!(f[39], w[39]);
+            // No shares: no hotspot for them either.
             let u = &unshared[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
-            assert_eq!(u[..24], w[..24]);
-            assert!(u[24..].iter().all(|&x| x == 0));
+            assert_eq!(u[..23], w[..23]);
+            assert!(u[23..].iter().all(|&x| x == 0));
         }
     }
 }
