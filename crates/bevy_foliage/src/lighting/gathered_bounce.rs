@@ -400,7 +400,7 @@ pub(crate) fn leaf_seed(leaf: u32) -> u64 {
 /// for the suns given — for the sun of the moment, or a ring of suns at its elevation
 /// ([`sun_ring`]) — so that no blend over far directions stands between the gather and the
 /// sun: one shadow ray per neighbour hit and sun. For a basis direction they are the bake's
-/// ratios for it exactly (the same rays, [`leaf_seed`]). A leaf without an envelope or not in
+/// ratios for it exactly (the same rays, the same seed per leaf). A leaf without an envelope or not in
 /// `scene`, or a sun that is no direction (zero, not finite): 1, eq. 5.24 unchanged.
 ///
 /// What lighting that changes would re-gather when the sun has moved (Boulanger 2008, §5.4.3
@@ -735,7 +735,7 @@ pub const STORED_RATIOS: usize = 28;
 const RATIO_LOG2_STEPS: f32 = 254.0;
 
 /// A ratio as a bake stores it: 0 below 1/32, else its base-2 logarithm over [−4, 4] in
-/// [`RATIO_LOG2_STEPS`] steps (1 is stored exactly, as code 128); not finite: 1.
+/// 254 steps (1 is stored exactly, as code 128); not finite: 1.
 pub fn quantize_ratio(ratio: f32) -> u8 {
     let r = if ratio.is_finite() { ratio } else { 1.0 };
     let log2_max = RATIO_MAX.log2();

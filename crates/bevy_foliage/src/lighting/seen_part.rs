@@ -52,7 +52,7 @@ pub const GAIN_RANGE: (f32, f32) = (0.25, 4.0);
 
 /// The eight gains of leaf `leaf` of `scene` (indexed as [`DIRECTIONS`]: the octant of the eye
 /// direction), from `points` points spread on the leaf, each tracing
-/// [`OPEN_RAYS_PER_POINT`] directions for its open share and one eye direction per octant;
+/// eight directions for its open share and one eye direction per octant;
 /// `opacity(l)` the share of leaf `l`'s area that stops light. An octant from which no point
 /// is seen gets 1 (the leaf is never drawn from there).
 pub fn seen_part_gains(
