@@ -1496,9 +1496,14 @@ fn sun_shadows(name: &str, cascades: SunCascades) -> Option<Check> {
             .add(StandardMaterial::default());
         world.spawn((Mesh3d(mesh), MeshMaterial3d(material), plate));
     }
+    // The plate's pipelines (its main pass and its shadow pass) are queued within a few frames
+    // and compile asynchronously: a frame rendered before they are ready has no plate in the
+    // shadow map. Under a loaded software rasteriser twelve frames were once not enough (268
+    // of 704 pixels within 3/255), so after them the harness waits for every pipeline.
     for _ in 0..12 {
         harness.step();
     }
+    harness.wait_until_ready().unwrap();
     // Whether the ray from p towards the sun (the plate's normal) crosses the plate.
     let blocked = |p: Vec3| {
         let o = p - plate_centre;
