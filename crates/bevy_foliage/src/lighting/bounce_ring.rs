@@ -676,19 +676,49 @@ mod tests {
         assert_eq!(ring_shares_at(&stored, None, across), stored.map(share_of));
     }
 
-    /// A ring at the horizon has its node 0 at +x, a basis sun: the leaves' ring ratios there
-    /// are the bake's ratios for +x (the same rays), quantised as stored.
-    #[test]
-    fn a_ring_node_on_a_basis_sun_takes_the_bakes_ratios_for_it() {
-        let leaves = uniform_ball(300, 1.0, 0.12, 7);
+    /// A uniform ball of leaves with what a ring is gathered from: its scene, every leaf,
+    /// its traced envelope, the default optics and each leaf's radius.
+    struct Ball {
+        leaves: crate::pruning::leaves::LeafSet,
+        scene: LeafScene,
+        all: Vec<u32>,
+        envelope: crate::lighting::envelope::CrownEnvelope,
+        material: LeafMaterial,
+        radii: Vec<f32>,
+    }
+
+    fn ball(count: usize, seed: u64) -> Ball {
+        let leaves = uniform_ball(count, 1.0, 0.12, seed);
         let scene = LeafScene::new(&leaves);
         let proxies = crate::lighting::bins::proxies(&leaves);
         let all: Vec<u32> = (0..leaves.len() as u32).collect();
         let envelope = crown_envelope_traced(&proxies, &scene, &all, &|_| 1.0, 16, 2, &|_| {});
         let material = crate::lighting::settings::TreeLightingSettings::default().optics;
-        let radii: Vec<f32> = (0..leaves.len())
+        let radii = (0..leaves.len())
             .map(|l| 0.5 * leaves.diameter(l))
             .collect();
+        Ball {
+            leaves,
+            scene,
+            all,
+            envelope,
+            material,
+            radii,
+        }
+    }
+
+    /// A ring at the horizon has its node 0 at +x, a basis sun: the leaves' ring ratios there
+    /// are the bake's ratios for +x (the same rays), quantised as stored.
+    #[test]
+    fn a_ring_node_on_a_basis_sun_takes_the_bakes_ratios_for_it() {
+        let Ball {
+            leaves,
+            scene,
+            all,
+            envelope,
+            material,
+            radii,
+        } = ball(300, 7);
         let ring = gather_ring(
             &scene,
             &material,
@@ -797,15 +827,14 @@ mod tests {
     /// 1 or above. The exponents read back are what the leaves are drawn with.
     #[test]
     fn the_rings_own_hotspot_brightens_its_shares_behind_the_eye() {
-        let leaves = uniform_ball(400, 1.0, 0.12, 5);
-        let scene = LeafScene::new(&leaves);
-        let proxies = crate::lighting::bins::proxies(&leaves);
-        let all: Vec<u32> = (0..leaves.len() as u32).collect();
-        let envelope = crown_envelope_traced(&proxies, &scene, &all, &|_| 1.0, 16, 2, &|_| {});
-        let material = crate::lighting::settings::TreeLightingSettings::default().optics;
-        let radii: Vec<f32> = (0..leaves.len())
-            .map(|l| 0.5 * leaves.diameter(l))
-            .collect();
+        let Ball {
+            leaves,
+            scene,
+            all,
+            envelope,
+            material,
+            radii,
+        } = ball(400, 5);
         let ring = gather_ring(
             &scene,
             &material,
