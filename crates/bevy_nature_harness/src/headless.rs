@@ -233,6 +233,7 @@ pub struct RenderHarness {
     frame_times: Vec<Duration>,
     warmup_frames: u32,
     ready: bool,
+    recaptures: u32,
 }
 
 impl RenderHarness {
@@ -277,6 +278,7 @@ impl RenderHarness {
             adapter,
             frame_times: Vec::new(),
             warmup_frames: 0,
+            recaptures: 0,
             ready: false,
         })
     }
@@ -387,6 +389,42 @@ impl RenderHarness {
             }
         }
         (waiting, total, errors)
+    }
+
+    /// Pipelines not yet compiled, leaving out the screenshot's own: Bevy specialises
+    /// `screenshot-to-screen` with the first capture, and it only draws a capture onto a window's
+    /// surface — never into the image read back.
+    fn scene_pipelines_compiling(&self) -> usize {
+        let Some(cache) = self
+            .app
+            .get_sub_app(RenderApp)
+            .and_then(|render_app| render_app.world().get_resource::<PipelineCache>())
+        else {
+            return 0;
+        };
+        cache
+            .pipelines()
+            .filter(|pipeline| match &pipeline.state {
+                CachedPipelineState::Queued | CachedPipelineState::Creating(_) => true,
+                CachedPipelineState::Err(err) => matches!(
+                    err,
+                    ShaderCacheError::ShaderNotLoaded(_)
+                        | ShaderCacheError::ShaderImportNotYetAvailable
+                ),
+                CachedPipelineState::Ok(_) => false,
+            })
+            .filter(|pipeline| {
+                let label = match &pipeline.descriptor {
+                    bevy::render::render_resource::PipelineDescriptor::RenderPipelineDescriptor(d) => {
+                        &d.label
+                    }
+                    bevy::render::render_resource::PipelineDescriptor::ComputePipelineDescriptor(d) => {
+                        &d.label
+                    }
+                };
+                label.as_deref() != Some("screenshot-to-screen")
+            })
+            .count()
     }
 
     /// Steps frames until no pipeline is compiling for [`HarnessConfig::stable_frames`]
@@ -603,8 +641,38 @@ impl RenderHarness {
     }
 
     /// Waits until the scene is ready, renders a frame and returns its pixels.
+    ///
+    /// A capture whose frame still had pipelines compiling is taken again once they are ready:
+    /// an entity spawned (or a setting changed) after the scene first became ready needs new
+    /// pipeline variants, compiled asynchronously, and the frame drawn before they are ready
+    /// simply leaves those draws out — on a software adapter shared with other tests' threads
+    /// that can outlast any fixed number of frames stepped before the capture.
     pub fn render(&mut self) -> Result<RgbaImage, HarnessError> {
         self.ensure_ready()?;
+        for _ in 0..3 {
+            let (image, complete) = self.capture()?;
+            if complete {
+                return RgbaImage::from_bevy(image).map_err(HarnessError::Readback);
+            }
+            self.recaptures += 1;
+            self.wait_until_ready()?;
+        }
+        let (waiting, _, _) = self.pipeline_status();
+        Err(HarnessError::NotReady {
+            frames: self.config.max_warmup_frames,
+            waiting,
+        })
+    }
+
+    /// How many captures [`render`](Self::render) took again because their frame still had
+    /// pipelines compiling.
+    pub fn recaptures(&self) -> u32 {
+        self.recaptures
+    }
+
+    /// Captures the next frame; `true` with it when no pipeline was still compiling after that
+    /// frame, i.e. every draw it queued had its pipeline.
+    fn capture(&mut self) -> Result<(Image, bool), HarnessError> {
         let slot: Arc<Mutex<Option<Image>>> = Arc::default();
         let sink = slot.clone();
         self.app
@@ -613,11 +681,17 @@ impl RenderHarness {
             .observe(move |captured: On<ScreenshotCaptured>| {
                 *sink.lock().unwrap() = Some(captured.image.clone());
             });
+        // The screenshot copies the frame it is extracted in: the first one stepped.
+        self.step_gpu_synchronised()?;
+        let waiting = self.scene_pipelines_compiling();
+        if let Some(image) = slot.lock().unwrap().take() {
+            return Ok((image, waiting == 0));
+        }
         // Up to 120 frames: after a settings change the next frame may wait on a new pipeline
         // variant, compiled asynchronously, which on a software adapter shared with other
         // tests' threads has outlasted 30 frames. Frames after the capture are not stepped.
-        let image = self.step_until(&slot, 120)?;
-        RgbaImage::from_bevy(image).map_err(HarnessError::Readback)
+        let image = self.step_until(&slot, 119)?;
+        Ok((image, waiting == 0))
     }
 
     /// Reads back the contents of a [`ShaderBuffer`] asset after the next frame.
@@ -803,6 +877,53 @@ mod tests {
             mapped_at_creation: false,
         });
         queue.write_buffer(&buffer, 0, &[0u8; 64]);
+    }
+
+    /// An entity spawned after the scene became ready, captured with no frame stepped in
+    /// between, is in the image: the capture waits for its pipelines rather than returning the
+    /// frame drawn without it.
+    #[test]
+    fn a_capture_waits_for_the_pipelines_of_an_entity_spawned_after_ready() {
+        let Some(mut harness) = RenderHarness::for_test("harness_late_entity", 16, 16) else {
+            return;
+        };
+        harness.app_mut().world_mut().spawn((
+            Camera3d::default(),
+            Camera {
+                clear_color: ClearColorConfig::Custom(Color::BLACK),
+                ..default()
+            },
+            Msaa::Off,
+            bevy::core_pipeline::tonemapping::Tonemapping::None,
+            Transform::from_xyz(0.0, 0.0, 3.0).looking_at(Vec3::ZERO, Vec3::Y),
+        ));
+        let before = harness.render().expect("the empty scene renders");
+        assert_eq!(before.pixel(8, 8)[..3], [0, 0, 0], "nothing is drawn yet");
+        assert_eq!(
+            harness.recaptures(),
+            0,
+            "the screenshot's own pipeline, compiled with the first capture, is not the scene's"
+        );
+        let world = harness.app_mut().world_mut();
+        let mesh = world
+            .resource_mut::<Assets<Mesh>>()
+            .add(Cuboid::new(1.0, 1.0, 1.0));
+        let material = world
+            .resource_mut::<Assets<StandardMaterial>>()
+            .add(StandardMaterial {
+                base_color: Color::srgb(1.0, 0.0, 0.0),
+                unlit: true,
+                ..default()
+            });
+        world.spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+        let after = harness.render().expect("the cube renders");
+        let centre = after.pixel(8, 8);
+        assert!(
+            centre[0] > 250 && centre[1] < 5 && centre[2] < 5,
+            "the cube spawned just before the capture is drawn: centre {centre:?} \
+             ({} captures taken again)",
+            harness.recaptures()
+        );
     }
 
     /// A renderer that stopped on an error is reported as that error, not as a readback that
