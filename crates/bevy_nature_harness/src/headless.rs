@@ -655,6 +655,10 @@ impl RenderHarness {
                 return RgbaImage::from_bevy(image).map_err(HarnessError::Readback);
             }
             self.recaptures += 1;
+            bevy::log::warn!(
+                "render: the captured frame still had scene pipelines compiling; \
+                 capturing again once they are ready"
+            );
             self.wait_until_ready()?;
         }
         let (waiting, _, _) = self.pipeline_status();

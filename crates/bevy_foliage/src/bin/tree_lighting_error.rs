@@ -8,7 +8,7 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]]
+//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]]
 //!     [--sun X,Y,Z]
 //!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
@@ -19,7 +19,9 @@
 //! the thesis) on a grid of `--samples G` eye rays a side (128), and each image's mean error
 //! over its mean light at pixels of 1, 4 and 16 eye rays a side (`lighting::image_error`);
 //! the last bins also with each leaf's seen-part gains from `--seen-points` points (32;
-//! `lighting::seen_part`): on the sky and the sun, and the covered part's on the bounce;
+//! `lighting::seen_part`): on the sky and the sun, and the covered part's on the bounce
+//! (`--seen-below W` weighs the directions below the horizon by W in their open share: 1, the
+//! bakes' uniform sphere, by default);
 //! `--hotspot` adds rows with the crown's hotspot (`lighting::hotspot`, measured with
 //! `HotspotSettings::OFFLINE` from its own rays) on the sun and the bounce, and prints its
 //! factors; `--bounce-rays R` adds rows with the bounce gathered from each leaf's own
@@ -89,6 +91,7 @@ fn main() {
     let mut bounce_pools = vec![DEFAULT_BOUNCE_POOL];
     let mut sun_rings: Vec<usize> = Vec::new();
     let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
+    let mut seen_below = 1.0f32;
     let mut to_sun = Vec3::new(0.5, 0.7, 0.3).normalize();
     use bevy_foliage::lighting::sun_maps::{
         LEAF_SHADOW_FINE, LeafShadowLookup, LeafShadowOffset, LeafShadowPlane,
@@ -113,6 +116,16 @@ fn main() {
             "--directions" => settings.directions = value(i) as u32,
             "--samples" => samples = value(i) as u32,
             "--seen-points" => seen_points = value(i) as u32,
+            "--seen-below" => {
+                seen_below = args
+                    .get(i + 1)
+                    .and_then(|v| v.parse::<f32>().ok())
+                    .filter(|w| w.is_finite() && *w >= 0.0)
+                    .unwrap_or_else(|| {
+                        eprintln!("--seen-below takes a weight ≥ 0");
+                        std::process::exit(2)
+                    })
+            }
             "--bounce-rays" => bounce_rays = value(i) as u32,
             "--sunlit-points" => sunlit_points = value(i) as u32,
             "--leaf-shadow-offset" => {
@@ -227,7 +240,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]] [--sun x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]] [--sun x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -262,6 +275,7 @@ fn main() {
                 samples,
                 directions: settings.directions,
                 seen_points,
+                seen_below,
                 hotspot,
                 leaf_shadow,
                 shadow_texels: shadow_texels.clone(),

@@ -46,6 +46,9 @@ pub struct ImageSettings {
     pub seed: u64,
     /// Points per leaf for the gains of [`super::seen_part`] (0: not measured).
     pub seen_points: u32,
+    /// The weight of the directions below the horizon in the open share of those gains
+    /// ([`super::seen_part::seen_part_gains`]; 1, what bakes use, by default).
+    pub seen_below: f32,
     /// Whether to measure the crown's hotspot ([`super::hotspot`], with another seed than the
     /// images') and render the last model with it.
     pub hotspot: bool,
@@ -79,6 +82,7 @@ impl Default for ImageSettings {
             bounces: 1,
             seed: 1,
             seen_points: DEFAULT_SEEN_POINTS,
+            seen_below: 1.0,
             hotspot: false,
             leaf_shadow: LeafShadowLookup::SHADERS,
             shadow_texels: vec![LEAF_SHADOW_FINE],
@@ -439,7 +443,14 @@ pub fn images_against_tracer(
         .collect();
     let gains = (settings.seen_points > 0).then(|| {
         let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
-        seen_part_gains_of(&scene, &all, settings.seen_points, &|_| 1.0, threads)
+        seen_part_gains_of(
+            &scene,
+            &all,
+            settings.seen_points,
+            settings.seen_below,
+            &|_| 1.0,
+            threads,
+        )
     });
     let hotspot_factors = match (&last_model, settings.hotspot) {
         (Some((_, envelope)), true) => Some(super::hotspot::crown_hotspot(

@@ -703,6 +703,7 @@ pub fn bake_masked(
             scene,
             &stored_leaves,
             settings.seen_points,
+            1.0,
             &|_| opaque,
             threads,
         )
@@ -880,6 +881,7 @@ mod tests {
             &original_scene,
             &original_of,
             DEFAULT_SEEN_POINTS,
+            1.0,
             &|_| 1.0,
             2,
         );
