@@ -26,9 +26,10 @@ use bevy::render::error_handler::{RenderError, RenderErrorHandler, RenderErrorPo
 use bevy::render::gpu_readback::{Readback, ReadbackComplete};
 use bevy::render::pipelined_rendering::PipelinedRenderingPlugin;
 use bevy::render::render_resource::{
-    Buffer, BufferDescriptor, BufferUsages, CachedPipelineState, CommandEncoderDescriptor,
-    Extent3d, Origin3d, PipelineCache, TexelCopyBufferInfo, TexelCopyBufferLayout,
-    TexelCopyTextureInfo, Texture, TextureAspect, TextureDimension, TextureFormat, TextureUsages,
+    Buffer, BufferDescriptor, BufferUsages, CachedPipeline, CachedPipelineState,
+    CommandEncoderDescriptor, Extent3d, Origin3d, PipelineCache, PipelineDescriptor,
+    TexelCopyBufferInfo, TexelCopyBufferLayout, TexelCopyTextureInfo, Texture, TextureAspect,
+    TextureDimension, TextureFormat, TextureUsages,
 };
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy::render::storage::ShaderBuffer;
@@ -353,78 +354,45 @@ impl RenderHarness {
 
     /// Pipelines still compiling, total pipelines, and the errors of failed ones.
     fn pipeline_status(&self) -> (usize, usize, Vec<String>) {
-        let Some(render_app) = self.app.get_sub_app(RenderApp) else {
+        let Some(cache) = self.pipeline_cache() else {
             return (0, 0, Vec::new());
         };
-        let Some(cache) = render_app.world().get_resource::<PipelineCache>() else {
-            return (0, 0, Vec::new());
-        };
-        let mut waiting = cache.waiting_pipelines().count();
-        let mut total = 0;
+        let (mut waiting, mut total) = (0, 0);
         let mut errors = Vec::new();
         for pipeline in cache.pipelines() {
             total += 1;
-            if let CachedPipelineState::Err(err) = &pipeline.state {
-                // Shaders still loading: Bevy retries these, they are not failures.
-                if matches!(
-                    err,
-                    ShaderCacheError::ShaderNotLoaded(_)
-                        | ShaderCacheError::ShaderImportNotYetAvailable
-                ) {
-                    waiting += 1;
-                    continue;
-                }
-                let label = match &pipeline.descriptor {
-                    bevy::render::render_resource::PipelineDescriptor::RenderPipelineDescriptor(d) => {
-                        d.label.clone()
-                    }
-                    bevy::render::render_resource::PipelineDescriptor::ComputePipelineDescriptor(d) => {
-                        d.label.clone()
-                    }
-                };
+            if is_compiling(pipeline) {
+                waiting += 1;
+            } else if let CachedPipelineState::Err(err) = &pipeline.state {
                 errors.push(format!(
                     "{}: {err}",
-                    label.as_deref().unwrap_or("<unnamed>")
+                    pipeline_label(pipeline).unwrap_or("<unnamed>")
                 ));
             }
         }
         (waiting, total, errors)
     }
 
-    /// Pipelines not yet compiled, leaving out the screenshot's own: Bevy specialises
+    /// Pipelines still compiling, leaving out the screenshot's own: Bevy specialises
     /// `screenshot-to-screen` with the first capture, and it only draws a capture onto a window's
     /// surface — never into the image read back.
     fn scene_pipelines_compiling(&self) -> usize {
-        let Some(cache) = self
-            .app
-            .get_sub_app(RenderApp)
-            .and_then(|render_app| render_app.world().get_resource::<PipelineCache>())
-        else {
-            return 0;
-        };
-        cache
-            .pipelines()
-            .filter(|pipeline| match &pipeline.state {
-                CachedPipelineState::Queued | CachedPipelineState::Creating(_) => true,
-                CachedPipelineState::Err(err) => matches!(
-                    err,
-                    ShaderCacheError::ShaderNotLoaded(_)
-                        | ShaderCacheError::ShaderImportNotYetAvailable
-                ),
-                CachedPipelineState::Ok(_) => false,
-            })
-            .filter(|pipeline| {
-                let label = match &pipeline.descriptor {
-                    bevy::render::render_resource::PipelineDescriptor::RenderPipelineDescriptor(d) => {
-                        &d.label
-                    }
-                    bevy::render::render_resource::PipelineDescriptor::ComputePipelineDescriptor(d) => {
-                        &d.label
-                    }
-                };
-                label.as_deref() != Some("screenshot-to-screen")
-            })
-            .count()
+        self.pipeline_cache().map_or(0, |cache| {
+            cache
+                .pipelines()
+                .filter(|&pipeline| {
+                    is_compiling(pipeline)
+                        && pipeline_label(pipeline) != Some("screenshot-to-screen")
+                })
+                .count()
+        })
+    }
+
+    fn pipeline_cache(&self) -> Option<&PipelineCache> {
+        self.app
+            .get_sub_app(RenderApp)?
+            .world()
+            .get_resource::<PipelineCache>()
     }
 
     /// Steps frames until no pipeline is compiling for [`HarnessConfig::stable_frames`]
@@ -770,6 +738,27 @@ impl RenderHarness {
             self.step_checked()?;
         }
         Err(HarnessError::ReadbackTimeout(30))
+    }
+}
+
+/// Whether a pipeline is still being compiled: queued, being created, or waiting on a shader
+/// that is still loading (Bevy retries those; they are not failures).
+fn is_compiling(pipeline: &CachedPipeline) -> bool {
+    match &pipeline.state {
+        CachedPipelineState::Queued | CachedPipelineState::Creating(_) => true,
+        CachedPipelineState::Err(err) => matches!(
+            err,
+            ShaderCacheError::ShaderNotLoaded(_) | ShaderCacheError::ShaderImportNotYetAvailable
+        ),
+        CachedPipelineState::Ok(_) => false,
+    }
+}
+
+/// A pipeline's label, render or compute.
+fn pipeline_label(pipeline: &CachedPipeline) -> Option<&str> {
+    match &pipeline.descriptor {
+        PipelineDescriptor::RenderPipelineDescriptor(d) => d.label.as_deref(),
+        PipelineDescriptor::ComputePipelineDescriptor(d) => d.label.as_deref(),
     }
 }
 
