@@ -9,11 +9,13 @@
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
 //!     [--images [--samples G] [--seen-points P] [--seen-below W] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]]
-//!     [--sun X,Y,Z]
+//!     [--sun X,Y,Z] [--eye X,Y,Z]
 //!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
-//! `--sun X,Y,Z`: the direction towards the sun (0.5, 0.7, 0.3 by default; the eye looks from
-//! (0, 0.3, 1)) — the model's errors depend on the angle between the two.
+//! `--sun X,Y,Z`: the direction towards the sun (0.5, 0.7, 0.3 by default); `--eye X,Y,Z` the
+//! direction the eye looks from (0, 0.3, 1 by default, the plane between two octants of the
+//! bins) — the model's errors depend on the angle between the two, and the seen-part gains'
+//! on where the eye is among their octants.
 //! `--images`: instead, the thesis' own measure (§5.7, fig. 5.16): the crown rendered by the
 //! model and by the tracer (`--directions` rays per intersection point, 256 by default as in
 //! the thesis) on a grid of `--samples G` eye rays a side (128), and each image's mean error
@@ -21,7 +23,9 @@
 //! the last bins also with each leaf's seen-part gains from `--seen-points` points (32;
 //! `lighting::seen_part`): on the sky and the sun, and the covered part's on the bounce
 //! (`--seen-below W` weighs the directions below the horizon by W in their open share: 1, the
-//! bakes' uniform sphere, by default);
+//! bakes' uniform sphere, by default); and, for the sky, two rows of what no eight gains beat:
+//! the gain traced for the eye's own direction from as many points, and the open share at
+//! each eye ray's own point over its leaf's mean;
 //! `--hotspot` adds rows with the crown's hotspot (`lighting::hotspot`, measured with
 //! `HotspotSettings::OFFLINE` from its own rays) on the sun and the bounce, and prints its
 //! factors; `--bounce-rays R` adds rows with the bounce gathered from each leaf's own
@@ -93,6 +97,7 @@ fn main() {
     let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
     let mut seen_below = 1.0f32;
     let mut to_sun = Vec3::new(0.5, 0.7, 0.3).normalize();
+    let mut to_eye = Vec3::new(0.0, 0.3, 1.0).normalize();
     use bevy_foliage::lighting::sun_maps::{
         LEAF_SHADOW_FINE, LeafShadowLookup, LeafShadowOffset, LeafShadowPlane,
     };
@@ -188,18 +193,16 @@ fn main() {
                 }
             }
             "--sun" => {
-                to_sun = args
-                    .get(i + 1)
-                    .map(|v| v.split(',').map(|c| c.trim().parse::<f32>()).collect())
-                    .and_then(|c: Result<Vec<f32>, _>| c.ok())
-                    .filter(|c| c.len() == 3 && c.iter().all(|c| c.is_finite()))
-                    .map(|c| Vec3::new(c[0], c[1], c[2]))
-                    .filter(|v| v.length() > 1e-3)
-                    .map(Vec3::normalize)
-                    .unwrap_or_else(|| {
-                        eprintln!("--sun takes x,y,z (a direction towards the sun)");
-                        std::process::exit(2)
-                    })
+                to_sun = direction(args.get(i + 1)).unwrap_or_else(|| {
+                    eprintln!("--sun takes x,y,z (a direction towards the sun)");
+                    std::process::exit(2)
+                })
+            }
+            "--eye" => {
+                to_eye = direction(args.get(i + 1)).unwrap_or_else(|| {
+                    eprintln!("--eye takes x,y,z (a direction towards the eye)");
+                    std::process::exit(2)
+                })
             }
             "--bounce-pool" => {
                 bounce_pools = args
@@ -240,7 +243,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]] [--sun x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -286,6 +289,7 @@ fn main() {
                 ..Default::default()
             },
             &rays_per_bin,
+            to_eye,
             threads,
         );
         return;
@@ -310,7 +314,7 @@ fn main() {
         let centre =
             crown.positions.iter().copied().sum::<Vec3>() / crown.positions.len().max(1) as f32;
         let started = std::time::Instant::now();
-        let eye = centre + Vec3::new(0.0, 0.3, 1.0).normalize() * 30.0;
+        let eye = centre + to_eye * 30.0;
         let neighbours = BinEstimate::Neighbours;
         let mut models = vec![
             (SunThroughCrown::SmoothEnvelope, neighbours),
@@ -451,6 +455,7 @@ fn image_table(
     light: &TraceLight,
     settings: &bevy_foliage::lighting::image_error::ImageSettings,
     rays_per_bin: &[u32],
+    to_eye: Vec3,
     threads: usize,
 ) {
     use bevy_foliage::lighting::image_error::{ImageError, images_against_tracer};
@@ -481,7 +486,6 @@ fn image_table(
     }));
     for (name, leaf_size, crown) in crowns {
         let started = std::time::Instant::now();
-        let to_eye = Vec3::new(0.0, 0.3, 1.0);
         let run = images_against_tracer(
             &crown,
             material,
@@ -524,6 +528,26 @@ fn image_table(
             );
             if let Some(seen) = run.seen.get(size) {
                 row(seen, "sky direct", &seen_label, &seen.sky);
+            }
+            // What no eight blended gains beat (the sky is the component they are for).
+            if let (Some(along), Some(at_point)) =
+                (run.seen_along.get(size), run.open_at_point.get(size))
+            {
+                row(
+                    along,
+                    "sky direct",
+                    &format!("{seen_label} traced for the eye's own direction (no blend)"),
+                    &along.sky,
+                );
+                row(
+                    at_point,
+                    "sky direct",
+                    &format!(
+                        "{}, the open share at the eye ray's own point over the leaf's mean",
+                        label(models.len() - 1)
+                    ),
+                    &at_point.sky,
+                );
             }
             row(
                 &run.noise[size],
@@ -705,4 +729,15 @@ fn image_table(
         }
         eprintln!("{name}: {:.1} s", started.elapsed().as_secs_f32());
     }
+}
+
+/// A direction `x,y,z` from the command line, normalised; `None` for anything else (or a
+/// zero vector).
+fn direction(arg: Option<&String>) -> Option<Vec3> {
+    arg.map(|v| v.split(',').map(|c| c.trim().parse::<f32>()).collect())
+        .and_then(|c: Result<Vec<f32>, _>| c.ok())
+        .filter(|c| c.len() == 3 && c.iter().all(|c| c.is_finite()))
+        .map(|c| Vec3::new(c[0], c[1], c[2]))
+        .filter(|v| v.length() > 1e-3)
+        .map(Vec3::normalize)
 }

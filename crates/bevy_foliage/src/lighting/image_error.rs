@@ -24,7 +24,10 @@ use super::path_trace::{
     ComponentError, ModelLight, TraceLight, TraceSettings, component_error, envelope_by, gather,
     luminance,
 };
-use super::seen_part::{DEFAULT_SEEN_POINTS, covered_gain, seen_gain, seen_part_gains_of};
+use super::seen_part::{
+    DEFAULT_SEEN_POINTS, GAIN_RANGE, covered_gain, open_share_at, seen_gain, seen_part_gain_along,
+    seen_part_gains_of,
+};
 use super::sun_maps::{
     LEAF_SHADOW_FINE, LeafShadowLookup, LightFrame, foliage_maps, shadow_map_trust,
 };
@@ -32,6 +35,12 @@ use super::traced_bins::BinEstimate;
 use crate::pruning::leaves::LeafSet;
 use crate::rng::SplitMix64;
 use bevy::math::Vec3;
+
+/// Rays for each open share of [`ImageComparison::open_at_point`].
+pub const OPEN_RAYS: u32 = 64;
+
+/// Points per leaf for the leaf's mean open share of [`ImageComparison::open_at_point`].
+pub const OPEN_POINTS: u32 = 64;
 
 /// How the crown is rendered and traced.
 #[derive(Clone, Debug)]
@@ -128,6 +137,15 @@ pub struct ImageComparison {
     /// covered part's gain ([`super::seen_part`]), per pixel size; empty when
     /// [`ImageSettings::seen_points`] is 0.
     pub seen: Vec<ImageError>,
+    /// As `seen`, with each leaf's gain traced for the eye's own direction
+    /// ([`super::seen_part::seen_part_gain_along`], as many points) in place of the eight
+    /// blended: what no blend of eight gains beats at those points. Empty with `seen`.
+    pub seen_along: Vec<ImageError>,
+    /// As `seen`, with the gain at each eye ray's own point: the open share there over the
+    /// leaf's mean ([`super::seen_part::open_share_at`], [`OPEN_RAYS`] rays, the mean from
+    /// [`OPEN_POINTS`] points): what no gain per leaf and eye direction beats. Empty with
+    /// `seen`.
+    pub open_at_point: Vec<ImageError>,
     /// As `seen` (or the last model), the sun's term and the bounce scaled by the crown's
     /// hotspot at the image's phase angle; empty unless [`ImageSettings::hotspot`].
     pub hotspot: Vec<ImageError>,
@@ -692,19 +710,21 @@ pub fn images_against_tracer(
         }
         _ => Vec::new(),
     };
-    let (seen, hotspot, drawn) = match &last_model {
+    let (seen, seen_along, open_at_point, hotspot, drawn) = match &last_model {
         Some(([sky, sun, bounce], envelope)) => {
-            // The images with the gains (where measured), the sun through the crown as
-            // `through(leaf, blend, gain)` makes the leaf's share of it (the gain applied), and
-            // the bounce scaled by `bounce_factor`.
-            let with = |through: &dyn Fn(usize, f32, f32) -> f32, bounce_factor: f32| {
+            // The images with the gain `gain(k, sample)` of eye ray k (where the gains were
+            // measured), the sun through the crown as `through(leaf, blend, gain)` makes the
+            // leaf's share of it (the gain applied), and the bounce scaled by `bounce_factor`.
+            let with_gain = |through: &dyn Fn(usize, f32, f32) -> f32,
+                             bounce_factor: f32,
+                             gain_of: &dyn Fn(usize, &Sample) -> f32| {
                 let (mut sky, mut sun, mut bounce) = (sky.clone(), sun.clone(), bounce.clone());
                 for (k, s) in samples.iter().enumerate() {
                     if let Some(s) = s {
                         let leaf = s.leaf as usize;
                         let e = &envelope.leaves[leaf];
                         let old = lobe_blend(&e.attenuation, light.to_sun, 1.0);
-                        let gain = gains.as_ref().map_or(1.0, |g| seen_gain(&g[leaf], view));
+                        let gain = gain_of(k, s);
                         let new = through(leaf, old, gain);
                         // The sun's term is linear in the share let through; the bounce in the
                         // light at the leaf before the gain.
@@ -719,10 +739,80 @@ pub fn images_against_tracer(
                 }
                 [sky, sun, bounce]
             };
+            // With the stored gains blended towards the eye, as the leaf shaders draw them.
+            let with = |through: &dyn Fn(usize, f32, f32) -> f32, bounce_factor: f32| {
+                with_gain(through, bounce_factor, &|_, s| {
+                    gains
+                        .as_ref()
+                        .map_or(1.0, |g| seen_gain(&g[s.leaf as usize], view))
+                })
+            };
+            let gained = |old: f32, gain: f32| (old * gain).min(1.0);
             let seen = if gains.is_some() {
-                measure(&with(&|_, old, gain| (old * gain).min(1.0), 1.0))
+                measure(&with(&|_, old, gain| gained(old, gain), 1.0))
             } else {
                 Vec::new()
+            };
+            // What no eight gains beat: the gain for the eye's own direction from as many
+            // points, and the open share at the eye ray's own point over the leaf's mean.
+            let (seen_along, open_at_point) = if gains.is_some() {
+                let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
+                let along = super::par_map(&all, threads, |&leaf| {
+                    seen_part_gain_along(
+                        &scene,
+                        leaf as usize,
+                        settings.seen_points,
+                        view,
+                        &|_| 1.0,
+                        0x5EE1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+                    )
+                });
+                let mean_open = super::par_map(&all, threads, |&leaf| {
+                    let mut rng = SplitMix64::new(0x09E4 ^ (leaf as u64).wrapping_mul(0x9E37_79B9));
+                    (0..OPEN_POINTS)
+                        .map(|_| {
+                            let p = scene.point_on(leaf as usize, &mut rng);
+                            open_share_at(
+                                &scene,
+                                leaf as usize,
+                                p,
+                                OPEN_RAYS,
+                                1.0,
+                                &|_| 1.0,
+                                &mut rng,
+                            )
+                        })
+                        .sum::<f32>()
+                        / OPEN_POINTS as f32
+                });
+                let at_point: Vec<f32> = super::par_map(&indices, threads, |&k| {
+                    samples[k].as_ref().map_or(1.0, |s| {
+                        let leaf = s.leaf as usize;
+                        let mut rng =
+                            SplitMix64::new(0x0BE4 ^ (k as u64).wrapping_mul(0x9E37_79B9));
+                        let open = open_share_at(
+                            &scene,
+                            leaf,
+                            s.point,
+                            OPEN_RAYS,
+                            1.0,
+                            &|_| 1.0,
+                            &mut rng,
+                        );
+                        if mean_open[leaf] > 0.0 {
+                            (open / mean_open[leaf]).clamp(GAIN_RANGE.0, GAIN_RANGE.1)
+                        } else {
+                            1.0
+                        }
+                    })
+                });
+                let through = |_: usize, old: f32, gain: f32| gained(old, gain);
+                (
+                    measure(&with_gain(&through, 1.0, &|_, s| along[s.leaf as usize])),
+                    measure(&with_gain(&through, 1.0, &|k, _| at_point[k])),
+                )
+            } else {
+                (Vec::new(), Vec::new())
             };
             let (hotspot, drawn) = match &hotspot_factors {
                 Some(h) => {
@@ -754,9 +844,9 @@ pub fn images_against_tracer(
                 }
                 None => (Vec::new(), Vec::new()),
             };
-            (seen, hotspot, drawn)
+            (seen, seen_along, open_at_point, hotspot, drawn)
         }
-        _ => (Vec::new(), Vec::new(), Vec::new()),
+        _ => Default::default(),
     };
     let mut sunlit = Vec::new();
     let mut sunlit_seconds = Vec::new();
@@ -949,6 +1039,8 @@ pub fn images_against_tracer(
         ring_hotspot_seconds,
         models,
         seen,
+        seen_along,
+        open_at_point,
         hotspot,
         drawn,
         gathered,
@@ -1086,6 +1178,48 @@ mod tests {
     /// expectation cannot follow; pixels several leaves wide average leaves in sun and in shade,
     /// and the sun's error falls towards the error of the crown's mean, which no pixel size
     /// changes. The sky, smooth leaf to leaf, is close at every size.
+    #[test]
+    fn the_limits_of_the_gains_see_what_a_roof_leaves_open() {
+        // A leaf half under a roof just above it, seen from above: only its open half is in
+        // view, brighter than the leaf's mean, which the model without a gain gives it. The
+        // ground as bright as the sky: the open share the gains weigh is the uniform sphere's.
+        let uniform = TraceLight {
+            ground: light().sky,
+            ..light()
+        };
+        let mut leaves = LeafSet::default();
+        push_square_leaf(&mut leaves, Vec3::ZERO, 0.5, Vec3::Y);
+        push_square_leaf(&mut leaves, Vec3::new(-0.6, 0.02, 0.0), 0.6, Vec3::Y);
+        let run = images_against_tracer(
+            &leaves,
+            &LeafMaterial::default(),
+            &uniform,
+            Vec3::new(0.1, 1.0, 0.05).normalize(),
+            1.0,
+            &ImageSettings {
+                samples: 32,
+                directions: 64,
+                seen_points: 64,
+                ..ImageSettings::default()
+            },
+            2,
+            &[(
+                SunThroughCrown::BlendedAttenuation,
+                BinEstimate::Traced { rays_per_bin: 256 },
+            )],
+            &[1],
+        );
+        let plain = run.models[0].1[0].sky.of_the_mean;
+        let along = run.seen_along[0].sky.of_the_mean;
+        let at_point = run.open_at_point[0].sky.of_the_mean;
+        assert!(plain < -0.04, "{plain}");
+        assert!(along.abs() < plain.abs() / 3.0, "{along} against {plain}");
+        assert!(
+            at_point.abs() < plain.abs() / 3.0,
+            "{at_point} against {plain}"
+        );
+    }
+
     #[test]
     fn the_suns_image_error_falls_as_pixels_average_more_leaves() {
         let leaves = uniform_ball(1500, 1.5, 0.05, 5);
