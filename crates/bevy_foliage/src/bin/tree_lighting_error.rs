@@ -25,7 +25,8 @@
 //! (`--seen-below W` weighs the directions below the horizon by W in their open share: 1, the
 //! bakes' uniform sphere, by default); and, for the sky, two rows of what no eight gains beat:
 //! the gain traced for the eye's own direction from as many points, and the open share at
-//! each eye ray's own point over its leaf's mean;
+//! each eye ray's own point over its leaf's mean (with the bounce's covered-part gain from
+//! each, for the bounce);
 //! `--hotspot` adds rows with the crown's hotspot (`lighting::hotspot`, measured with
 //! `HotspotSettings::OFFLINE` from its own rays) on the sun and the bounce, and prints its
 //! factors; `--bounce-rays R` adds rows with the bounce gathered from each leaf's own
@@ -622,6 +623,29 @@ fn image_table(
                         label(models.len() - 1)
                     ),
                     &seen.bounce,
+                );
+            }
+            // The covered part's gain from the limits' gains (the sky's rows above).
+            if let (Some(along), Some(at_point)) =
+                (run.seen_along.get(size), run.open_at_point.get(size))
+            {
+                row(
+                    along,
+                    "sun indirect (1 bounce)",
+                    &format!(
+                        "attenuation blend, {}, covered-part gain from the eye's own direction",
+                        label(models.len() - 1)
+                    ),
+                    &along.bounce,
+                );
+                row(
+                    at_point,
+                    "sun indirect (1 bounce)",
+                    &format!(
+                        "attenuation blend, {}, the covered share at the eye ray's own point",
+                        label(models.len() - 1)
+                    ),
+                    &at_point.bounce,
                 );
             }
             if let Some(spot) = run.hotspot.get(size) {
