@@ -712,9 +712,10 @@ pub fn images_against_tracer(
     };
     let (seen, seen_along, open_at_point, hotspot, drawn) = match &last_model {
         Some(([sky, sun, bounce], envelope)) => {
-            // The images with the gain `gain(k, sample)` of eye ray k (where the gains were
-            // measured), the sun through the crown as `through(leaf, blend, gain)` makes the
-            // leaf's share of it (the gain applied), and the bounce scaled by `bounce_factor`.
+            // The images with the gain `gain_of(k, sample)` of eye ray k on the sky (and, by
+            // the covered part's gain, on the bounce), the sun through the crown as
+            // `through(leaf, blend, gain)` makes the leaf's share of it (the gain applied), and
+            // the bounce scaled by `bounce_factor`.
             let with_gain = |through: &dyn Fn(usize, f32, f32) -> f32,
                              bounce_factor: f32,
                              gain_of: &dyn Fn(usize, &Sample) -> f32| {
