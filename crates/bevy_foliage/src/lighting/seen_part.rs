@@ -275,16 +275,21 @@ mod tests {
         assert!((seen_gain(&[1.0; 8], Vec3::new(0.2, 0.9, -0.4).normalize()) - 1.0).abs() < 1e-6);
     }
 
+    /// Leaf 0: side 1 at the origin, facing up; leaf 1, its roof: side 1.2 centred over
+    /// x = −0.6, just above, covering x < 0 (and a margin).
+    fn leaf_under_a_roof() -> LeafSet {
+        let mut leaves = LeafSet::default();
+        push_square_leaf(&mut leaves, Vec3::ZERO, 0.5, Vec3::Y);
+        push_square_leaf(&mut leaves, Vec3::new(-0.6, 0.02, 0.0), 0.6, Vec3::Y);
+        leaves
+    }
+
     /// A leaf facing up with a roof low over its −x half: from above only the +x half shows,
     /// and it is the open one, so the gains of the four upper octants are well above 1; from
     /// below the whole leaf shows, and the gains of the lower four are 1.
     #[test]
     fn the_part_seen_past_a_roof_is_the_open_part() {
-        let mut leaves = LeafSet::default();
-        push_square_leaf(&mut leaves, Vec3::ZERO, 0.5, Vec3::Y);
-        // Roof: side 1.2 centred over x = −0.6, just above: covers x < 0 (and a margin).
-        push_square_leaf(&mut leaves, Vec3::new(-0.6, 0.02, 0.0), 0.6, Vec3::Y);
-        let scene = LeafScene::new(&leaves);
+        let scene = LeafScene::new(&leaf_under_a_roof());
         let gains = seen_part_gains(&scene, 0, 512, 1.0, &|_| 1.0, 3);
         for (j, d) in DIRECTIONS.iter().enumerate() {
             if d.y > 0.0 {
@@ -301,10 +306,7 @@ mod tests {
     fn a_gain_along_one_direction_is_that_directions_seen_part() {
         // The roof of the test above: from straight above only the open half (x > 0) is in
         // view, from straight below all of the leaf.
-        let mut leaves = LeafSet::default();
-        push_square_leaf(&mut leaves, Vec3::ZERO, 0.5, Vec3::Y);
-        push_square_leaf(&mut leaves, Vec3::new(-0.6, 0.02, 0.0), 0.6, Vec3::Y);
-        let scene = LeafScene::new(&leaves);
+        let scene = LeafScene::new(&leaf_under_a_roof());
         let above = seen_part_gain_along(&scene, 0, 512, Vec3::Y, &|_| 1.0, 3);
         let below = seen_part_gain_along(&scene, 0, 512, -Vec3::Y, &|_| 1.0, 3);
         // Open half ≈ 0.95, covered half 0.5 (its upper hemisphere shut): ≈ 0.95 / 0.73.
@@ -320,10 +322,7 @@ mod tests {
 
     #[test]
     fn a_points_open_share_counts_what_its_neighbours_leave_open() {
-        let mut leaves = LeafSet::default();
-        push_square_leaf(&mut leaves, Vec3::ZERO, 0.5, Vec3::Y);
-        push_square_leaf(&mut leaves, Vec3::new(-0.6, 0.02, 0.0), 0.6, Vec3::Y);
-        let scene = LeafScene::new(&leaves);
+        let scene = LeafScene::new(&leaf_under_a_roof());
         let mut rng = SplitMix64::new(9);
         let under = Vec3::new(-0.25, 0.0, 0.0);
         let open = open_share_at(&scene, 0, under, 1024, 1.0, &|_| 1.0, &mut rng);
