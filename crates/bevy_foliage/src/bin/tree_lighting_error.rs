@@ -8,7 +8,7 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]]
+//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]]
 //!     [--sun X,Y,Z] [--eye X,Y,Z]
 //!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
@@ -23,7 +23,8 @@
 //! the last bins also with each leaf's seen-part gains from `--seen-points` points (32;
 //! `lighting::seen_part`): on the sky and the sun, and the covered part's on the bounce
 //! (`--seen-below W` weighs the directions below the horizon by W in their open share: 1, the
-//! bakes' uniform sphere, by default); and, for the sky, two rows of what no eight gains beat:
+//! bakes' uniform sphere, by default; `--seen-seed S` draws their points and rays from another
+//! seed than the bakes' 0, to tell the gains' own noise from a change); and, for the sky, two rows of what no eight gains beat:
 //! the gain traced for the eye's own direction from as many points, and the open share at
 //! each eye ray's own point over its leaf's mean (with the bounce's covered-part gain from
 //! each, for the bounce);
@@ -97,6 +98,7 @@ fn main() {
     let mut sun_rings: Vec<usize> = Vec::new();
     let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
     let mut seen_below = 1.0f32;
+    let mut seen_seed = 0u64;
     let mut to_sun = Vec3::new(0.5, 0.7, 0.3).normalize();
     let mut to_eye = Vec3::new(0.0, 0.3, 1.0).normalize();
     use bevy_foliage::lighting::sun_maps::{
@@ -129,6 +131,15 @@ fn main() {
                     .filter(|w| w.is_finite() && *w >= 0.0)
                     .unwrap_or_else(|| {
                         eprintln!("--seen-below takes a weight ≥ 0");
+                        std::process::exit(2)
+                    })
+            }
+            "--seen-seed" => {
+                seen_seed = args
+                    .get(i + 1)
+                    .and_then(|v| v.parse::<u64>().ok())
+                    .unwrap_or_else(|| {
+                        eprintln!("--seen-seed takes a whole number ≥ 0");
                         std::process::exit(2)
                     })
             }
@@ -244,7 +255,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -280,6 +291,7 @@ fn main() {
                 directions: settings.directions,
                 seen_points,
                 seen_below,
+                seen_seed,
                 hotspot,
                 leaf_shadow,
                 shadow_texels: shadow_texels.clone(),

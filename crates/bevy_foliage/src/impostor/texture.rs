@@ -296,7 +296,8 @@ impl ImpostorSource {
         let (scene, opacity) = self.leaf_scene();
         let opacity = |l: u32| opacity.get(l as usize).copied().unwrap_or(1.0);
         let all: Vec<u32> = (0..self.leaves.len() as u32).collect();
-        let gains = seen_part_gains_of(&scene, &all, DEFAULT_SEEN_POINTS, 1.0, &opacity, threads);
+        let gains =
+            seen_part_gains_of(&scene, &all, DEFAULT_SEEN_POINTS, 1.0, &opacity, 0, threads);
         let seen = crown_mean_gains(&gains);
         let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
         let ratios = bounce_ratios_of(

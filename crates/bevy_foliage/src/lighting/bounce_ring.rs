@@ -31,10 +31,10 @@
 //! crown's hotspot on the shares is fitted with the ring, against the shares as drawn
 //! ([`ring_sun_hotspot`]; the bake's is fitted against the blend). On the four procedural trees
 //! at pixels 1.4–2.5 leaves wide the shares so drawn, with the seen-part gain and that
-//! hotspot, put the sun's image error at 4.9 % with the sun behind the eye, 6.3–7.0 % beside
-//! and above it and 14–16 % against it, where the blend is at 8–29 % and 52–57 %, the shares
-//! with the bake's hotspot at 4.0 %, 6.9–7.8 % and 14–17 % and without their slopes at
-//! 4.8–8.5 % and 21–24 % (`tree_lighting_error --images --sun-ring 14 --sunlit-points 16`).
+//! hotspot, put the sun's image error at 4.8 % with the sun behind the eye, 6.1–6.6 % beside
+//! and above it and 14–16 % against it, where the blend is at 8–28 % and 52–57 %, the shares
+//! with the bake's hotspot at 3.9 %, 6.8–7.4 % and 14–17 % and without their slopes at
+//! 4.6–8.5 % and 21–24 % (`tree_lighting_error --images --sun-ring 14 --sunlit-points 16`).
 //!
 //! Plain Rust, no render types.
 
@@ -239,11 +239,11 @@ pub fn gather_ring(
 /// they over-correct: on the four procedural trees at pixels 1.4–2.5 leaves wide, the sun
 /// midway between two nodes (`tree_lighting_error --images --hotspot --sun-ring 14
 /// --sunlit-points 16`, the rows as the leaf shaders draw them), the shares' bias with the sun
-/// against the eye (α = 137°) is −4.6…+0.8 % with the bake's (the cedar −11.8 %) and
-/// −1.2…+3.2 % with these; the image error averaged over the trees goes from 7.8 to 7.0 %
-/// at α = 58°, 6.9 to 6.3 % at 68°, 14.3 to 13.8 % at 137° and 16.6 to 16.1 % at 148°, and
-/// from 4.0 to 4.9 % with the sun behind the eye (α = 4°), where these leave the shares
-/// 1–3.5 % dark. Traced as [`RING_HOTSPOT`], the fit takes 0.02–0.07 s for 2,000 leaves on
+/// against the eye (α = 137°) is −5.1…+0.2 % with the bake's (the cedar −10.8 %) and
+/// −1.3…+2.6 % with these; the image error averaged over the trees goes from 7.4 to 6.6 %
+/// at α = 58°, 6.8 to 6.1 % at 68°, 14.5 to 13.8 % at 137° and 16.6 to 16.0 % at 148°, and
+/// from 3.9 to 4.8 % with the sun behind the eye (α = 4°), where these leave the shares
+/// 1–3.7 % dark. Traced as [`RING_HOTSPOT`], the fit takes 0.02–0.07 s for 2,000 leaves on
 /// two threads.
 #[allow(clippy::too_many_arguments)]
 pub fn ring_sun_hotspot(

@@ -58,6 +58,9 @@ pub struct ImageSettings {
     /// The weight of the directions below the horizon in the open share of those gains
     /// ([`super::seen_part::seen_part_gains`]; 1, what bakes use, by default).
     pub seen_below: f32,
+    /// Seed of those gains' points and rays (0, what bakes use, by default; another shows how
+    /// much of a figure is the gains' own noise).
+    pub seen_seed: u64,
     /// Whether to measure the crown's hotspot ([`super::hotspot`], with another seed than the
     /// images') and render the last model with it.
     pub hotspot: bool,
@@ -92,6 +95,7 @@ impl Default for ImageSettings {
             seed: 1,
             seen_points: DEFAULT_SEEN_POINTS,
             seen_below: 1.0,
+            seen_seed: 0,
             hotspot: false,
             leaf_shadow: LeafShadowLookup::SHADERS,
             shadow_texels: vec![LEAF_SHADOW_FINE],
@@ -467,6 +471,7 @@ pub fn images_against_tracer(
             settings.seen_points,
             settings.seen_below,
             &|_| 1.0,
+            settings.seen_seed,
             threads,
         )
     });

@@ -705,6 +705,7 @@ pub fn bake_masked(
             settings.seen_points,
             1.0,
             &|_| opaque,
+            0,
             threads,
         )
         .into_iter()
@@ -883,6 +884,7 @@ mod tests {
             DEFAULT_SEEN_POINTS,
             1.0,
             &|_| 1.0,
+            0,
             2,
         );
         let same = b
