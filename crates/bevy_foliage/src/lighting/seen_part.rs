@@ -79,7 +79,8 @@ pub const GAIN_RANGE: (f32, f32) = (0.25, 4.0);
 /// (`tree_lighting_error --images --seen-below W`, W = 1 and 0.2, pixels 1.4–2.5 leaves wide): at 0.2 the
 /// sky's bias falls by 0.3–1.3 points (−2.3…−3.4 % to −1.0…−2.6 % with 128-ray bins and 32
 /// points, its error 2.8–5.8 % to 2.7–5.4 %), but with 32-ray bins and 16 points the error
-/// moves by −0.1 to +0.3 points and the bounce's by up to +0.5, so bakes keep 1.
+/// moves by −0.1 to +0.3 points and the bounce's by up to +0.5, so bakes keep 1 (measured with
+/// uniform open rays, before [`open_share_at`] stratified them).
 pub fn seen_part_gains(
     scene: &LeafScene,
     leaf: usize,
