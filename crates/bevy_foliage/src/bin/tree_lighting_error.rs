@@ -8,7 +8,7 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]]
+//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]]
 //!     [--sun X,Y,Z] [--eye X,Y,Z]
 //!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
@@ -53,6 +53,13 @@
 //! point moved towards the sun by `T + S·tan θ` texels, θ the leaf's tilt from the sun
 //! (`sun_maps::LeafShadowOffset`); also in the `--sun-maps` table.
 //!
+//! `--open-maps CxP[r][,…]` (with `--images` and seen-part gains): rows of the sky with the
+//! gain from each leaf's open-share map of C × C cells traced from P points
+//! (`seen_part::open_map`) read at the eye ray's point, alone and times the map's residual
+//! gains blended towards the eye; the cells over the points' bounding rectangle in the leaf's
+//! plane, or with `r` over the square a leaf shader can find from its vertices
+//! (`seen_part::MapFrame::of_leaf`).
+//!
 //! `--sunlit-points P` (with `--images`): rows of the sun through the crown from each leaf's
 //! sunlit share traced from P points on it (`lighting::sunlit_share`) for the image's sun and,
 //! per `--sun-ring N`, on a ring of N suns at its elevation read with the sun midway between
@@ -96,6 +103,7 @@ fn main() {
     use bevy_foliage::lighting::gathered_bounce::{DEFAULT_BOUNCE_POOL, MAX_BOUNCE_POOL};
     let mut bounce_pools = vec![DEFAULT_BOUNCE_POOL];
     let mut sun_rings: Vec<usize> = Vec::new();
+    let mut open_maps: Vec<(u32, u32, bool)> = Vec::new();
     let mut seen_points = bevy_foliage::lighting::seen_part::OFFLINE_SEEN_POINTS;
     let mut seen_below = 1.0f32;
     let mut seen_seed = 0u64;
@@ -231,6 +239,23 @@ fn main() {
                         std::process::exit(2)
                     })
             }
+            "--open-maps" => {
+                open_maps = args
+                    .get(i + 1)
+                    .map(|list| {
+                        list.split(',')
+                            .filter_map(|m| {
+                                let (side, points) = m.split_once('x')?;
+                                let (points, of_leaf) = match points.trim().strip_suffix('r') {
+                                    Some(p) => (p, true),
+                                    None => (points.trim(), false),
+                                };
+                                Some((side.trim().parse().ok()?, points.parse().ok()?, of_leaf))
+                            })
+                            .collect()
+                    })
+                    .unwrap_or_default();
+            }
             "--sun-ring" => {
                 sun_rings = args
                     .get(i + 1)
@@ -255,7 +280,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -298,6 +323,7 @@ fn main() {
                 bounce_rays,
                 bounce_pools: bounce_pools.clone(),
                 sun_rings: sun_rings.clone(),
+                open_maps: open_maps.clone(),
                 sunlit_points,
                 ..Default::default()
             },
@@ -561,6 +587,22 @@ fn image_table(
                     ),
                     &at_point.sky,
                 );
+            }
+            for ((side, points, of_leaf), alone, with_residual) in &run.open_maps {
+                let frame = if *of_leaf { ", the leaf's square" } else { "" };
+                for (errors, how) in [(alone, ""), (with_residual, " times its residual gains")] {
+                    if let Some(map) = errors.get(size) {
+                        row(
+                            map,
+                            "sky direct",
+                            &format!(
+                                "{}, the leaf's open-share map ({side}x{side} cells, {points} points{frame}) at the eye ray's point{how}",
+                                label(models.len() - 1)
+                            ),
+                            &map.sky,
+                        );
+                    }
+                }
             }
             row(
                 &run.noise[size],

@@ -25,8 +25,8 @@ use super::path_trace::{
     luminance,
 };
 use super::seen_part::{
-    DEFAULT_SEEN_POINTS, GAIN_RANGE, covered_gain, open_share_at, seen_gain, seen_part_gain_along,
-    seen_part_gains_of,
+    DEFAULT_SEEN_POINTS, GAIN_RANGE, MapFrame, covered_gain, open_map, open_share_at, seen_gain,
+    seen_part_gain_along, seen_part_gains_of,
 };
 use super::sun_maps::{
     LEAF_SHADOW_FINE, LeafShadowLookup, LightFrame, foliage_maps, shadow_map_trust,
@@ -84,6 +84,11 @@ pub struct ImageSettings {
     /// Points per leaf for each leaf's sunlit share traced for the sun and on each ring of
     /// `sun_rings` ([`super::sunlit_share`], [`ImageComparison::sunlit`]; 0: not measured).
     pub sunlit_points: u32,
+    /// Open-share maps measured on the sky, each as (cells a side, points a leaf, whether
+    /// over the square the leaf shaders can find, [`super::seen_part::MapFrame::of_leaf`],
+    /// rather than the points' bounding rectangle) ([`super::seen_part::open_map`],
+    /// [`ImageComparison::open_maps`]; none by default).
+    pub open_maps: Vec<(u32, u32, bool)>,
 }
 
 impl Default for ImageSettings {
@@ -103,6 +108,7 @@ impl Default for ImageSettings {
             bounce_pools: vec![DEFAULT_BOUNCE_POOL],
             sun_rings: Vec::new(),
             sunlit_points: 0,
+            open_maps: Vec::new(),
         }
     }
 }
@@ -150,6 +156,10 @@ pub struct ImageComparison {
     /// [`OPEN_POINTS`] points): what no gain per leaf and eye direction beats. Empty with
     /// `seen`.
     pub open_at_point: Vec<ImageError>,
+    /// Per map of [`ImageSettings::open_maps`], as `seen` with the gain from each leaf's
+    /// open-share map read at the eye ray's point, then that times the map's residual gains
+    /// blended towards the eye. Empty with `seen`.
+    pub open_maps: Vec<OpenMapRows>,
     /// As `seen` (or the last model), the sun's term and the bounce scaled by the crown's
     /// hotspot at the image's phase angle; empty unless [`ImageSettings::hotspot`].
     pub hotspot: Vec<ImageError>,
@@ -220,6 +230,11 @@ pub struct ImageComparison {
     /// Eye rays that hit a leaf.
     pub hits: usize,
 }
+
+/// The rows of one open-share map of [`ImageComparison::open_maps`]: the map as settings give
+/// it (cells a side, points a leaf, over the leaf's square), the images with the map's gain
+/// alone, and with it times the map's residual gains blended towards the eye.
+pub type OpenMapRows = ((u32, u32, bool), Vec<ImageError>, Vec<ImageError>);
 
 /// What one eye ray found: the leaf, the point, and the traced light there from two seeds
 /// (luminance of sky, sun, one bounce, all bounces).
@@ -715,7 +730,7 @@ pub fn images_against_tracer(
         }
         _ => Vec::new(),
     };
-    let (seen, seen_along, open_at_point, hotspot, drawn) = match &last_model {
+    let (seen, seen_along, open_at_point, open_maps, hotspot, drawn) = match &last_model {
         Some(([sky, sun, bounce], envelope)) => {
             // The images with the gain `gain_of(k, sample)` of eye ray k on the sky (and, by
             // the covered part's gain, on the bounce), the sun through the crown as
@@ -761,7 +776,7 @@ pub fn images_against_tracer(
             };
             // What no eight gains beat: the gain for the eye's own direction from as many
             // points, and the open share at the eye ray's own point over the leaf's mean.
-            let (seen_along, open_at_point) = if gains.is_some() {
+            let (seen_along, open_at_point, open_maps) = if gains.is_some() {
                 let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
                 let along = super::par_map(&all, threads, |&leaf| {
                     seen_part_gain_along(
@@ -813,12 +828,49 @@ pub fn images_against_tracer(
                     })
                 });
                 let through = |_: usize, old: f32, gain: f32| gained(old, gain);
+                let open_maps = settings
+                    .open_maps
+                    .iter()
+                    .map(|&(side, points, of_leaf)| {
+                        let maps = super::par_map(&all, threads, |&leaf| {
+                            let frame = of_leaf.then(|| {
+                                let l = leaf as usize;
+                                let centre = leaves.centroid(l);
+                                let radius = leaves
+                                    .leaf_vertices(l)
+                                    .into_iter()
+                                    .map(|v| (leaves.positions[v as usize] - centre).length())
+                                    .fold(0.0f32, f32::max);
+                                MapFrame::of_leaf(centre, scene.normal(l), radius)
+                            });
+                            open_map(
+                                &scene,
+                                leaf as usize,
+                                frame,
+                                side,
+                                points,
+                                &|_| 1.0,
+                                0x09E2_u64
+                                    ^ settings.seen_seed.wrapping_mul(0xD1B5_4A32_D192_ED03)
+                                    ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+                            )
+                        });
+                        let drawn = measure(&with_gain(&through, 1.0, &|_, s| {
+                            maps[s.leaf as usize].gain_at(s.point)
+                        }));
+                        let with_residual = measure(&with_gain(&through, 1.0, &|_, s| {
+                            maps[s.leaf as usize].gain_towards(s.point, view)
+                        }));
+                        ((side, points, of_leaf), drawn, with_residual)
+                    })
+                    .collect();
                 (
                     measure(&with_gain(&through, 1.0, &|_, s| along[s.leaf as usize])),
                     measure(&with_gain(&through, 1.0, &|k, _| at_point[k])),
+                    open_maps,
                 )
             } else {
-                (Vec::new(), Vec::new())
+                Default::default()
             };
             let (hotspot, drawn) = match &hotspot_factors {
                 Some(h) => {
@@ -850,7 +902,7 @@ pub fn images_against_tracer(
                 }
                 None => (Vec::new(), Vec::new()),
             };
-            (seen, seen_along, open_at_point, hotspot, drawn)
+            (seen, seen_along, open_at_point, open_maps, hotspot, drawn)
         }
         _ => Default::default(),
     };
@@ -1047,6 +1099,7 @@ pub fn images_against_tracer(
         seen,
         seen_along,
         open_at_point,
+        open_maps,
         hotspot,
         drawn,
         gathered,

@@ -69,6 +69,14 @@ impl SharePlane {
         (self.mean + self.gradient.dot(at - self.centre)).clamp(0.0, 1.0)
     }
 
+    /// The same plane with its mean within [0, 1] (the gradient as it is).
+    pub fn clamped(self) -> SharePlane {
+        SharePlane {
+            mean: self.mean.clamp(0.0, 1.0),
+            ..self
+        }
+    }
+
     /// The plane a fraction `f` of the way to `other` (the same leaf's, for another sun):
     /// mean and gradient linearly.
     pub fn lerp(&self, other: &SharePlane, f: f32) -> SharePlane {
@@ -101,49 +109,93 @@ pub fn sunlit_planes(
             return vec![SharePlane::default(); suns.len()];
         }
         let mut rng = SplitMix64::new(0x51A1_5EED ^ (leaf as u64).wrapping_mul(0x9E37_79B9));
-        let spots: Vec<Vec3> = (0..side * side)
+        let fit = PlaneFit::jittered(scene, leaf as usize, side, &mut rng);
+        suns.iter()
+            .map(|&sun| {
+                fit.fit(|p| scene.transmittance(p, sun, leaf, opacity))
+                    .clamped()
+            })
+            .collect()
+    })
+}
+
+/// Points spread over a leaf and the least-squares fit of a value linear across them
+/// ([`SharePlane`]): the points in the leaf's plane about their centroid, and the normal
+/// equations' matrix `[[sxx, sxy], [sxy, syy]]`, set up once for every value fitted on them.
+pub struct PlaneFit {
+    /// The points, on the leaf.
+    pub points: Vec<Vec3>,
+    centre: Vec3,
+    axes: (Vec3, Vec3),
+    xy: Vec<(f32, f32)>,
+    sxx: f32,
+    sxy: f32,
+    syy: f32,
+}
+
+impl PlaneFit {
+    /// A jittered `side × side` grid of points over leaf `leaf` of `scene` (the unit square
+    /// mapped evenly onto the leaf, [`LeafScene::point_at`]), jittered by `rng`.
+    pub fn jittered(scene: &LeafScene, leaf: usize, side: u32, rng: &mut SplitMix64) -> Self {
+        let side = side.max(1);
+        let points: Vec<Vec3> = (0..side * side)
             .map(|k| {
                 let u = ((k % side) as f32 + rng.next_f32()) / side as f32;
                 let v = ((k / side) as f32 + rng.next_f32()) / side as f32;
-                scene.point_at(leaf as usize, (u, v))
+                scene.point_at(leaf, (u, v))
             })
             .collect();
-        // The points in the leaf's plane about their centroid, and the least-squares normal
-        // equations' matrix [[sxx, sxy], [sxy, syy]] of a share linear across it.
-        let centre = spots.iter().copied().sum::<Vec3>() / spots.len() as f32;
-        let (t1, t2) = scene.normal(leaf as usize).any_orthonormal_pair();
-        let xy: Vec<(f32, f32)> = spots
+        Self::new(points, scene.normal(leaf))
+    }
+
+    /// The fit over `points` (at least one) on a leaf facing `normal`.
+    pub fn new(points: Vec<Vec3>, normal: Vec3) -> Self {
+        let centre = points.iter().copied().sum::<Vec3>() / points.len().max(1) as f32;
+        let axes = normal.any_orthonormal_pair();
+        let xy: Vec<(f32, f32)> = points
             .iter()
-            .map(|p| ((*p - centre).dot(t1), (*p - centre).dot(t2)))
+            .map(|p| ((*p - centre).dot(axes.0), (*p - centre).dot(axes.1)))
             .collect();
         let (sxx, sxy, syy) = xy.iter().fold((0.0, 0.0, 0.0), |(a, b, c), (x, y)| {
             (a + x * x, b + x * y, c + y * y)
         });
+        Self {
+            points,
+            centre,
+            axes,
+            xy,
+            sxx,
+            sxy,
+            syy,
+        }
+    }
+
+    /// The plane of least squares through `value(p)` at each point (not clamped). Points all
+    /// on a line (or one point) fit no plane: the mean alone.
+    pub fn fit(&self, mut value: impl FnMut(Vec3) -> f32) -> SharePlane {
+        let values: Vec<f32> = self.points.iter().map(|&p| value(p)).collect();
+        let mean = values.iter().sum::<f32>() / values.len().max(1) as f32;
+        let (bx, by) = self
+            .xy
+            .iter()
+            .zip(&values)
+            .fold((0.0, 0.0), |(a, b), ((x, y), v)| {
+                (a + x * (v - mean), b + y * (v - mean))
+            });
+        let (sxx, sxy, syy) = (self.sxx, self.sxy, self.syy);
         let det = sxx * syy - sxy * sxy;
-        suns.iter()
-            .map(|&sun| {
-                let lit: Vec<f32> = spots
-                    .iter()
-                    .map(|&p| scene.transmittance(p, sun, leaf, opacity))
-                    .collect();
-                let mean = lit.iter().sum::<f32>() / lit.len() as f32;
-                let (bx, by) = xy.iter().zip(&lit).fold((0.0, 0.0), |(a, b), ((x, y), v)| {
-                    (a + x * (v - mean), b + y * (v - mean))
-                });
-                // Points all on a line (or one point) fit no plane: the mean alone.
-                let gradient = if det > 1e-6 * (sxx + syy).powi(2) && det > 0.0 {
-                    t1 * ((syy * bx - sxy * by) / det) + t2 * ((sxx * by - sxy * bx) / det)
-                } else {
-                    Vec3::ZERO
-                };
-                SharePlane {
-                    mean: mean.clamp(0.0, 1.0),
-                    centre,
-                    gradient,
-                }
-            })
-            .collect()
-    })
+        let gradient = if det > 1e-6 * (sxx + syy).powi(2) && det > 0.0 {
+            self.axes.0 * ((syy * bx - sxy * by) / det)
+                + self.axes.1 * ((sxx * by - sxy * bx) / det)
+        } else {
+            Vec3::ZERO
+        };
+        SharePlane {
+            mean,
+            centre: self.centre,
+            gradient,
+        }
+    }
 }
 
 /// Each leaf's plane towards `to_sun` from planes traced on a ring of `ring.len()` suns at
