@@ -55,10 +55,10 @@
 //!
 //! `--open-maps CxP[r][,…]` (with `--images` and seen-part gains): rows of the sky with the
 //! gain from each leaf's open-share map of C × C cells traced from P points
-//! (`seen_part::open_map`) read at the eye ray's point, alone and times the map's residual
+//! (`open_map::open_map`) read at the eye ray's point, alone and times the map's residual
 //! gains blended towards the eye; the cells over the points' bounding rectangle in the leaf's
 //! plane, or with `r` over the square a leaf shader can find from its vertices
-//! (`seen_part::MapFrame::of_leaf`).
+//! (`open_map::MapFrame::of_leaf`).
 //!
 //! `--sunlit-points P` (with `--images`): rows of the sun through the crown from each leaf's
 //! sunlit share traced from P points on it (`lighting::sunlit_share`) for the image's sun and,
@@ -588,9 +588,13 @@ fn image_table(
                     &at_point.sky,
                 );
             }
-            for ((side, points, of_leaf), alone, with_residual) in &run.open_maps {
+            for ((side, points, of_leaf), alone, with_residual, stored) in &run.open_maps {
                 let frame = if *of_leaf { ", the leaf's square" } else { "" };
-                for (errors, how) in [(alone, ""), (with_residual, " times its residual gains")] {
+                for (errors, how) in [
+                    (alone, ""),
+                    (with_residual, " times its residual gains"),
+                    (stored, " times its residual gains, as stored"),
+                ] {
                     if let Some(map) = errors.get(size) {
                         row(
                             map,

@@ -20,13 +20,14 @@ use super::leaf_scene::LeafScene;
 use super::model::{
     LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bsdf, lobe_blend, open_share, sun_radiance,
 };
+use super::open_map::{MapFrame, STORED_SIDE, StoredOpenMap, open_map};
 use super::path_trace::{
     ComponentError, ModelLight, TraceLight, TraceSettings, component_error, envelope_by, gather,
     luminance,
 };
 use super::seen_part::{
-    DEFAULT_SEEN_POINTS, GAIN_RANGE, MapFrame, covered_gain, open_map, open_share_at, seen_gain,
-    seen_part_gain_along, seen_part_gains_of,
+    DEFAULT_SEEN_POINTS, GAIN_RANGE, covered_gain, open_share_at, seen_gain, seen_part_gain_along,
+    seen_part_gains_of,
 };
 use super::sun_maps::{
     LEAF_SHADOW_FINE, LeafShadowLookup, LightFrame, foliage_maps, shadow_map_trust,
@@ -85,8 +86,8 @@ pub struct ImageSettings {
     /// `sun_rings` ([`super::sunlit_share`], [`ImageComparison::sunlit`]; 0: not measured).
     pub sunlit_points: u32,
     /// Open-share maps measured on the sky, each as (cells a side, points a leaf, whether
-    /// over the square the leaf shaders can find, [`super::seen_part::MapFrame::of_leaf`],
-    /// rather than the points' bounding rectangle) ([`super::seen_part::open_map`],
+    /// over the square the leaf shaders can find, [`super::open_map::MapFrame::of_leaf`],
+    /// rather than the points' bounding rectangle) ([`super::open_map::open_map`],
     /// [`ImageComparison::open_maps`]; none by default).
     pub open_maps: Vec<(u32, u32, bool)>,
 }
@@ -158,7 +159,9 @@ pub struct ImageComparison {
     pub open_at_point: Vec<ImageError>,
     /// Per map of [`ImageSettings::open_maps`], as `seen` with the gain from each leaf's
     /// open-share map read at the eye ray's point, then that times the map's residual gains
-    /// blended towards the eye. Empty with `seen`.
+    /// blended towards the eye, then (for a map of [`STORED_SIDE`] cells over the leaf's
+    /// square) that as a bake stores it ([`StoredOpenMap`], the residual gains quantised as
+    /// the gains are): what the leaf shaders would draw. Empty with `seen`.
     pub open_maps: Vec<OpenMapRows>,
     /// As `seen` (or the last model), the sun's term and the bounce scaled by the crown's
     /// hotspot at the image's phase angle; empty unless [`ImageSettings::hotspot`].
@@ -233,8 +236,14 @@ pub struct ImageComparison {
 
 /// The rows of one open-share map of [`ImageComparison::open_maps`]: the map as settings give
 /// it (cells a side, points a leaf, over the leaf's square), the images with the map's gain
-/// alone, and with it times the map's residual gains blended towards the eye.
-pub type OpenMapRows = ((u32, u32, bool), Vec<ImageError>, Vec<ImageError>);
+/// alone, with it times the map's residual gains blended towards the eye, and that as a bake
+/// stores it (empty unless stored).
+pub type OpenMapRows = (
+    (u32, u32, bool),
+    Vec<ImageError>,
+    Vec<ImageError>,
+    Vec<ImageError>,
+);
 
 /// What one eye ray found: the leaf, the point, and the traced light there from two seeds
 /// (luminance of sky, sun, one bounce, all bounces).
@@ -828,20 +837,26 @@ pub fn images_against_tracer(
                     })
                 });
                 let through = |_: usize, old: f32, gain: f32| gained(old, gain);
+                // Each leaf's centroid and radius, as its vertices carry them.
+                let centroids: Vec<(Vec3, f32)> = (0..scene.leaf_count())
+                    .map(|l| {
+                        let centre = leaves.centroid(l);
+                        let radius = leaves
+                            .leaf_vertices(l)
+                            .into_iter()
+                            .map(|v| (leaves.positions[v as usize] - centre).length())
+                            .fold(0.0f32, f32::max);
+                        (centre, radius)
+                    })
+                    .collect();
                 let open_maps = settings
                     .open_maps
                     .iter()
                     .map(|&(side, points, of_leaf)| {
                         let maps = super::par_map(&all, threads, |&leaf| {
                             let frame = of_leaf.then(|| {
-                                let l = leaf as usize;
-                                let centre = leaves.centroid(l);
-                                let radius = leaves
-                                    .leaf_vertices(l)
-                                    .into_iter()
-                                    .map(|v| (leaves.positions[v as usize] - centre).length())
-                                    .fold(0.0f32, f32::max);
-                                MapFrame::of_leaf(centre, scene.normal(l), radius)
+                                let (centre, radius) = centroids[leaf as usize];
+                                MapFrame::of_leaf(centre, scene.normal(leaf as usize), radius)
                             });
                             open_map(
                                 &scene,
@@ -861,7 +876,28 @@ pub fn images_against_tracer(
                         let with_residual = measure(&with_gain(&through, 1.0, &|_, s| {
                             maps[s.leaf as usize].gain_towards(s.point, view)
                         }));
-                        ((side, points, of_leaf), drawn, with_residual)
+                        let stored = if of_leaf && side == STORED_SIDE {
+                            let stored: Vec<(StoredOpenMap, [f32; 8])> = maps
+                                .iter()
+                                .map(|m| {
+                                    let residual = m.residual.map(|g| {
+                                        super::seen_part::gain_of(super::seen_part::quantize_gain(
+                                            g,
+                                        ))
+                                    });
+                                    (StoredOpenMap::of(m), residual)
+                                })
+                                .collect();
+                            measure(&with_gain(&through, 1.0, &|_, s| {
+                                let (map, residual) = &stored[s.leaf as usize];
+                                let (centre, radius) = centroids[s.leaf as usize];
+                                (map.gain_at(s.point - centre, radius) * seen_gain(residual, view))
+                                    .clamp(GAIN_RANGE.0, GAIN_RANGE.1)
+                            }))
+                        } else {
+                            Vec::new()
+                        };
+                        ((side, points, of_leaf), drawn, with_residual, stored)
                     })
                     .collect();
                 (

@@ -28,6 +28,7 @@ pub mod image_error;
 pub mod leaf_scene;
 pub mod leaf_tree;
 pub mod model;
+pub mod open_map;
 pub mod path_trace;
 pub mod seen_part;
 pub mod settings;

@@ -40,22 +40,23 @@
 //! with uniform open rays), so eq. 5.7's lobes stay.
 //!
 //! Most of what is left is where on the leaf the eye looks, which a map of the leaf's open
-//! share says wherever the eye is ([`open_map`]: cells over the leaf's square, what the map
-//! leaves for the eye's direction in eight residual gains; `tree_lighting_error --images
+//! share says wherever the eye is ([`super::open_map`]: cells over the leaf's square, what the
+//! map leaves for the eye's direction in eight residual gains; `tree_lighting_error --images
 //! --open-maps CxP[r]`). Not yet drawn by the shaders; measured (32-ray bins, pixels 1.4–2.5
-//! leaves wide, the sky's error summed over the four trees): 3 × 3 cells over the square a
-//! leaf shader can find ([`MapFrame::of_leaf`]) from 32 points a leaf, times its residual
-//! gains, 15.2 points on average over four seeds at eye (0, 0.3, 1) (14.5–16.5), where the
-//! eight gains alone from the same 32 points give 18.0 (17.4–18.4) and from a bake's 16 points
-//! 19.5; every tree 2.8–4.7 %. At 16 points the map gains little (18.0–18.8), 4 × 4 cells no
-//! more than 3 × 3, and the map alone, without its residual gains, leaves the bias at
-//! −3…−5.6 %; a plane of open share fitted over each leaf by least squares was worse than the
-//! eight gains (sum 21.8).
+//! leaves wide, the sky's error summed over the four trees): 3 × 3 cells over the square a leaf
+//! shader can find ([`super::open_map::MapFrame::of_leaf`]) from 32 points a leaf, times its
+//! residual gains, 15.2 points on average over four seeds at eye (0, 0.3, 1) (14.5–16.5), where
+//! the eight gains alone from the same 32 points give 18.0 (17.4–18.4) and from a bake's 16
+//! points 19.5; every tree 2.8–4.7 %; over the five eyes (seed 0) the olive 3.4–4.6 %, the ash
+//! 3.1–3.8, the oak 3.3–3.8, the cedar 1.6–3.1 (the eight gains from 32 points: 4.5–4.9,
+//! 4.4–5.4, 3.9–5.0, 2.1–3.7); stored as a bake would store it, within 0.1 point at eye (0,
+//! 0.3, 1). At 16 points the map gains little (18.0–18.8), 4 × 4 cells no more than 3 × 3, and
+//! the map alone, without its residual gains, leaves the bias at −3…−5.6 %; a plane of open
+//! share fitted over each leaf by least squares was worse than the eight gains (sum 21.8).
 
 use super::bins::DIRECTIONS;
 use super::leaf_scene::{LeafScene, uniform_direction};
 use super::model::lobe_blend;
-use super::sunlit_share::PlaneFit;
 use crate::rng::SplitMix64;
 use bevy::math::Vec3;
 
@@ -75,7 +76,7 @@ pub const MAX_SEEN_POINTS: u32 = 4096;
 
 /// Directions sampled from each point for its open share, one per octant ([`open_share_at`];
 /// besides one eye ray per octant).
-const OPEN_RAYS_PER_POINT: u32 = 8;
+pub const OPEN_RAYS_PER_POINT: u32 = 8;
 
 /// Bounds of a gain: a leaf seen from an octant only through a sliver gets a noisy ratio.
 pub const GAIN_RANGE: (f32, f32) = (0.25, 4.0);
@@ -224,164 +225,6 @@ pub fn open_share_at(
         weight += cosine;
     }
     if weight > 0.0 { lit / weight } else { 1.0 }
-}
-
-/// Where an [`OpenMap`]'s grid lies on its leaf: a rectangle in the leaf's plane.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct MapFrame {
-    /// The middle of the grid, in the leaf's plane.
-    pub centre: Vec3,
-    /// The grid's two axes, unit vectors in the leaf's plane.
-    pub axes: (Vec3, Vec3),
-    /// The grid's half extent along each axis.
-    pub half: (f32, f32),
-}
-
-impl MapFrame {
-    /// The square a leaf shader can find from what each vertex carries: centred on the leaf's
-    /// centroid, its axes [`Vec3::any_orthonormal_pair`] of the leaf's normal, its half side
-    /// the leaf's radius (the farthest corner from the centroid).
-    pub fn of_leaf(centroid: Vec3, normal: Vec3, radius: f32) -> Self {
-        Self {
-            centre: centroid,
-            axes: normal.normalize_or(Vec3::Y).any_orthonormal_pair(),
-            half: (radius, radius),
-        }
-    }
-
-    /// The cell of a `side × side` grid a point of the leaf falls in, row by row (the nearest
-    /// at the edge).
-    pub fn cell(&self, side: u32, at: Vec3) -> usize {
-        let side = side.max(1);
-        let d = at - self.centre;
-        let index = |x: f32, half: f32| {
-            let u = if half > 0.0 {
-                (x / half + 1.0) * 0.5
-            } else {
-                0.5
-            };
-            ((u * side as f32).floor() as i64).clamp(0, side as i64 - 1) as usize
-        };
-        index(d.dot(self.axes.1), self.half.1) * side as usize
-            + index(d.dot(self.axes.0), self.half.0)
-    }
-}
-
-/// The open share across a leaf as a `side × side` grid of cells in the leaf's plane
-/// ([`open_map`]), with what it leaves of the seen part's gain per octant of the eye: where a
-/// neighbour covers a patch of the leaf, the part in view is the rest, and the cell the eye
-/// looks at says how open it is wherever the eye is.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct OpenMap {
-    /// The leaf's mean open share (over every point traced).
-    pub mean: f32,
-    /// Where the grid lies.
-    pub frame: MapFrame,
-    /// Cells a side.
-    pub side: u32,
-    /// Each cell's mean open share, row by row (the leaf's mean where no point fell).
-    pub cells: Vec<f32>,
-    /// Per octant of the eye ([`DIRECTIONS`]), what the map leaves of the seen part's gain:
-    /// `Σ open·V / Σ map·V` over the points (1 where no point is seen from the octant).
-    pub residual: [f32; 8],
-}
-
-impl OpenMap {
-    /// The gain at point `at` of the leaf: its cell's open share over the leaf's mean, within
-    /// [`GAIN_RANGE`] (1 where nothing is open).
-    pub fn gain_at(&self, at: Vec3) -> f32 {
-        match self.cells.get(self.frame.cell(self.side, at)) {
-            Some(&open) if self.mean > 0.0 => (open / self.mean).clamp(GAIN_RANGE.0, GAIN_RANGE.1),
-            _ => 1.0,
-        }
-    }
-
-    /// [`OpenMap::gain_at`] times the residual gains blended towards `to_eye` by eq. 5.7's
-    /// lobes, as [`seen_gain`] blends the eight gains.
-    pub fn gain_towards(&self, at: Vec3, to_eye: Vec3) -> f32 {
-        (self.gain_at(at) * seen_gain(&self.residual, to_eye)).clamp(GAIN_RANGE.0, GAIN_RANGE.1)
-    }
-}
-
-/// Leaf `leaf`'s [`OpenMap`] of `side × side` cells from a jittered grid of about `points`
-/// points over it, each point's open share from one ray per octant ([`open_share_at`]) and
-/// one eye ray per octant for the residual gains; the grid over `frame`, or where `None` over
-/// the points' bounding rectangle in the leaf's plane.
-pub fn open_map(
-    scene: &LeafScene,
-    leaf: usize,
-    frame: Option<MapFrame>,
-    side: u32,
-    points: u32,
-    opacity: &(impl Fn(u32) -> f32 + Sync),
-    seed: u64,
-) -> OpenMap {
-    if leaf >= scene.leaf_count() || scene.triangle_count(leaf) == 0 {
-        return OpenMap {
-            mean: 1.0,
-            ..Default::default()
-        };
-    }
-    let mut rng = SplitMix64::new(seed);
-    let grid = (points.max(1) as f32).sqrt().ceil() as u32;
-    let spots = PlaneFit::jittered(scene, leaf, grid, &mut rng).points;
-    let frame = frame.unwrap_or_else(|| {
-        let n = scene.normal(leaf);
-        let axes = n.any_orthonormal_pair();
-        let (lo, hi) = spots.iter().fold(
-            (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-            |(lo, hi), p| {
-                let q = Vec3::new(p.dot(axes.0), p.dot(axes.1), 0.0);
-                (lo.min(q), hi.max(q))
-            },
-        );
-        MapFrame {
-            centre: axes.0 * (lo.x + hi.x) * 0.5
-                + axes.1 * (lo.y + hi.y) * 0.5
-                + n * spots[0].dot(n),
-            axes,
-            half: ((hi.x - lo.x) * 0.5, (hi.y - lo.y) * 0.5),
-        }
-    });
-    let side = side.max(1);
-    let cells = (side * side) as usize;
-    let (mut sum, mut count) = (vec![0.0f32; cells], vec![0u32; cells]);
-    let mut opens = Vec::with_capacity(spots.len());
-    for &p in &spots {
-        let open = open_share_at(scene, leaf, p, OPEN_RAYS_PER_POINT, 1.0, opacity, &mut rng);
-        let c = frame.cell(side, p);
-        sum[c] += open;
-        count[c] += 1;
-        opens.push(open);
-    }
-    let mean = opens.iter().sum::<f32>() / spots.len() as f32;
-    let cells: Vec<f32> = sum
-        .iter()
-        .zip(&count)
-        .map(|(s, &c)| if c > 0 { s / c as f32 } else { mean })
-        .collect();
-    let (mut seen_open, mut seen_map) = ([0.0f32; 8], [0.0f32; 8]);
-    for (&p, &open) in spots.iter().zip(&opens) {
-        let in_map = cells[frame.cell(side, p)];
-        for j in 0..8 {
-            let v = scene.transmittance(p, direction_in_octant(j, &mut rng), leaf as u32, opacity);
-            seen_open[j] += open * v;
-            seen_map[j] += in_map * v;
-        }
-    }
-    OpenMap {
-        mean,
-        frame,
-        side,
-        cells,
-        residual: std::array::from_fn(|j| {
-            if seen_map[j] > 0.0 {
-                (seen_open[j] / seen_map[j]).clamp(GAIN_RANGE.0, GAIN_RANGE.1)
-            } else {
-                1.0
-            }
-        }),
-    }
 }
 
 /// [`seen_part_gains`] of each of `leaves` (indices into `scene`), on up to `threads` threads.
@@ -564,55 +407,6 @@ mod tests {
             assert_eq!(d.signum(), octant.signum(), "octant {j}: {d}");
             assert!((d.length() - 1.0).abs() < 1e-5);
         }
-    }
-
-    /// The roof over the leaf's −x half, in an open-share map of 4 × 4 cells: the cells of the
-    /// open half read above the leaf's mean and those under the roof below it, and what the
-    /// map leaves for the eye's direction is little — from below, where the whole leaf is in
-    /// view, exactly nothing.
-    #[test]
-    fn an_open_share_map_keeps_which_part_of_the_leaf_is_open() {
-        let scene = LeafScene::new(&leaf_under_a_roof());
-        let map = open_map(&scene, 0, None, 4, 256, &|_| 1.0, 5);
-        assert_eq!(map.cells.len(), 16);
-        // Open half ≈ 0.95 (less near the roof's edge), covered half 0.5: mean ≈ 0.7.
-        assert!((0.64..0.78).contains(&map.mean), "{}", map.mean);
-        let open_side = map.gain_at(Vec3::new(0.4, 0.0, 0.1));
-        let covered = map.gain_at(Vec3::new(-0.4, 0.0, -0.2));
-        assert!(open_side > 1.25, "{open_side}");
-        assert!((0.6..0.8).contains(&covered), "{covered}");
-        for (j, d) in DIRECTIONS.iter().enumerate() {
-            let r = map.residual[j];
-            if d.y > 0.0 {
-                // From above only the open half shows, and the map already knows it is open.
-                assert!((0.95..1.12).contains(&r), "octant {j}: {:?}", map.residual);
-            } else {
-                assert!((r - 1.0).abs() < 1e-4, "octant {j}: {:?}", map.residual);
-            }
-        }
-        // From straight above, at the open half: the seen part's gain, as traced along the
-        // eye's direction (1.2–1.45 in the test above).
-        let above = map.gain_towards(Vec3::new(0.4, 0.0, 0.1), Vec3::Y);
-        assert!((1.25..1.5).contains(&above), "{above}");
-        // A lone leaf: every cell its mean; nothing to leave for the eye.
-        let mut lone = LeafSet::default();
-        push_square_leaf(
-            &mut lone,
-            Vec3::ZERO,
-            0.1,
-            Vec3::new(0.2, 0.5, 1.0).normalize(),
-        );
-        let lone = LeafScene::new(&lone);
-        let map = open_map(&lone, 0, None, 3, 36, &|_| 1.0, 2);
-        assert!((map.mean - 1.0).abs() < 1e-6);
-        assert!(map.cells.iter().all(|c| (c - 1.0).abs() < 1e-6));
-        assert_eq!(map.residual, [1.0; 8]);
-        assert_eq!(map.gain_towards(Vec3::new(0.05, 0.0, 0.0), Vec3::X), 1.0);
-        // A leaf that is not there: no change.
-        assert_eq!(
-            open_map(&lone, 3, None, 3, 36, &|_| 1.0, 2).gain_at(Vec3::ZERO),
-            1.0
-        );
     }
 
     /// The covered part's gain is the ratio it stands for, from the sky's gain and the mean
