@@ -300,16 +300,8 @@ mod tests {
     use super::*;
     use crate::lighting::bins::DIRECTIONS;
     use crate::lighting::path_trace::push_square_leaf;
+    use crate::lighting::seen_part::tests::leaf_under_a_roof;
     use crate::pruning::leaves::LeafSet;
-
-    /// Leaf 0: side 1 at the origin, facing up; leaf 1, its roof: side 1.2 centred over
-    /// x = −0.6, just above, covering x < 0 (and a margin).
-    fn leaf_under_a_roof() -> LeafSet {
-        let mut leaves = LeafSet::default();
-        push_square_leaf(&mut leaves, Vec3::ZERO, 0.5, Vec3::Y);
-        push_square_leaf(&mut leaves, Vec3::new(-0.6, 0.02, 0.0), 0.6, Vec3::Y);
-        leaves
-    }
 
     /// The roof over the leaf's −x half, in an open-share map of 4 × 4 cells: the cells of the
     /// open half read above the leaf's mean and those under the roof below it, and what the
@@ -336,7 +328,7 @@ mod tests {
             }
         }
         // From straight above, at the open half: the seen part's gain, as traced along the
-        // eye's direction (1.2–1.45 in the test above).
+        // eye's direction (1.2–1.45 in `seen_part`'s test of the same roof).
         let above = map.gain_towards(Vec3::new(0.4, 0.0, 0.1), Vec3::Y);
         assert!((1.25..1.5).contains(&above), "{above}");
         // A lone leaf: every cell its mean; nothing to leave for the eye.

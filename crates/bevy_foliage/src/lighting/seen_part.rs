@@ -48,7 +48,7 @@
 //! residual gains, 15.2 points on average over four seeds at eye (0, 0.3, 1) (14.5–16.5), where
 //! the eight gains alone from the same 32 points give 18.0 (17.4–18.4) and from a bake's 16
 //! points 19.5; every tree 2.8–4.7 %; over the five eyes (seed 0) the olive 3.4–4.6 %, the ash
-//! 3.1–3.8, the oak 3.3–3.8, the cedar 1.6–3.1 (the eight gains from 32 points: 4.5–4.9,
+//! 3.1–3.8, the oak 3.3–3.8, the cedar 1.6–3.1 (the eight gains from 32 points: 4.5–5.5,
 //! 4.4–5.4, 3.9–5.0, 2.1–3.7); stored as a bake would store it, within 0.1 point at eye (0,
 //! 0.3, 1). At 16 points the map gains little (18.0–18.8), 4 × 4 cells no more than 3 × 3, and
 //! the map alone, without its residual gains, leaves the bias at −3…−5.6 %; a plane of open
@@ -300,7 +300,7 @@ pub fn covered_gain(gain: f32, open: f32) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::lighting::path_trace::push_square_leaf;
     use crate::pruning::leaves::LeafSet;
@@ -323,7 +323,7 @@ mod tests {
 
     /// Leaf 0: side 1 at the origin, facing up; leaf 1, its roof: side 1.2 centred over
     /// x = −0.6, just above, covering x < 0 (and a margin).
-    fn leaf_under_a_roof() -> LeafSet {
+    pub(crate) fn leaf_under_a_roof() -> LeafSet {
         let mut leaves = LeafSet::default();
         push_square_leaf(&mut leaves, Vec3::ZERO, 0.5, Vec3::Y);
         push_square_leaf(&mut leaves, Vec3::new(-0.6, 0.02, 0.0), 0.6, Vec3::Y);
