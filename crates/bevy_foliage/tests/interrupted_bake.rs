@@ -12,8 +12,8 @@ use std::process::Command;
 fn bake_into(out: &Path) -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_foliage_bake"));
     command
-        // Two rays a bin and two points a leaf for the seen-part gains: the determinism of
-        // both is checked too, at a fraction of the default bake's cost.
+        // Two rays a bin and two points a leaf for the seen-part gains and the open maps: the
+        // determinism of each is checked too, at a fraction of the default bake's cost.
         .args([
             "--resolution",
             "64",
@@ -22,6 +22,8 @@ fn bake_into(out: &Path) -> Command {
             "--rays-per-bin",
             "2",
             "--seen-points",
+            "2",
+            "--open-map-points",
             "2",
             "--out",
         ])

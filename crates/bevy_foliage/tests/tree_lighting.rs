@@ -18,6 +18,7 @@ use bevy_foliage::lighting::model::{
     SkyLight, SunBounce, SunThroughCrown, bounce_radiance, bounce_radiance_by_face, open_share,
     sky_radiance, sun_radiance, sun_through_crown,
 };
+use bevy_foliage::lighting::open_map::{self, LeafOpenMap, StoredOpenMap};
 use bevy_foliage::lighting::path_trace::LeafScene;
 use bevy_foliage::lighting::seen_part::{covered_gain, gain_of, quantize_gain, seen_gain};
 use bevy_foliage::lighting::settings::BounceRingSettings;
@@ -49,6 +50,9 @@ const STRONG_GAIN: f32 = 3.0;
 /// The strong stage's hotspot: the exponent on the blended sun (darker where the crown's blend,
 /// scaled by the strong gains, stays below 1) and the factor on the bounce.
 const STRONG_HOTSPOT: (f32, f32) = (3.0, 2.0);
+/// Open-map cell gains for the strong bake, row by row: no two alike, the grid not symmetric
+/// about either axis or its diagonal.
+const STRONG_CELLS: [f32; 9] = [0.4, 1.0, 2.6, 1.7, 0.6, 2.1, 0.8, 3.2, 0.5];
 
 fn srgb(linear: f32) -> f32 {
     let c = linear.clamp(0.0, 1.0);
@@ -268,6 +272,10 @@ struct Check {
     /// Compared pixels the ring's own hotspot on its shares moves by more than 3/255 from the
     /// bake's hotspot on them.
     ring_hotspot_visible: u32,
+    /// Compared pixels the leaves' open maps move by more than 3/255 from the eight gains, and
+    /// pixels inside a leaf not compared for straddling two of its map's cells.
+    map_visible: u32,
+    map_edges: u32,
     /// Compared pixels the crown's hotspot moves by more than 3/255, and those its exponent on
     /// the sun alone moves so.
     hotspot_visible: u32,
@@ -357,6 +365,18 @@ fn compare_with_model(
     // shader reads the ring's sunlit shares along) with its barycentric weight, with which
     // the rasteriser carries the vertices' shares to the pixel.
     let radii = baked.leaf_radii();
+    let (centroids, open_maps) = (baked.leaf_centroids(), baked.leaf_open_maps());
+    // Which cell of its leaf's open map a model point reads, by the gain there (equal gains
+    // read alike): a pixel whose centre lies within a tenth of a pixel of a cell's edge is not
+    // compared (the rasteriser's interpolation and the ray may fall on either side).
+    let map_cell = |leaf: u32, p: Vec3| -> u8 {
+        open_maps.get(leaf as usize).map_or(0, |m| {
+            let g = m
+                .map
+                .gain_at(p - centroids[leaf as usize], radii[leaf as usize]);
+            open_map::quantize_cell_gain(g)
+        })
+    };
     let corners_at = |leaf: u32, p: Vec3| -> Vec<(Vec3, f32)> {
         let leaf = leaf as usize;
         let range =
@@ -397,7 +417,9 @@ fn compare_with_model(
                     shares_on: bool,
                     slopes_on: bool,
                     ring_spot_on: bool,
+                    map_on: bool,
                     corners: &[(Vec3, f32)],
+                    at: Vec3,
                     outside: f32,
                     at_leaf: Option<f32>|
      -> Vec3 {
@@ -482,7 +504,25 @@ fn compare_with_model(
         } else {
             Vec3::ZERO
         };
-        sky_radiance(&optics, n, wo, &a, &sky) * seen
+        // The sky from the leaf's open map where it has one: the cell at the point (`at`, from
+        // the leaf's centroid) times the residual gains blended towards the eye at each vertex
+        // of the pixel's triangle and carried to the pixel by its barycentric weights, as the
+        // vertex stage blends them.
+        let sky_gain = match open_maps.get(leaf as usize) {
+            Some(m) if lighting.seen_part && map_on && m.is_map() => {
+                let (centroid, radius) = (centroids[leaf as usize], radii[leaf as usize]);
+                let residual: f32 = corners
+                    .iter()
+                    .map(|&(across, weight)| {
+                        let vertex = centroid + across * radius.max(1e-6);
+                        weight * seen_gain(&m.residual_gains(), (eye_local - vertex).normalize())
+                    })
+                    .sum();
+                m.map.gain_at(at, radius) * residual
+            }
+            _ => seen,
+        };
+        sky_radiance(&optics, n, wo, &a, &sky) * sky_gain
             + sun_radiance(&optics, n, wo, to_sun, through, e_sun)
             + bounced
     };
@@ -539,6 +579,8 @@ fn compare_with_model(
         slopes_visible: 0,
         hotspot_visible: 0,
         hotspot_sun_visible: 0,
+        map_visible: 0,
+        map_edges: 0,
         sunlit: 0,
         shaded: 0,
         texel_in_leaves: (f32::INFINITY, 0.0),
@@ -565,6 +607,15 @@ fn compare_with_model(
             {
                 continue;
             }
+            let local = from_world.transform_point3(point);
+            let cell = map_cell(leaf, local);
+            if corners.iter().any(|c| {
+                ray_leaf(centre + *c * 0.1)
+                    .is_none_or(|h| map_cell(leaf, from_world.transform_point3(h.1)) != cell)
+            }) {
+                check.map_edges += 1;
+                continue;
+            }
             if leaf_shadows {
                 let (texel, size) = (texel_at(point), leaves.diameter(leaf as usize));
                 assert!(
@@ -589,7 +640,8 @@ fn compare_with_model(
             }
             // The pixel the model gives with the bounce, the covered part's gain and the
             // hotspot each on or off, in 255ths of sRGB.
-            let corners = corners_at(leaf, from_world.transform_point3(point));
+            let corners = corners_at(leaf, local);
+            let at = local - centroids[leaf as usize];
             let pixel = |bounce: bool,
                          covered: bool,
                          hotspot: bool,
@@ -598,14 +650,21 @@ fn compare_with_model(
                          shares: bool,
                          slopes: bool| {
                 expected(
-                    leaf, bounce, covered, hotspot, ratios, ring, shares, slopes, true, &corners,
-                    outside, at_leaf,
+                    leaf, bounce, covered, hotspot, ratios, ring, shares, slopes, true, true,
+                    &corners, at, outside, at_leaf,
                 )
                 .to_array()
                 .map(|c| srgb(c) * 255.0)
             };
             let bake_spot_on_shares = expected(
-                leaf, true, true, true, true, true, true, true, false, &corners, outside, at_leaf,
+                leaf, true, true, true, true, true, true, true, false, true, &corners, at, outside,
+                at_leaf,
+            )
+            .to_array()
+            .map(|c| srgb(c) * 255.0);
+            let no_map = expected(
+                leaf, true, true, true, true, true, true, true, true, false, &corners, at, outside,
+                at_leaf,
             )
             .to_array()
             .map(|c| srgb(c) * 255.0);
@@ -653,6 +712,9 @@ fn compare_with_model(
             }
             if (0..3).any(|c| (want[c] - bake_spot_on_shares[c]).abs() > 3.0) {
                 check.ring_hotspot_visible += 1;
+            }
+            if (0..3).any(|c| (want[c] - no_map[c]).abs() > 3.0) {
+                check.map_visible += 1;
             }
             if (0..3).any(|c| (want[c] - no_hotspot[c]).abs() > 3.0) {
                 check.hotspot_visible += 1;
@@ -703,10 +765,28 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         worst,
         bounce_visible,
         ratios_visible,
+        map_visible,
+        map_edges,
         ..
     } = check;
     println!(
         "the bake's own bounce ratios move {ratios_visible} of {compared} leaf pixels by > 3/255"
+    );
+    // The leaves' open maps are a visible part of what is checked: the sky read from the cell
+    // under the pixel, against the eight gains.
+    println!(
+        "the bake's open maps move {map_visible} of {compared} leaf pixels by > 3/255 ({map_edges} pixels on cell edges not compared)"
+    );
+    let mapped = baked.leaf_open_maps().iter().filter(|m| m.is_map()).count();
+    println!("{mapped} of {} leaves have an open map", baked.leaf_count());
+    assert!(
+        mapped * 10 >= baked.leaf_count() * 9,
+        "the bake stores only {mapped} of {} leaves' open maps",
+        baked.leaf_count()
+    );
+    assert!(
+        map_visible * 2 >= compared,
+        "the open maps show in too few pixels ({map_visible} of {compared}) for the test to see them"
     );
     println!(
         "tree lighting: {compared} pixels inside leaves compared, {within} within 3/255, worst {worst:.1}/255; the bounce moves {bounce_visible} of them by > 6/255; the crown's hotspot {:?}",
@@ -791,8 +871,23 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         back: std::array::from_fn(|k| 6.0 + 0.3 * k as f32),
     }
     .quantized();
+    // And strong open maps, each cell and each octant's residual gain its own (so a shader
+    // that reads the cells on the wrong axes or in the wrong order, or the residual gains out
+    // of order, fails), on each leaf's own grid.
+    let strong_open: Vec<LeafOpenMap> = baked
+        .leaf_open
+        .iter()
+        .map(|m| LeafOpenMap {
+            map: StoredOpenMap {
+                cells: STRONG_CELLS.map(open_map::quantize_cell_gain),
+                axes: m.map.axes,
+            },
+            residual: std::array::from_fn(|j| quantize_gain(0.6 + 0.15 * j as f32)),
+        })
+        .collect();
     let strong = BakedFoliage {
         leaf_seen: vec![[quantize_gain(STRONG_GAIN); 8]; baked.leaf_count()],
+        leaf_open: strong_open,
         leaf_bounce: vec![strong_ratios; baked.leaf_count()],
         hotspot: Hotspot {
             sun: [STRONG_HOTSPOT.0; HOTSPOT_NODES],
@@ -872,6 +967,16 @@ fn leaves_show_the_light_the_cpu_model_gives_them() {
         covered.hotspot_visible,
         covered.compared,
         covered.hotspot_sun_visible
+    );
+    println!(
+        "the strong open maps move {} of {} by > 3/255 ({} on cell edges not compared)",
+        covered.map_visible, covered.compared, covered.map_edges
+    );
+    assert!(
+        covered.map_visible * 4 >= covered.compared * 3,
+        "the strong open maps show in too few pixels ({} of {}) for the test to see them",
+        covered.map_visible,
+        covered.compared
     );
     assert!(
         covered.within as f32 >= 0.99 * covered.compared as f32,

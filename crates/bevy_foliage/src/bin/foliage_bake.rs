@@ -3,7 +3,7 @@
 //! ```text
 //! cargo run -p bevy_foliage --bin foliage_bake -- [--out DIR] [--resolution N] [--depth D]
 //!     [--leaf-material NAME ...] [--rays-per-bin R | --neighbour-bins] [--seen-points P]
-//!     [--bounce-rays R] [--bounce-pool K] [--no-hotspot] [TREE | FILE.gltf | FILE.glb ...]
+//!     [--open-map-points P] [--bounce-rays R] [--bounce-pool K] [--no-hotspot] [TREE | FILE.gltf | FILE.glb ...]
 //! ```
 //! TREE is one of `olea`, `fraxinus`, `quercus`, `cedrus` (the thesis' test trees; default: all);
 //! a glTF file is split into leaves as `bevy_foliage::pruning::gltf` documents.
@@ -12,6 +12,9 @@
 //! `--neighbour-bins`: §5.6's estimate from the neighbours instead.
 //! `--seen-points`: points per leaf for the gains from a leaf's mean light to the part of it
 //! in view (`lighting::seen_part`; default 32, twice a bake at load time's; 0 for none); their time is the envelope stage's.
+//! `--open-map-points`: points per leaf for its map of the open share across it, which the
+//! sky takes in place of those gains (`lighting::open_map`; default 32, as at load time; 0 for
+//! none); the envelope stage's time too.
 //! `--bounce-rays`: rays per leaf for the bounce gathered from its neighbours
 //! (`lighting::gathered_bounce`; default 64, twice a bake at load time's; 0 for none: eq. 5.24
 //! alone); the envelope stage's time too. `--bounce-pool`: leaves whose gathers make each
@@ -84,6 +87,11 @@ fn main() {
             "--seen-points" => {
                 settings.seen_points = value("--seen-points").parse().expect("--seen-points P")
             }
+            "--open-map-points" => {
+                settings.open_map_points = value("--open-map-points")
+                    .parse()
+                    .expect("--open-map-points P")
+            }
             "--bounce-rays" => {
                 settings.bounce_rays = value("--bounce-rays").parse().expect("--bounce-rays R")
             }
@@ -92,7 +100,7 @@ fn main() {
             }
             "--help" | "-h" => {
                 eprintln!(
-                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [--seen-points P] [--bounce-rays R] [--bounce-pool K] [--no-hotspot] [olea|fraxinus|quercus|cedrus ...]"
+                    "foliage_bake [--out DIR] [--resolution N] [--depth D | --leaves-per-cell N] [--rays-per-bin R | --neighbour-bins] [--seen-points P] [--open-map-points P] [--bounce-rays R] [--bounce-pool K] [--no-hotspot] [olea|fraxinus|quercus|cedrus ...]"
                 );
                 return;
             }

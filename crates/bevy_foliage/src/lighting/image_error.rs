@@ -20,7 +20,7 @@ use super::leaf_scene::LeafScene;
 use super::model::{
     LeafMaterial, SkyLight, SunBounce, SunThroughCrown, bsdf, lobe_blend, open_share, sun_radiance,
 };
-use super::open_map::{MapFrame, STORED_SIDE, StoredOpenMap, open_map};
+use super::open_map::{LeafOpenMap, MapFrame, STORED_SIDE, open_map};
 use super::path_trace::{
     ComponentError, ModelLight, TraceLight, TraceSettings, component_error, envelope_by, gather,
     luminance,
@@ -160,8 +160,8 @@ pub struct ImageComparison {
     /// Per map of [`ImageSettings::open_maps`], as `seen` with the gain from each leaf's
     /// open-share map read at the eye ray's point, then that times the map's residual gains
     /// blended towards the eye, then (for a map of [`STORED_SIDE`] cells over the leaf's
-    /// square) that as a bake stores it ([`StoredOpenMap`], the residual gains quantised as
-    /// the gains are): what the leaf shaders would draw. Empty with `seen`.
+    /// square) that as a bake stores it ([`LeafOpenMap`], the residual gains quantised as
+    /// the gains are): what a bake stores and the leaf shaders draw. Empty with `seen`.
     pub open_maps: Vec<OpenMapRows>,
     /// As `seen` (or the last model), the sun's term and the bounce scaled by the crown's
     /// hotspot at the image's phase angle; empty unless [`ImageSettings::hotspot`].
@@ -876,23 +876,14 @@ pub fn images_against_tracer(
                         let with_residual = measure(&with_gain(&through, 1.0, &|_, s| {
                             maps[s.leaf as usize].gain_towards(s.point, view)
                         }));
+                        // As a bake stores the map and the leaf shaders read it: the cell at
+                        // the point times the residual gains' blend towards the eye.
                         let stored = if of_leaf && side == STORED_SIDE {
-                            let stored: Vec<(StoredOpenMap, [f32; 8])> = maps
-                                .iter()
-                                .map(|m| {
-                                    let residual = m.residual.map(|g| {
-                                        super::seen_part::gain_of(super::seen_part::quantize_gain(
-                                            g,
-                                        ))
-                                    });
-                                    (StoredOpenMap::of(m), residual)
-                                })
-                                .collect();
+                            let stored: Vec<LeafOpenMap> =
+                                maps.iter().map(LeafOpenMap::of).collect();
                             measure(&with_gain(&through, 1.0, &|_, s| {
-                                let (map, residual) = &stored[s.leaf as usize];
                                 let (centre, radius) = centroids[s.leaf as usize];
-                                (map.gain_at(s.point - centre, radius) * seen_gain(residual, view))
-                                    .clamp(GAIN_RANGE.0, GAIN_RANGE.1)
+                                stored[s.leaf as usize].sky_gain(s.point - centre, radius, view)
                             }))
                         } else {
                             Vec::new()

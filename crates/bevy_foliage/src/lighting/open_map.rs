@@ -16,11 +16,15 @@
 //! sky (`tree_lighting_error --images --open-maps CxP[r]`, see [`super::seen_part`]): 3 × 3
 //! cells from 32 points, times the residual gains, take the four procedural trees' image
 //! error from 18.0 to 15.2 points summed over the trees (four seeds, against the eight gains
-//! from as many points). Plain Rust, no render types; not yet baked or drawn.
+//! from as many points). A bake stores each leaf's map with its residual gains
+//! ([`LeafOpenMap`], [`open_maps_of`]); the leaf vertex stage blends the residual gains towards
+//! the eye on the sky, and the fragment stage reads the cell under the pixel. Plain Rust, no
+//! render types.
 
 use super::leaf_scene::LeafScene;
 use super::seen_part::{
-    GAIN_RANGE, OPEN_RAYS_PER_POINT, direction_in_octant, open_share_at, seen_gain,
+    GAIN_RANGE, OPEN_RAYS_PER_POINT, direction_in_octant, gain_of, open_share_at, quantize_gain,
+    seen_gain,
 };
 use super::sunlit_share::PlaneFit;
 use crate::rng::SplitMix64;
@@ -28,6 +32,16 @@ use bevy::math::Vec3;
 
 /// Cells a side of a map as a bake stores it.
 pub const STORED_SIDE: u32 = 3;
+
+/// Points per leaf for its map in a bake ([`open_maps_of`]): 3 × 3 cells from 32 points, times
+/// their residual gains, measured best of the sides and counts tried (4 × 4 cells from as many
+/// points no better; from 16 points a small gain over the eight gains alone). At load time and
+/// in `foliage_bake` alike: on the olive's 16,107 leaves they cost 8.5 s on two cores.
+pub const DEFAULT_OPEN_MAP_POINTS: u32 = 32;
+
+/// Bytes of a [`LeafOpenMap`] in a bake file: the residual gains (eight `u16`), the nine cell
+/// codes and the two axes.
+pub const LEAF_OPEN_MAP_BYTES: usize = 29;
 
 /// Where an [`OpenMap`]'s grid lies on its leaf: a rectangle in the leaf's plane.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -241,6 +255,141 @@ impl StoredOpenMap {
     }
 }
 
+/// A leaf's map as a bake stores it: the map ([`StoredOpenMap`]) and its residual gains per
+/// octant of the eye, quantised as the seen part's gains ([`quantize_gain`]). The sky the eye
+/// sees at a point of the leaf is the leaf's mean sky times [`LeafOpenMap::sky_gain`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LeafOpenMap {
+    /// The cells and the grid's axes (all cells 0: no map).
+    pub map: StoredOpenMap,
+    /// The residual gains, indexed as [`super::bins::DIRECTIONS`].
+    pub residual: [u16; 8],
+}
+
+impl LeafOpenMap {
+    /// `map` as stored: none where it is not a map of [`STORED_SIDE`] cells a side.
+    pub fn of(map: &OpenMap) -> Self {
+        let stored = StoredOpenMap::of(map);
+        if stored == StoredOpenMap::default() {
+            return Self::default();
+        }
+        Self {
+            map: stored,
+            residual: map.residual.map(quantize_gain),
+        }
+    }
+
+    /// Whether the leaf has a map (else its sky takes the seen part's eight gains).
+    pub fn is_map(&self) -> bool {
+        self.map.cells != [0; 9]
+    }
+
+    /// The residual gains as stored.
+    pub fn residual_gains(&self) -> [f32; 8] {
+        self.residual.map(gain_of)
+    }
+
+    /// The gain on the leaf's mean sky at the point `offset` from the leaf's centroid (a leaf
+    /// of radius `radius`) seen from direction `to_eye`: the cell's gain times the residual
+    /// gains blended towards the eye ([`seen_gain`]), as the leaf shaders take them (the
+    /// blend at the vertex, the cell at the pixel); 1 without a map.
+    pub fn sky_gain(&self, offset: Vec3, radius: f32, to_eye: Vec3) -> f32 {
+        if !self.is_map() {
+            return 1.0;
+        }
+        self.map.gain_at(offset, radius) * seen_gain(&self.residual_gains(), to_eye)
+    }
+
+    /// The bytes a bake file holds ([`LEAF_OPEN_MAP_BYTES`]): the residual gains little-endian,
+    /// the cells, the axes.
+    pub fn to_bytes(&self) -> [u8; LEAF_OPEN_MAP_BYTES] {
+        let mut out = [0u8; LEAF_OPEN_MAP_BYTES];
+        for (j, g) in self.residual.iter().enumerate() {
+            out[2 * j..2 * j + 2].copy_from_slice(&g.to_le_bytes());
+        }
+        out[16..25].copy_from_slice(&self.map.cells);
+        out[25..27].copy_from_slice(&self.map.axes[0]);
+        out[27..29].copy_from_slice(&self.map.axes[1]);
+        out
+    }
+
+    /// [`LeafOpenMap::to_bytes`]' inverse.
+    pub fn from_bytes(b: &[u8; LEAF_OPEN_MAP_BYTES]) -> Self {
+        Self {
+            map: StoredOpenMap {
+                cells: std::array::from_fn(|c| b[16 + c]),
+                axes: [[b[25], b[26]], [b[27], b[28]]],
+            },
+            residual: std::array::from_fn(|j| u16::from_le_bytes([b[2 * j], b[2 * j + 1]])),
+        }
+    }
+
+    /// The eight words the leaf shaders read: the residual gains two a word (octant `2k` in
+    /// the low half of word `k`), then the bytes from the cells on, four a word, low byte
+    /// first (cells 0–8, the axes' four bytes, three of padding).
+    pub fn words(&self) -> [u32; 8] {
+        let b = self.to_bytes();
+        let mut padded = [0u8; 32];
+        padded[..LEAF_OPEN_MAP_BYTES].copy_from_slice(&b);
+        std::array::from_fn(|k| {
+            if k < 4 {
+                self.residual[2 * k] as u32 | (self.residual[2 * k + 1] as u32) << 16
+            } else {
+                let i = 16 + 4 * (k - 4);
+                u32::from_le_bytes([padded[i], padded[i + 1], padded[i + 2], padded[i + 3]])
+            }
+        })
+    }
+}
+
+/// Each of `leaves`' stored map ([`LeafOpenMap`]) of [`STORED_SIDE`] cells a side from about
+/// `points` points, its grid on the square `frames(leaf)` gives it ([`MapFrame::of_leaf`],
+/// where the leaf shaders find it); `threads` workers (0: one).
+pub fn open_maps_of(
+    scene: &LeafScene,
+    leaves: &[u32],
+    frames: &(impl Fn(usize) -> MapFrame + Sync),
+    points: u32,
+    opacity: &(impl Fn(u32) -> f32 + Sync),
+    seed: u64,
+    threads: usize,
+) -> Vec<LeafOpenMap> {
+    // The seeds `tree_lighting_error --open-maps` measures with (`image_error`).
+    let base = 0x09E2_u64 ^ seed.wrapping_mul(0xD1B5_4A32_D192_ED03);
+    let chunk = leaves.len().div_ceil(threads.max(1)).max(1);
+    std::thread::scope(|s| {
+        let handles: Vec<_> = leaves
+            .chunks(chunk)
+            .enumerate()
+            .map(|(part_index, part)| {
+                s.spawn(move || {
+                    part.iter()
+                        .enumerate()
+                        .map(|(i, &leaf)| {
+                            let seed = base ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                            let frame = frames(part_index * chunk + i);
+                            let map = open_map(
+                                scene,
+                                leaf as usize,
+                                Some(frame),
+                                STORED_SIDE,
+                                points,
+                                opacity,
+                                seed,
+                            );
+                            LeafOpenMap::of(&map)
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("open-map thread"))
+            .collect()
+    })
+}
+
 /// Steps of a stored cell gain's logarithm: codes 1–255 span `log2` over [`GAIN_RANGE`]
 /// ([−2, 2], each step 1.1 % of the gain; 1 is code 128 exactly); code 0 is no map.
 const CELL_LOG2_STEPS: f32 = 254.0;
@@ -384,6 +533,57 @@ mod tests {
         // Another side of cells is not stored.
         let four = open_map(&scene, 0, Some(frame), 4, 64, &|_| 1.0, 4);
         assert_eq!(StoredOpenMap::of(&four), StoredOpenMap::default());
+    }
+
+    /// What a bake stores of a leaf's map: the same map as [`open_map`] on the leaf's square,
+    /// through bytes and back unchanged, laid out in the words the shaders read, and the sky's
+    /// gain the cell's times the residual gains' blend.
+    #[test]
+    fn a_leaf_open_map_is_the_map_on_its_square_as_stored() {
+        let leaves = leaf_under_a_roof();
+        let scene = LeafScene::new(&leaves);
+        let centroid = leaves.centroid(0);
+        let radius = leaves
+            .leaf_vertices(0)
+            .into_iter()
+            .map(|v| (leaves.positions[v as usize] - centroid).length())
+            .fold(0.0f32, f32::max);
+        let frame = MapFrame::of_leaf(centroid, scene.normal(0), radius);
+        let stored = open_maps_of(&scene, &[0, 1], &|_| frame, 32, &|_| 1.0, 0, 2);
+        assert_eq!(stored.len(), 2);
+        let m = stored[0];
+        assert!(m.is_map());
+        let base = 0x09E2_u64;
+        let map = open_map(&scene, 0, Some(frame), STORED_SIDE, 32, &|_| 1.0, base);
+        assert_eq!(m, LeafOpenMap::of(&map));
+        assert_eq!(LeafOpenMap::from_bytes(&m.to_bytes()), m);
+        let w = m.words();
+        assert_eq!(w[1], m.residual[2] as u32 | (m.residual[3] as u32) << 16);
+        assert_eq!(
+            w[5],
+            u32::from_le_bytes(m.map.cells[4..8].try_into().unwrap())
+        );
+        assert_eq!(w[6] & 0xff, m.map.cells[8] as u32);
+        assert_eq!(
+            (w[6] >> 8) & 0xffff,
+            u16::from_le_bytes(m.map.axes[0]) as u32
+        );
+        assert_eq!(w[6] >> 24, m.map.axes[1][0] as u32);
+        assert_eq!(w[7], m.map.axes[1][1] as u32);
+        let (at, to_eye) = (
+            Vec3::new(0.4, 0.0, 0.1),
+            Vec3::new(0.2, 1.0, 0.3).normalize(),
+        );
+        let want = m.map.gain_at(at - centroid, radius) * seen_gain(&m.residual_gains(), to_eye);
+        assert_eq!(m.sky_gain(at - centroid, radius, to_eye), want);
+        // The open half reads brighter than the covered one.
+        let covered = m.sky_gain(Vec3::new(-0.4, 0.0, -0.2) - centroid, radius, to_eye);
+        assert!(want > 1.2 && covered < 0.9, "{want} {covered}");
+        // A leaf that is not there has no map, and no map is no change.
+        let none = open_maps_of(&scene, &[7], &|_| frame, 32, &|_| 1.0, 0, 1);
+        assert!(!none[0].is_map());
+        assert_eq!(none[0].words(), [0; 8]);
+        assert_eq!(LeafOpenMap::default().sky_gain(Vec3::X, 1.0, Vec3::Y), 1.0);
     }
 
     #[test]

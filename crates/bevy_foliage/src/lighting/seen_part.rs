@@ -42,7 +42,8 @@
 //! Most of what is left is where on the leaf the eye looks, which a map of the leaf's open
 //! share says wherever the eye is ([`super::open_map`]: cells over the leaf's square, what the
 //! map leaves for the eye's direction in eight residual gains; `tree_lighting_error --images
-//! --open-maps CxP[r]`). Not yet drawn by the shaders; measured (32-ray bins, pixels 1.4–2.5
+//! --open-maps CxP[r]`). A bake stores it and the leaf shaders draw the sky with it in place of
+//! the eight gains (the blended sun and the bounce keep them); measured (32-ray bins, pixels 1.4–2.5
 //! leaves wide, the sky's error summed over the four trees): 3 × 3 cells over the square a leaf
 //! shader can find ([`super::open_map::MapFrame::of_leaf`]) from 32 points a leaf, times its
 //! residual gains, 15.2 points on average over four seeds at eye (0, 0.3, 1) (14.5–16.5), where

@@ -93,6 +93,12 @@ pub struct BakeSettings {
     /// Points per leaf for the gains from a leaf's mean light to the part of it the eye sees
     /// ([`crate::lighting::seen_part`]); 0 leaves every gain at 1 (the thesis' model as it is).
     pub seen_points: u32,
+    /// Points per leaf for its map of the open share across it
+    /// ([`crate::lighting::open_map`]): what the eye sees of the leaf's sky read where the eye
+    /// looks on the leaf, times residual gains per octant of the eye, in place of the eight
+    /// gains on the sky; 0 stores none (the sky takes the eight gains). Where the bake traces
+    /// through the leaves.
+    pub open_map_points: u32,
     /// Rays per leaf for the bounce gathered from the leaf's own neighbours
     /// ([`crate::lighting::gathered_bounce`]): per leaf and face, for fourteen suns, the ratio
     /// of the gathered bounce to eq. 5.24's; 0 stores none (eq. 5.24 as it is). Where the bake
@@ -122,6 +128,7 @@ impl Default for BakeSettings {
             threads: 0,
             bins: BinEstimate::default(),
             seen_points: crate::lighting::seen_part::DEFAULT_SEEN_POINTS,
+            open_map_points: crate::lighting::open_map::DEFAULT_OPEN_MAP_POINTS,
             bounce_rays: crate::lighting::gathered_bounce::DEFAULT_BOUNCE_RAYS,
             bounce_pool: crate::lighting::gathered_bounce::DEFAULT_BOUNCE_POOL,
             hotspot: Default::default(),
@@ -235,6 +242,10 @@ pub struct BakedFoliage {
     /// of the eight octants ([`crate::lighting::seen_part`]), quantised by
     /// [`quantize_gain`](crate::lighting::seen_part::quantize_gain); empty: all 1.
     pub leaf_seen: Vec<[u16; 8]>,
+    /// Per stored leaf, its map of the open share across it with its residual gains
+    /// ([`crate::lighting::open_map::LeafOpenMap`]), which the sky takes in place of the
+    /// seen-part gains; empty: none.
+    pub leaf_open: Vec<crate::lighting::open_map::LeafOpenMap>,
     /// Per stored leaf, its bounce ratios: the bounce gathered from its neighbours over eq.
     /// 5.24's, per face and sun direction ([`crate::lighting::gathered_bounce`]), as
     /// [`BounceRatios::quantized`](crate::lighting::gathered_bounce::BounceRatios::quantized)
@@ -330,6 +341,31 @@ impl BakedFoliage {
             .collect()
     }
 
+    /// Per stored leaf, its open map as stored; empty for a bake without them (or with them for
+    /// another number of leaves).
+    pub fn leaf_open_maps(&self) -> &[crate::lighting::open_map::LeafOpenMap] {
+        if self.leaf_open.len() != self.leaf_count() {
+            return &[];
+        }
+        &self.leaf_open
+    }
+
+    /// Per stored leaf, the centroid of its vertices as the leaf shaders have it (a vertex's
+    /// position less its `centroid_offsets`); the origin for a leaf without vertices.
+    pub fn leaf_centroids(&self) -> Vec<Vec3> {
+        (0..self.leaf_count())
+            .map(|leaf| {
+                let start = self.leaf_index_start[leaf] as usize;
+                match self.indices.get(start) {
+                    Some(&v) if start < self.leaf_index_start[leaf + 1] as usize => {
+                        self.positions[v as usize] - self.centroid_offsets[v as usize]
+                    }
+                    _ => Vec3::ZERO,
+                }
+            })
+            .collect()
+    }
+
     /// Per stored leaf, its radius as the leaf shaders have it: its farthest vertex from its
     /// vertices' centroid (`centroid_offsets`); 0 for a leaf without vertices.
     pub fn leaf_radii(&self) -> Vec<f32> {
@@ -384,15 +420,15 @@ impl BakedFoliage {
     /// Bytes the GPU holds for this tree type: the packed leaf vertices, the stored index
     /// list, per-leaf index starts, per-cell leaf starts and visibility, and each leaf's
     /// light (attenuations, seen-part gains, bounce ratios and their ring, the ring's sunlit
-    /// shares and their slopes; `store::LEAF_LIGHT_WORDS`).
+    /// shares and their slopes, the open map; `store::LEAF_LIGHT_WORDS`).
     pub fn gpu_bytes(&self) -> usize {
-        // 16 words a vertex and 40 a leaf (`store::LEAF_VERTEX_WORDS`, `LEAF_LIGHT_WORDS`).
+        // 16 words a vertex and 48 a leaf (`store::LEAF_VERTEX_WORDS`, `LEAF_LIGHT_WORDS`).
         self.positions.len() * 16 * 4
             + self.indices.len() * 4
             + self.leaf_index_start.len() * 4
             + self.cell_first_leaf.len() * 4
             + self.visibility.len() * 2
-            + self.leaf_count() * 40 * 4
+            + self.leaf_count() * 48 * 4
     }
 }
 
@@ -468,6 +504,13 @@ pub fn bake_masked(
         return Err(BakeError::Settings(format!(
             "seen_points {} not in 0..={}",
             settings.seen_points,
+            crate::lighting::seen_part::MAX_SEEN_POINTS
+        )));
+    }
+    if settings.open_map_points > crate::lighting::seen_part::MAX_SEEN_POINTS {
+        return Err(BakeError::Settings(format!(
+            "open_map_points {} not in 0..={}",
+            settings.open_map_points,
             crate::lighting::seen_part::MAX_SEEN_POINTS
         )));
     }
@@ -548,6 +591,7 @@ pub fn bake_masked(
         centroid_offsets: Vec::new(),
         leaf_light: Vec::new(),
         leaf_seen: Vec::new(),
+        leaf_open: Vec::new(),
         leaf_bounce: Vec::new(),
         hotspot: Default::default(),
         extinction: 0.0,
@@ -711,6 +755,24 @@ pub fn bake_masked(
         .into_iter()
         .map(|g| g.map(quantize_gain))
         .collect();
+    }
+    if let (Some(scene), true) = (&scene, settings.open_map_points > 0) {
+        use crate::lighting::open_map::{MapFrame, open_maps_of};
+        // Each map's grid on the square the leaf shaders find from what a leaf vertex
+        // carries: the leaf's centroid and radius as stored, the leaf's own normal.
+        let (centroids, radii) = (baked.leaf_centroids(), baked.leaf_radii());
+        baked.leaf_open = open_maps_of(
+            scene,
+            &stored_leaves,
+            &|i| {
+                let normal = scene.normal(stored_leaves[i] as usize);
+                MapFrame::of_leaf(centroids[i], normal, radii[i])
+            },
+            settings.open_map_points,
+            &|_| opaque,
+            0,
+            threads,
+        );
     }
     // The leaves' optics the gathered ratios and the hotspot are measured with: the settings'
     // default (both are ratios, unchanged by the base colour that scales the optics).
@@ -894,6 +956,24 @@ mod tests {
             .filter(|(stored, want)| **stored == want.map(quantize_gain))
             .count();
         assert_eq!(same, b.leaf_count());
+        // The open maps likewise, each on the square the shaders find from the stored leaf's
+        // vertices.
+        use crate::lighting::open_map::{DEFAULT_OPEN_MAP_POINTS, MapFrame, open_maps_of};
+        let (centroids, radii) = (b.leaf_centroids(), b.leaf_radii());
+        let want_maps = open_maps_of(
+            &original_scene,
+            &original_of,
+            &|i| {
+                let normal = original_scene.normal(original_of[i] as usize);
+                MapFrame::of_leaf(centroids[i], normal, radii[i])
+            },
+            DEFAULT_OPEN_MAP_POINTS,
+            &|_| 1.0,
+            0,
+            2,
+        );
+        assert_eq!(b.leaf_open_maps(), want_maps.as_slice());
+        assert!(want_maps.iter().filter(|m| m.is_map()).count() * 10 >= b.leaf_count() * 9);
         // The part in view is the more open one: above 1 over the crown, from every octant.
         for j in 0..8 {
             let mean = want.iter().map(|g| g[j]).sum::<f32>() / want.len() as f32;
@@ -1115,6 +1195,29 @@ mod tests {
         );
         let absurd = BakeSettings {
             seen_points: u32::MAX,
+            ..settings
+        };
+        assert!(matches!(
+            bake(&tree.leaves, &absurd, &|_| {}),
+            Err(BakeError::Settings(_))
+        ));
+    }
+
+    /// With no points for the open maps, the bake stores none (the sky takes the eight gains);
+    /// an absurd count is refused.
+    #[test]
+    fn open_maps_can_be_left_out() {
+        let tree = generate(&TreeSpecies::olea().with_leaf_count(300));
+        let settings = BakeSettings {
+            cells: CellCount::Depth(3),
+            resolution: 32,
+            open_map_points: 0,
+            ..default()
+        };
+        let baked = bake(&tree.leaves, &settings, &|_| {}).unwrap().0;
+        assert!(baked.leaf_open.is_empty() && !baked.leaf_seen.is_empty());
+        let absurd = BakeSettings {
+            open_map_points: u32::MAX,
             ..settings
         };
         assert!(matches!(

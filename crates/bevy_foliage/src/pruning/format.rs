@@ -23,9 +23,9 @@ use std::path::Path;
 pub const MAGIC: &[u8; 8] = b"BNFOLIAG";
 /// Current format version; bump on any layout change.
 ///
-/// Version 6 added the leaves' opacity the bake traced them with
+/// Version 7 added each leaf's open map ([`BakedFoliage::leaf_open`]); version 6 added the leaves' opacity the bake traced them with
 /// ([`BakedFoliage::leaf_opacity`]); version 5 the bounce ratios, 4 the crown's hotspot.
-pub const FORMAT_VERSION: u32 = 6;
+pub const FORMAT_VERSION: u32 = 7;
 
 /// Why a baked foliage file could not be read.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -205,6 +205,8 @@ pub fn encode(baked: &BakedFoliage) -> Vec<u8> {
     w.u16s(&seen);
     let bounce: Vec<u8> = baked.leaf_bounce.iter().flatten().copied().collect();
     w.u8s(&bounce);
+    let open: Vec<u8> = baked.leaf_open.iter().flat_map(|m| m.to_bytes()).collect();
+    w.u8s(&open);
     w.u32s(&baked.hotspot.packed());
     w.u32s(&[baked.extinction.to_bits()]);
     w.u32s(&[baked.leaf_opacity.to_bits()]);
@@ -272,6 +274,7 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
     let light = r.u16s()?;
     let seen = r.u16s()?;
     let bounce = r.u8s()?;
+    let open = r.u8s()?;
     let hotspot = r.u32s()?;
     let extinction = r.u32s()?;
     let opacity = r.u32s()?;
@@ -301,6 +304,14 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
         .chunks_exact(STORED_RATIOS)
         .map(|c| std::array::from_fn(|j| c[j]))
         .collect();
+    use crate::lighting::open_map::{LEAF_OPEN_MAP_BYTES, LeafOpenMap};
+    if open.len() % LEAF_OPEN_MAP_BYTES != 0 {
+        return Err(FormatError::Invalid("open map section".into()));
+    }
+    let leaf_open = open
+        .chunks_exact(LEAF_OPEN_MAP_BYTES)
+        .map(|c| LeafOpenMap::from_bytes(c.try_into().expect("chunk of the map's size")))
+        .collect();
     let skipped = r.u32s()?;
     if r.at != payload.len() || skipped.len() != 3 {
         return Err(FormatError::Invalid("unexpected trailing data".into()));
@@ -318,6 +329,7 @@ pub fn decode(bytes: &[u8]) -> Result<BakedFoliage, FormatError> {
         centroid_offsets,
         leaf_light,
         leaf_seen,
+        leaf_open,
         leaf_bounce,
         hotspot,
         extinction: f32::from_bits(extinction[0]),
@@ -392,6 +404,13 @@ pub fn validate(b: &BakedFoliage) -> Result<(), FormatError> {
         return bad(format!(
             "seen-part gains for {} leaves, file has {}",
             b.leaf_seen.len(),
+            b.leaf_count()
+        ));
+    }
+    if !b.leaf_open.is_empty() && b.leaf_open.len() != b.leaf_count() {
+        return bad(format!(
+            "open maps for {} leaves, file has {}",
+            b.leaf_open.len(),
             b.leaf_count()
         ));
     }
@@ -502,6 +521,17 @@ pub(crate) mod tests {
         let mut no_seen = sample();
         no_seen.leaf_seen.clear();
         assert_eq!(decode(&encode(&no_seen)), Ok(no_seen));
+        // Open maps likewise: none (the sky takes the gains) or one a leaf, kept byte for byte.
+        let mut short_open = sample();
+        assert!(short_open.leaf_open.iter().any(|m| m.is_map()));
+        short_open.leaf_open.pop();
+        assert!(matches!(
+            decode(&encode(&short_open)),
+            Err(FormatError::Invalid(_))
+        ));
+        let mut no_open = sample();
+        no_open.leaf_open.clear();
+        assert_eq!(decode(&encode(&no_open)), Ok(no_open));
         // Bounce ratios likewise: none (eq. 5.24 alone) or one set a leaf, kept byte for byte.
         let mut short_bounce = sample();
         assert!(!short_bounce.leaf_bounce.is_empty());

@@ -6,8 +6,8 @@
 #import bevy_foliage::leaf_pulling::{SlotVertex, pull_leaf_vertex}
 #ifdef TREE_LIGHTING
 #import bevy_pbr::{mesh_functions, mesh_view_bindings::view}
-#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_bounce_ratios, leaf_has_ring_shares, leaf_params, leaf_ring_height, leaf_ring_hotspot, leaf_ring_ratios, leaf_ring_shares, leaf_seen_gains}
-#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, optics_of, ratio_towards, ratio_with_ring, ring_sun_at, seen_gain}
+#import bevy_foliage::leaf_pulling::{PulledLeafVertex, leaf_attenuation, leaf_bounce_ratios, leaf_has_ring_shares, leaf_open_map, leaf_open_residual, leaf_params, leaf_ring_height, leaf_ring_hotspot, leaf_ring_ratios, leaf_ring_shares, leaf_seen_gains}
+#import bevy_foliage::tree_lighting::{LeafLight, TreeLitVertexOutput, covered_gain, hotspot_at, leaf_radiance, lights_of, open_map_at, has_open_map, optics_of, ratio_towards, ratio_with_ring, ring_sun_at, seen_gain}
 
 // The tree instance's frame, read once per vertex: world directions into the model's frame
 // (the transpose undoes a rotation and, once normalised, a uniform scale), the instance's scale
@@ -34,6 +34,8 @@ fn tree_frame(instance_index: u32) -> TreeFrame {
 struct LitLeafVertex {
     light: LeafLight,
     ring_sun: vec4<f32>,
+    open_map: vec4<u32>,
+    open_at: vec2<f32>,
 }
 
 // The light leaf vertex `leaf` sends to the eye, worked out in the tree's frame for a leaf of
@@ -73,11 +75,23 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LitLeafVertex {
     // blended sun raised to its exponent, the bounce scaled.
     var seen = 1.0;
     var sun_exponent = 1.0;
+    var open_map = vec4(0u);
+    var open_at = vec2(0.0);
     let cos_alpha = dot(to_eye, frame.to_sun);
     if leaf_params.seen_part != 0u {
         seen = seen_gain(leaf_seen_gains(leaf.leaf), to_eye);
         sun_exponent = hotspot_at(leaf.hotspot.xy, cos_alpha);
-        light.sky *= seen;
+        // The sky from the leaf's map of its open share where it has one
+        // (`lighting::open_map`): the residual gains towards the eye here, the cell under the
+        // pixel in the fragment stage; the eight gains where not.
+        let map = leaf_open_map(leaf.leaf);
+        if has_open_map(map) {
+            light.sky *= seen_gain(leaf_open_residual(leaf.leaf), to_eye);
+            open_map = map;
+            open_at = open_map_at(map, leaf.offset, leaf.leaf_radius);
+        } else {
+            light.sky *= seen;
+        }
         light.through = pow(min(light.through * seen, 1.0), sun_exponent);
         light.bounce *= covered_gain(seen, light.open) * hotspot_at(leaf.hotspot.zw, cos_alpha);
     }
@@ -105,7 +119,7 @@ fn tree_light(leaf: PulledLeafVertex, frame: TreeFrame) -> LitLeafVertex {
     light.sky = select(light.sky * inverse, vec3(0.0), lacks);
     light.sun = select(light.sun * inverse, vec3(0.0), lacks);
     light.bounce = select(light.bounce * inverse, vec3(0.0), lacks);
-    return LitLeafVertex(light, ring_sun);
+    return LitLeafVertex(light, ring_sun, open_map, open_at);
 }
 
 // How far the sun's light travels from the leaf vertex after entering the crown from outside:
@@ -133,6 +147,8 @@ fn vertex(in: SlotVertex) -> TreeLitVertexOutput {
     let lit = tree_light(leaf, frame);
     let light = lit.light;
     out.ring_sun = lit.ring_sun;
+    out.open_map = lit.open_map;
+    out.open_at = lit.open_at;
     out.sky = light.sky;
     out.sun = light.sun;
     out.bounce = light.bounce;

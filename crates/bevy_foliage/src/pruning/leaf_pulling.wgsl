@@ -182,11 +182,28 @@ fn leaf_seen_gains(leaf: u32) -> array<f32, 8> {
     return g;
 }
 
+// The residual gains of leaf `leaf`'s open map, as the seen-part gains are stored
+// (`lighting::open_map::LeafOpenMap::residual_gains`).
+fn leaf_open_residual(leaf: u32) -> array<f32, 8> {
+    var g = unpack_eight(leaf_light[LEAF_LIGHT_VECS * leaf + 10u]);
+    for (var j = 0u; j < 8u; j += 1u) {
+        g[j] *= SEEN_GAIN_MAX;
+    }
+    return g;
+}
+
+// Leaf `leaf`'s open map as stored: nine cell codes a byte each (cells 0–3 in x, 4–7 in y,
+// 8 in z's low byte), then its grid's two axes two bytes each (z's upper three bytes, w's low
+// byte; `lighting::open_map::LeafOpenMap::words`). All cells 0: no map.
+fn leaf_open_map(leaf: u32) -> vec4<u32> {
+    return leaf_light[LEAF_LIGHT_VECS * leaf + 11u];
+}
+
 // The largest gain a bake stores (`lighting::seen_part::GAIN_RANGE`).
 const SEEN_GAIN_MAX: f32 = 4.0;
 
 // vec4s per leaf in `leaf_light` (`store::LEAF_LIGHT_WORDS` / 4).
-const LEAF_LIGHT_VECS: u32 = 10u;
+const LEAF_LIGHT_VECS: u32 = 12u;
 
 // 28 ratios stored a byte each in two vec4s (the last word not read): code 0 is 0, codes 1–255
 // the ratio's base-2 logarithm from −4 to 4 (`lighting::gathered_bounce::ratio_of`).

@@ -32,7 +32,7 @@
     shadows::{fetch_directional_shadow, get_cascade_index, world_to_directional_light_local},
 }
 #import bevy_foliage::leaf_pulling::leaf_params
-#import bevy_foliage::tree_lighting::{TreeLitVertexOutput, through_on_ring}
+#import bevy_foliage::tree_lighting::{TreeLitVertexOutput, open_map_gain, through_on_ring}
 
 // How the shadow map is read at the leaf, measured in `lighting::sun_maps`
 // (`LeafShadowPlane::SHADERS`): the slack, in texels, by which a texel's nearest leaf may lie in
@@ -192,7 +192,9 @@ fn fragment(in: TreeLitVertexOutput, @builtin(front_facing) is_front: bool) -> F
     // leaf's sunlit share on the ring here.
     let crown = through_on_ring(in.through_reach_size.x, in.ring_sun);
     let through = mix(crown * shadow.outside, shadow.at_leaf, shadow.trust);
-    let light = (in.sky + in.sun * through + in.bounce * shadow.outside) * base.rgb;
+    // The sky of the part of the leaf in view: the cell of the leaf's open map under the pixel.
+    let sky = in.sky * open_map_gain(in.open_map, in.open_at);
+    let light = (sky + in.sun * through + in.bounce * shadow.outside) * base.rgb;
     var out: FragmentOutput;
     out.color = main_pass_post_lighting_processing(
         pbr_input, vec4(light * view_bindings::view.exposure, base.a));

@@ -99,11 +99,12 @@ pub const LEAF_VERTEX_WORDS: usize = 16;
 /// (0: none, the bake's blend) and one of padding; the shares' slopes across the leaf
 /// ([`BounceRing::sunlit_slopes`], signed bytes, node `k`'s component `c` at byte `3k + c`;
 /// 0 where the ring has none), two bytes of padding and the ring's hotspot's last four
-/// nodes.
-pub const LEAF_LIGHT_WORDS: usize = 40;
+/// nodes; last, the leaf's open map ([`LeafOpenMap::words`](crate::lighting::open_map::LeafOpenMap::words): its residual gains, then its
+/// cells and axes; all 0 for none, `BakedFoliage::leaf_open`).
+pub const LEAF_LIGHT_WORDS: usize = 48;
 
 // `BakedFoliage::gpu_bytes` counts these sizes.
-const _: () = assert!(LEAF_VERTEX_WORDS == 16 && LEAF_LIGHT_WORDS == 40);
+const _: () = assert!(LEAF_VERTEX_WORDS == 16 && LEAF_LIGHT_WORDS == 48);
 
 /// Appends the [`LEAF_LIGHT_WORDS`] words of each of `tree`'s leaves to `out`, with `ring` (its
 /// sun height and per leaf its ratios and sunlit shares) as the type's ring; `None`, or a ring
@@ -118,6 +119,7 @@ pub fn push_leaf_light(tree: &BakedFoliage, ring: Option<&BounceRing>, out: &mut
         .map(|r| r.sunlit_slopes.as_slice())
         .filter(|s| shares.is_some() && s.len() == tree.leaf_count());
     let no_ratios = BounceRatios::default().quantized();
+    let open_maps = tree.leaf_open_maps();
     let ratio_words = |r: &[u8; STORED_RATIOS]| {
         r.chunks_exact(4)
             .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
@@ -179,6 +181,8 @@ pub fn push_leaf_light(tree: &BakedFoliage, ring: Option<&BounceRing>, out: &mut
                 .chunks_exact(4)
                 .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
         );
+        // The open map (none: all 0, the sky takes the eight gains).
+        out.extend(open_maps.get(leaf).copied().unwrap_or_default().words());
     }
 }
 
@@ -494,7 +498,8 @@ mod tests {
 
     /// Each leaf's words: the bake's values where they were, then its type's ring height and
     /// ring ratios (low byte first), or no ring's — also for a ring of the wrong size — and the
-    /// ring's shares, their slopes and its hotspot on them where it has them.
+    /// ring's shares, their slopes and its hotspot on them where it has them; the leaf's open map
+    /// last.
     #[test]
     fn the_leaf_light_words_hold_the_types_ring() {
         let tree = crate::pruning::format::tests::sample();
@@ -517,6 +522,19 @@ mod tests {
         let (mut with, mut without, mut wrong) = (Vec::new(), Vec::new(), Vec::new());
         push_leaf_light(&tree, Some(&ring), &mut with);
         push_leaf_light(&tree, None, &mut without);
+        // A bake without open maps, or with them for another number of leaves: all 0 there.
+        for open in [Vec::new(), tree.leaf_open[1..].to_vec()] {
+            let mut bare = Vec::new();
+            let no_maps = BakedFoliage {
+                leaf_open: open,
+                ..tree.clone()
+            };
+            push_leaf_light(&no_maps, None, &mut bare);
+            for leaf in 0..n {
+                let b = &bare[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
+                assert!(b[40..].iter().all(|&x| x == 0));
+            }
+        }
         let short = BounceRing {
             sun_height: 0.25,
             leaves: ring.leaves[1..].to_vec(),
@@ -598,7 +616,23 @@ mod tests {
                 }
             }
             assert!(bytes[42..44].iter().all(|&b| b == 0));
-            assert!(o[28..].iter().all(|&x| x == 0));
+            assert!(o[28..40].iter().all(|&x| x == 0));
+            // The open map last, ring or none: the residual gains, then cells and axes.
+            let m = tree.leaf_open[leaf];
+            assert!(m.is_map());
+            assert_eq!(w[40..48], m.words());
+            assert_eq!(o[40..48], m.words());
+            assert_eq!(w[40], m.residual[0] as u32 | (m.residual[1] as u32) << 16);
+            assert_eq!(
+                w[44],
+                u32::from_le_bytes(m.map.cells[..4].try_into().unwrap())
+            );
+            let a = m.map.axes;
+            assert_eq!(
+                w[46],
+                u32::from_le_bytes([m.map.cells[8], a[0][0], a[0][1], a[1][0]])
+            );
+            assert_eq!(w[47], a[1][1] as u32);
             // Shares without slopes keep the ring's hotspot.
             let f = &flat[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
             assert_eq!(f[..28], w[..28]);
@@ -607,7 +641,8 @@ mod tests {
             // No shares: no hotspot for them either.
             let u = &unshared[leaf * LEAF_LIGHT_WORDS..(leaf + 1) * LEAF_LIGHT_WORDS];
             assert_eq!(u[..23], w[..23]);
-            assert!(u[23..].iter().all(|&x| x == 0));
+            assert!(u[23..40].iter().all(|&x| x == 0));
+            assert_eq!(u[40..], w[40..]);
         }
     }
 }

@@ -153,6 +153,50 @@ fn seen_gain(gains: array<f32, 8>, to_eye: vec3<f32>) -> f32 {
     return select(1.0, blended / sum, sum > 0.0);
 }
 
+// Byte `i` of a leaf's open map as stored (`leaf_pulling::leaf_open_map`).
+fn open_map_byte(map: vec4<u32>, i: u32) -> u32 {
+    return (map[i / 4u] >> (8u * (i % 4u))) & 0xffu;
+}
+
+// Whether a stored open map holds cells (all 0: no map; `LeafOpenMap::is_map`).
+fn has_open_map(map: vec4<u32>) -> bool {
+    return map.x != 0u || map.y != 0u || (map.z & 0xffu) != 0u;
+}
+
+// A unit vector stored octahedrally in two bytes (`lighting::open_map::decode_axis`).
+fn open_map_axis(lo: u32, hi: u32) -> vec3<f32> {
+    var xy = vec2(f32(lo), f32(hi)) / 255.0 * 2.0 - 1.0;
+    let z = 1.0 - abs(xy.x) - abs(xy.y);
+    if z < 0.0 {
+        let s = select(vec2(-1.0), vec2(1.0), xy >= vec2(0.0));
+        xy = (1.0 - abs(xy.yx)) * s;
+    }
+    let v = vec3(xy, z);
+    return select(vec3(1.0, 0.0, 0.0), normalize(v), dot(v, v) > 0.0);
+}
+
+// Where a leaf vertex lies on its open map's grid: its offset from the leaf's centroid along
+// the grid's two axes, in units of the leaf's radius (−1 to 1 across the square). Linear in
+// the offset, so the rasteriser carries it to each pixel exactly.
+fn open_map_at(map: vec4<u32>, offset: vec3<f32>, radius: f32) -> vec2<f32> {
+    let r = max(radius, 1e-6);
+    return vec2(
+        dot(offset, open_map_axis(open_map_byte(map, 9u), open_map_byte(map, 10u))),
+        dot(offset, open_map_axis(open_map_byte(map, 11u), open_map_byte(map, 12u)))) / r;
+}
+
+// The gain of the open map's cell at `at` on its grid (`open_map_at`): the cell's open share
+// over the leaf's mean, its base-2 logarithm stored over [−2, 2] in 254 steps, codes 1–255
+// (`lighting::open_map::StoredOpenMap::gain_at`); 1 without a map.
+fn open_map_gain(map: vec4<u32>, at: vec2<f32>) -> f32 {
+    if !has_open_map(map) {
+        return 1.0;
+    }
+    let cell = clamp(floor((at + 1.0) * 0.5 * 3.0), vec2(0.0), vec2(2.0));
+    let q = open_map_byte(map, u32(cell.y) * 3u + u32(cell.x));
+    return select(1.0, exp2(f32(q - 1u) / 254.0 * 4.0 - 2.0), q != 0u);
+}
+
 // The seen-part gain of the part of the sphere the neighbours cover, where the bounce comes
 // from, for the sky's gain `gain` and the leaf's open share `open`
 // (`lighting::seen_part::covered_gain`).
@@ -438,4 +482,8 @@ struct TreeLitVertexOutput {
     // The leaf's sunlit share on its type's ring here, its seen-part gain, the crown's hotspot
     // exponent and the ring's weight (`ring_sun_at`; weight 0: `through` alone).
     @location(8) ring_sun: vec4<f32>,
+    // The leaf's open map (`leaf_pulling::leaf_open_map`; all 0: none) and where the vertex
+    // lies on its grid (`open_map_at`): the fragment scales the sky by the cell under it.
+    @location(9) @interpolate(flat) open_map: vec4<u32>,
+    @location(10) open_at: vec2<f32>,
 }
