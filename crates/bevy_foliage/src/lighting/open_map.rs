@@ -356,37 +356,19 @@ pub fn open_maps_of(
 ) -> Vec<LeafOpenMap> {
     // The seeds `tree_lighting_error --open-maps` measures with (`image_error`).
     let base = 0x09E2_u64 ^ seed.wrapping_mul(0xD1B5_4A32_D192_ED03);
-    let chunk = leaves.len().div_ceil(threads.max(1)).max(1);
-    std::thread::scope(|s| {
-        let handles: Vec<_> = leaves
-            .chunks(chunk)
-            .enumerate()
-            .map(|(part_index, part)| {
-                s.spawn(move || {
-                    part.iter()
-                        .enumerate()
-                        .map(|(i, &leaf)| {
-                            let seed = base ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-                            let frame = frames(part_index * chunk + i);
-                            let map = open_map(
-                                scene,
-                                leaf as usize,
-                                Some(frame),
-                                STORED_SIDE,
-                                points,
-                                opacity,
-                                seed,
-                            );
-                            LeafOpenMap::of(&map)
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("open-map thread"))
-            .collect()
+    let indexed: Vec<(usize, u32)> = leaves.iter().copied().enumerate().collect();
+    super::par_map(&indexed, threads, |&(i, leaf)| {
+        let seed = base ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let map = open_map(
+            scene,
+            leaf as usize,
+            Some(frames(i)),
+            STORED_SIDE,
+            points,
+            opacity,
+            seed,
+        );
+        LeafOpenMap::of(&map)
     })
 }
 
@@ -501,10 +483,9 @@ mod tests {
         );
     }
 
-    /// The map as stored reads the cells the map was binned on, at every point of the leaf,
-    /// within the codes' rounding; without cells it is no map.
-    #[test]
-    fn a_stored_map_reads_the_cells_it_was_binned_on() {
+    /// The roofed leaf's scene, and its centroid, radius and square as its vertices give them
+    /// ([`MapFrame::of_leaf`]).
+    fn roof_square() -> (LeafScene, Vec3, f32, MapFrame) {
         let leaves = leaf_under_a_roof();
         let scene = LeafScene::new(&leaves);
         let centroid = leaves.centroid(0);
@@ -514,6 +495,14 @@ mod tests {
             .map(|v| (leaves.positions[v as usize] - centroid).length())
             .fold(0.0f32, f32::max);
         let frame = MapFrame::of_leaf(centroid, scene.normal(0), radius);
+        (scene, centroid, radius, frame)
+    }
+
+    /// The map as stored reads the cells the map was binned on, at every point of the leaf,
+    /// within the codes' rounding; without cells it is no map.
+    #[test]
+    fn a_stored_map_reads_the_cells_it_was_binned_on() {
+        let (scene, centroid, radius, frame) = roof_square();
         let map = open_map(&scene, 0, Some(frame), STORED_SIDE, 144, &|_| 1.0, 4);
         let stored = StoredOpenMap::of(&map);
         let mut rng = SplitMix64::new(8);
@@ -540,15 +529,7 @@ mod tests {
     /// gain the cell's times the residual gains' blend.
     #[test]
     fn a_leaf_open_map_is_the_map_on_its_square_as_stored() {
-        let leaves = leaf_under_a_roof();
-        let scene = LeafScene::new(&leaves);
-        let centroid = leaves.centroid(0);
-        let radius = leaves
-            .leaf_vertices(0)
-            .into_iter()
-            .map(|v| (leaves.positions[v as usize] - centroid).length())
-            .fold(0.0f32, f32::max);
-        let frame = MapFrame::of_leaf(centroid, scene.normal(0), radius);
+        let (scene, centroid, radius, frame) = roof_square();
         let stored = open_maps_of(&scene, &[0, 1], &|_| frame, 32, &|_| 1.0, 0, 2);
         assert_eq!(stored.len(), 2);
         let m = stored[0];
