@@ -8,7 +8,7 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]]
+//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…] [--ring-offset F]] [--sunlit-points P [--sunlit-maps C[,C…]]]]
 //!     [--sun X,Y,Z] [--eye X,Y,Z]
 //!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
@@ -39,7 +39,7 @@
 //! blend's are, with the seconds that re-gather takes; `--sun-ring N[,N…]` a row per ring of
 //! N suns at the sun's elevation, `gathered_bounce::sun_ring`, ratios re-gathered on it and
 //! read for the sun midway between two nodes, as a tree turned about its vertical sees the
-//! sun, and with `--hotspot` also drawn with the ring's own hotspot, measured for suns at the
+//! sun (`--ring-offset F`: F of a node's step past a node instead, 0 on one), and with `--hotspot` also drawn with the ring's own hotspot, measured for suns at the
 //! sun's height against the bounce with the ring, `hotspot::HotspotSuns::Height`), each leaf's
 //! ratios pooled
 //! with its nearest neighbours' (`--bounce-pool K[,K…]`: K leaves a pool, the first for
@@ -67,6 +67,11 @@
 //! least-squares fit to the same points, `SharePlane`) read at the eye ray's point; as it is,
 //! with the seen-part gain, with the crown's hotspot, and (rings' shares, with `--hotspot`)
 //! with a hotspot fitted against the ring's shares at the sun's height.
+//!
+//! `--sunlit-maps C[,C…]` (with `--sunlit-points P`): rows of the sun from a map of each
+//! leaf's sunlit share for the image's sun, C × C cells over the leaf's square from the same
+//! P points, read at the eye ray's point (alone and with the seen-part gain), and a row of
+//! the share at the eye ray's point itself, what no value stored per leaf beats.
 //!
 //! `--sun-maps`: instead, the sun's share on each leaf from maps rendered from the sun (a shadow
 //! map at five texel sizes, 1/16 to one leaf, read as the leaf shaders read it and with a 3×3 filter, the crown's extinction over its depth, eq. 5.3's foliage maps)
@@ -100,6 +105,8 @@ fn main() {
     let mut samples = 128u32;
     let mut bounce_rays = 0u32;
     let mut sunlit_points = 0u32;
+    let mut sunlit_maps: Vec<u32> = Vec::new();
+    let mut ring_offset = 0.5f32;
     use bevy_foliage::lighting::gathered_bounce::{DEFAULT_BOUNCE_POOL, MAX_BOUNCE_POOL};
     let mut bounce_pools = vec![DEFAULT_BOUNCE_POOL];
     let mut sun_rings: Vec<usize> = Vec::new();
@@ -153,6 +160,26 @@ fn main() {
             }
             "--bounce-rays" => bounce_rays = value(i) as u32,
             "--sunlit-points" => sunlit_points = value(i) as u32,
+            "--ring-offset" => {
+                ring_offset = args
+                    .get(i + 1)
+                    .and_then(|v| v.parse::<f32>().ok())
+                    .filter(|f| (0.0..1.0).contains(f))
+                    .unwrap_or_else(|| {
+                        eprintln!("--ring-offset takes a share of a node's step in [0, 1)");
+                        std::process::exit(2)
+                    })
+            }
+            "--sunlit-maps" => {
+                sunlit_maps = args
+                    .get(i + 1)
+                    .map(|list| {
+                        list.split(',')
+                            .filter_map(|c| c.trim().parse().ok())
+                            .collect()
+                    })
+                    .unwrap_or_default();
+            }
             "--leaf-shadow-offset" => {
                 let parts: Option<Vec<f32>> = args
                     .get(i + 1)
@@ -280,7 +307,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…]] [--sunlit-points P]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…] [--ring-offset F]] [--sunlit-points P [--sunlit-maps C[,C…]]]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -325,6 +352,8 @@ fn main() {
                 sun_rings: sun_rings.clone(),
                 open_maps: open_maps.clone(),
                 sunlit_points,
+                sunlit_maps: sunlit_maps.clone(),
+                ring_offset,
                 ..Default::default()
             },
             &rays_per_bin,
@@ -736,7 +765,12 @@ fn image_table(
                     &g[size],
                     "sun indirect (1 bounce)",
                     &format!(
-                        "eq. 5.24 × ratios re-gathered on a ring of {count} suns at its elevation, the sun midway between two"
+                        "eq. 5.24 × ratios re-gathered on a ring of {count} suns at its elevation, {}",
+                        if (settings.ring_offset - 0.5).abs() < 1e-6 {
+                            "the sun midway between two".to_string()
+                        } else {
+                            format!("the sun {} of a step past a node", settings.ring_offset)
+                        }
                     ),
                     &g[size].bounce,
                 );

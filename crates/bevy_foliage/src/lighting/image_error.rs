@@ -90,6 +90,17 @@ pub struct ImageSettings {
     /// rather than the points' bounding rectangle) ([`super::open_map::open_map`],
     /// [`ImageComparison::open_maps`]; none by default).
     pub open_maps: Vec<(u32, u32, bool)>,
+    /// Cells a side of each map of the sunlit share across each leaf measured for the image's
+    /// sun, from [`ImageSettings::sunlit_points`] points a leaf over the square the leaf
+    /// shaders can find ([`super::open_map::MapFrame::of_leaf`]), read at the eye ray's point
+    /// ([`ImageComparison::sunlit`]; none by default). With any, a row of the share at the
+    /// eye ray's point itself, what no map beats.
+    pub sunlit_maps: Vec<u32>,
+    /// Where the image's sun stands between two nodes of each ring of
+    /// [`ImageSettings::sun_rings`], as a share of a node's step in azimuth: 0.5 (by default)
+    /// midway, what a tree turned by half a step sees, the farthest from the ring's suns; 0 on
+    /// a node. Instances turned at random see every offset.
+    pub ring_offset: f32,
 }
 
 impl Default for ImageSettings {
@@ -110,6 +121,8 @@ impl Default for ImageSettings {
             sun_rings: Vec::new(),
             sunlit_points: 0,
             open_maps: Vec::new(),
+            sunlit_maps: Vec::new(),
+            ring_offset: 0.5,
         }
     }
 }
@@ -688,11 +701,11 @@ pub fn images_against_tracer(
                 true,
                 spot.as_ref(),
             );
-            // For rings of suns at the sun's elevation, the sun midway between two nodes (what
-            // a tree turned by half a node's step sees: the farthest from the ring's gather).
+            // For rings of suns at the sun's elevation, the sun `ring_offset` of a node's step
+            // past a node (midway by default: what a tree turned by half a step sees, the
+            // farthest from the ring's gather).
             for &count in &settings.sun_rings {
-                let phase =
-                    light.to_sun.z.atan2(light.to_sun.x) + std::f32::consts::PI / count as f32;
+                let phase = ring_phase(light.to_sun, count, settings.ring_offset);
                 let (ring, seconds) = regather(&sun_ring(light.to_sun, count, phase));
                 let drawn = image_with(
                     &|leaf, n| {
@@ -959,7 +972,7 @@ pub fn images_against_tracer(
             None,
         ));
         for &count in &settings.sun_rings {
-            let phase = light.to_sun.z.atan2(light.to_sun.x) + std::f32::consts::PI / count as f32;
+            let phase = ring_phase(light.to_sun, count, settings.ring_offset);
             let started = std::time::Instant::now();
             let ring = sunlit_planes(
                 &scene,
@@ -971,12 +984,112 @@ pub fn images_against_tracer(
             );
             sunlit_seconds.push((count, started.elapsed().as_secs_f32()));
             sources.push((
-                format!("on a ring of {count}, the sun midway"),
+                format!(
+                    "on a ring of {count}, {}",
+                    sun_between(settings.ring_offset)
+                ),
                 ring.iter()
                     .map(|r| plane_on_ring(r, phase, light.to_sun))
                     .collect(),
                 Some((phase, ring)),
             ));
+        }
+        // Maps of the sunlit share over the leaf's square for the image's sun, and the share
+        // at the eye ray's point itself: how much of the planes' error a finer picture of
+        // the sunflecks on each leaf takes away.
+        if !settings.sunlit_maps.is_empty() {
+            use super::open_map::MapFrame;
+            let side = (settings.sunlit_points.max(1) as f32).sqrt().ceil() as u32;
+            let sun_at = |leaf: usize, t: f32, gained: bool| {
+                let t = match (&gains, gained) {
+                    (Some(g), true) => (t * seen_gain(&g[leaf], view)).min(1.0),
+                    _ => t,
+                };
+                luminance(sun_radiance(
+                    material,
+                    scene.normal(leaf),
+                    view,
+                    light.to_sun,
+                    t,
+                    light.sun,
+                ))
+            };
+            let at_point: Vec<f32> = samples
+                .iter()
+                .map(|s| {
+                    s.as_ref().map_or(0.0, |s| {
+                        let leaf = s.leaf as usize;
+                        sun_at(
+                            leaf,
+                            scene.transmittance(s.point, light.to_sun, s.leaf, |_| 1.0),
+                            false,
+                        )
+                    })
+                })
+                .collect();
+            sunlit.push((
+                "leaf's sunlit share at the eye ray's point".into(),
+                measure(&[model_sky.clone(), at_point, model_bounce.clone()]),
+            ));
+            for &cells_a_side in &settings.sunlit_maps {
+                let cells_a_side = cells_a_side.max(1);
+                let frames: Vec<MapFrame> = (0..scene.leaf_count())
+                    .map(|leaf| {
+                        MapFrame::of_leaf(
+                            leaves.centroid(leaf),
+                            scene.normal(leaf),
+                            (0.5 * leaves.diameter(leaf)).max(1e-6),
+                        )
+                    })
+                    .collect();
+                let maps: Vec<Vec<f32>> = super::par_map(&all, threads, |&leaf| {
+                    let mut rng =
+                        SplitMix64::new(0x51A1_5EED ^ (leaf as u64).wrapping_mul(0x9E37_79B9));
+                    let fit = super::sunlit_share::PlaneFit::jittered(
+                        &scene,
+                        leaf as usize,
+                        side,
+                        &mut rng,
+                    );
+                    let n = (cells_a_side * cells_a_side) as usize;
+                    let (mut sum, mut count) = (vec![0.0f32; n], vec![0u32; n]);
+                    let mut total = 0.0;
+                    for &p in &fit.points {
+                        let t = scene.transmittance(p, light.to_sun, leaf, |_| 1.0);
+                        let c = frames[leaf as usize].cell(cells_a_side, p);
+                        sum[c] += t;
+                        count[c] += 1;
+                        total += t;
+                    }
+                    let mean = total / fit.points.len().max(1) as f32;
+                    sum.iter()
+                        .zip(&count)
+                        .map(|(s, &c)| if c > 0 { s / c as f32 } else { mean })
+                        .collect()
+                });
+                for gained in [false, true] {
+                    if gained && gains.is_none() {
+                        continue;
+                    }
+                    let sun: Vec<f32> = samples
+                        .iter()
+                        .map(|s| {
+                            s.as_ref().map_or(0.0, |s| {
+                                let leaf = s.leaf as usize;
+                                let t = maps[leaf][frames[leaf].cell(cells_a_side, s.point)];
+                                sun_at(leaf, t, gained)
+                            })
+                        })
+                        .collect();
+                    sunlit.push((
+                        format!(
+                            "leaf's sunlit map {cells_a_side}x{cells_a_side} traced for this sun{}",
+                            if gained { ", seen-part gain" } else { "" }
+                        ),
+                        measure(&[model_sky.clone(), sun, model_bounce.clone()]),
+                    ));
+                }
+            }
         }
         for (source, planes, ring) in sources {
             for plane in [false, true] {
@@ -1143,6 +1256,21 @@ pub fn images_against_tracer(
     }
 }
 
+/// The azimuth of node 0 of a ring of `count` suns that puts the sun towards `to_sun` `offset`
+/// of a node's step past the node before it.
+fn ring_phase(to_sun: Vec3, count: usize, offset: f32) -> f32 {
+    to_sun.z.atan2(to_sun.x) - std::f32::consts::TAU * offset / count.max(1) as f32
+}
+
+/// Where the sun stands on a ring, for a row's label.
+fn sun_between(offset: f32) -> String {
+    if (offset - 0.5).abs() < 1e-6 {
+        "the sun midway".into()
+    } else {
+        format!("the sun {offset} of a step past a node")
+    }
+}
+
 /// The sun per eye ray as the leaf shaders draw a ring of sunlit shares with their slopes
 /// ([`super::bounce_ring::ring_shares_at`]): each leaf's planes on `ring` (at azimuths from
 /// `phase`) stored as shares and slopes per the leaf's radius, read at each vertex of the
@@ -1204,6 +1332,27 @@ fn image_as_drawn(
 mod tests {
     use super::*;
     use crate::lighting::path_trace::{push_square_leaf, test_light as light, uniform_ball};
+
+    #[test]
+    fn the_ring_offset_puts_the_sun_that_far_past_a_node() {
+        use super::super::gathered_bounce::{nodes_either_side, sun_ring};
+        let to_sun = Vec3::new(0.3, 0.2, -1.0).normalize();
+        for (count, offset) in [(14, 0.0), (14, 0.25), (14, 0.5), (28, 0.75)] {
+            let phase = ring_phase(to_sun, count, offset);
+            let ring = sun_ring(to_sun, count, phase);
+            let (i, j, f) = nodes_either_side(count, phase, to_sun).expect("a sun off the pole");
+            // Round the circle: on a node the sun may read as the end of the step before.
+            let d = (f - offset).rem_euclid(1.0);
+            assert!(d.min(1.0 - d) < 1e-4, "{count}, {offset}: {f}");
+            assert_eq!(j, (i + 1) % count);
+            // On a node, that node is the sun itself.
+            if offset == 0.0 {
+                let nearest = ring[i].distance(to_sun).min(ring[j].distance(to_sun));
+                assert!(nearest < 1e-5, "{nearest}");
+            }
+        }
+        assert_eq!(sun_between(0.5), "the sun midway");
+    }
 
     #[test]
     fn a_pixel_is_the_mean_of_its_block() {
