@@ -766,11 +766,7 @@ fn image_table(
                     "sun indirect (1 bounce)",
                     &format!(
                         "eq. 5.24 × ratios re-gathered on a ring of {count} suns at its elevation, {}",
-                        if (settings.ring_offset - 0.5).abs() < 1e-6 {
-                            "the sun midway between two".to_string()
-                        } else {
-                            format!("the sun {} of a step past a node", settings.ring_offset)
-                        }
+                        bevy_foliage::lighting::image_error::sun_between(settings.ring_offset)
                     ),
                     &g[size].bounce,
                 );

@@ -999,7 +999,7 @@ pub fn images_against_tracer(
         // the sunflecks on each leaf takes away.
         if !settings.sunlit_maps.is_empty() {
             use super::open_map::MapFrame;
-            let side = (settings.sunlit_points.max(1) as f32).sqrt().ceil() as u32;
+            use super::sunlit_share::share_points;
             let sun_at = |leaf: usize, t: f32, gained: bool| {
                 let t = match (&gains, gained) {
                     (Some(g), true) => (t * seen_gain(&g[leaf], view)).min(1.0),
@@ -1031,26 +1031,20 @@ pub fn images_against_tracer(
                 "leaf's sunlit share at the eye ray's point".into(),
                 measure(&[model_sky.clone(), at_point, model_bounce.clone()]),
             ));
+            let frames: Vec<MapFrame> = (0..scene.leaf_count())
+                .map(|leaf| {
+                    MapFrame::of_leaf(
+                        leaves.centroid(leaf),
+                        scene.normal(leaf),
+                        (0.5 * leaves.diameter(leaf)).max(1e-6),
+                    )
+                })
+                .collect();
             for &cells_a_side in &settings.sunlit_maps {
                 let cells_a_side = cells_a_side.max(1);
-                let frames: Vec<MapFrame> = (0..scene.leaf_count())
-                    .map(|leaf| {
-                        MapFrame::of_leaf(
-                            leaves.centroid(leaf),
-                            scene.normal(leaf),
-                            (0.5 * leaves.diameter(leaf)).max(1e-6),
-                        )
-                    })
-                    .collect();
+                // Each leaf's cells from the points its sunlit share is traced from.
                 let maps: Vec<Vec<f32>> = super::par_map(&all, threads, |&leaf| {
-                    let mut rng =
-                        SplitMix64::new(0x51A1_5EED ^ (leaf as u64).wrapping_mul(0x9E37_79B9));
-                    let fit = super::sunlit_share::PlaneFit::jittered(
-                        &scene,
-                        leaf as usize,
-                        side,
-                        &mut rng,
-                    );
+                    let fit = share_points(&scene, leaf as usize, settings.sunlit_points);
                     let n = (cells_a_side * cells_a_side) as usize;
                     let (mut sum, mut count) = (vec![0.0f32; n], vec![0u32; n]);
                     let mut total = 0.0;
@@ -1262,8 +1256,8 @@ fn ring_phase(to_sun: Vec3, count: usize, offset: f32) -> f32 {
     to_sun.z.atan2(to_sun.x) - std::f32::consts::TAU * offset / count.max(1) as f32
 }
 
-/// Where the sun stands on a ring, for a row's label.
-fn sun_between(offset: f32) -> String {
+/// Where the sun stands on a ring ([`ImageSettings::ring_offset`]), for a row's label.
+pub fn sun_between(offset: f32) -> String {
     if (offset - 0.5).abs() < 1e-6 {
         "the sun midway".into()
     } else {
@@ -1352,6 +1346,55 @@ mod tests {
             }
         }
         assert_eq!(sun_between(0.5), "the sun midway");
+    }
+
+    #[test]
+    fn the_sunlit_maps_read_the_shares_own_points_cell_by_cell() {
+        let leaves = uniform_ball(600, 1.0, 0.05, 3);
+        let run = images_against_tracer(
+            &leaves,
+            &LeafMaterial::default(),
+            &light(),
+            Vec3::new(0.0, 0.3, 1.0),
+            0.1,
+            &ImageSettings {
+                samples: 16,
+                directions: 16,
+                sunlit_points: 16,
+                sunlit_maps: vec![1, 3],
+                ..ImageSettings::default()
+            },
+            2,
+            &[(SunThroughCrown::BlendedAttenuation, BinEstimate::Neighbours)],
+            &[1, 4],
+        );
+        let row = |label: &str| {
+            &run.sunlit
+                .iter()
+                .find(|(l, _)| l == label)
+                .unwrap_or_else(|| panic!("no row {label}"))
+                .1
+        };
+        // The tracer's direct sun is a shadow ray from the hit point: the share there is exact.
+        for e in row("leaf's sunlit share at the eye ray's point") {
+            assert!(e.sun.mean_absolute < 1e-6, "{:?}", e.sun);
+        }
+        // One cell holds every point: the leaf's share, traced from the same points.
+        let (share, one) = (
+            row("leaf's sunlit share traced for this sun"),
+            row("leaf's sunlit map 1x1 traced for this sun"),
+        );
+        for (a, b) in share.iter().zip(one) {
+            assert!((a.sun.mean_absolute - b.sun.mean_absolute).abs() < 1e-6);
+        }
+        // Nine cells know which part of a half-shaded leaf the eye looks at.
+        let nine = row("leaf's sunlit map 3x3 traced for this sun");
+        assert!(
+            nine[0].sun.mean_absolute < 0.8 * share[0].sun.mean_absolute,
+            "{:?} against {:?}",
+            nine[0].sun,
+            share[0].sun
+        );
     }
 
     #[test]
