@@ -1,15 +1,18 @@
 //! A [`TileSource`] that injects faults into another, to test and measure streaming under the
 //! failures real sources have: latency spikes, errors, truncated and wrongly sized tiles, and
-//! loads that never answer. Each load draws its fate from a seeded hash of the tile and a
-//! running count of loads, so a run is repeatable; the faults can be switched off mid-run to
-//! watch the terrain recover.
+//! loads that never answer. Each load draws its fate from a seeded hash of the tile and how
+//! many times that tile was loaded before, so a tile's n-th load meets the same fault in every
+//! run, whatever order the cache asks for tiles in (a count over all loads would hand the
+//! faults to other tiles as soon as one load finished a frame earlier); the faults can be
+//! switched off mid-run to watch the terrain recover.
 
 use crate::cache::TileKey;
 use crate::source::{TexelKind, TileData, TileError, TileSource};
 use bevy::tasks::BoxedFuture;
+use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 /// How often each fault strikes (fractions of loads, summing to at most 1) and how long a
@@ -89,6 +92,8 @@ pub struct FaultyTileSource {
     faults: TileFaults,
     seed: u64,
     enabled: AtomicBool,
+    /// Loads asked for so far, per tile.
+    loads_of: Mutex<HashMap<TileKey, u64>>,
     /// What was injected.
     pub counts: FaultCounts,
 }
@@ -101,6 +106,7 @@ impl FaultyTileSource {
             faults,
             seed,
             enabled: AtomicBool::new(true),
+            loads_of: Mutex::new(HashMap::new()),
             counts: FaultCounts::default(),
         }
     }
@@ -110,7 +116,7 @@ impl FaultyTileSource {
         self.enabled.store(enabled, Ordering::Relaxed);
     }
 
-    /// The fault of load number `n` of `key`.
+    /// The fault of load number `n` of `key` (counted from 0 for each tile).
     pub fn fault(&self, key: TileKey, n: u64) -> Fault {
         if !self.enabled.load(Ordering::Relaxed) {
             return Fault::None;
@@ -165,7 +171,15 @@ impl TileSource for FaultyTileSource {
         self.inner.texels()
     }
     fn load(&self, key: TileKey) -> BoxedFuture<'static, Result<Option<TileData>, TileError>> {
-        let n = self.counts.loads.fetch_add(1, Ordering::Relaxed);
+        self.counts.loads.fetch_add(1, Ordering::Relaxed);
+        let n = {
+            // A poisoned lock only means another load panicked mid-count; the counts are
+            // still whole numbers, so carry on with them.
+            let mut loads_of = self.loads_of.lock().unwrap_or_else(|e| e.into_inner());
+            let n = loads_of.entry(key).or_insert(0);
+            *n += 1;
+            *n - 1
+        };
         let fault = self.fault(key, n);
         if fault != Fault::None {
             self.counts.faulted.fetch_add(1, Ordering::Relaxed);
@@ -242,5 +256,36 @@ mod tests {
         assert_eq!(source.fault(key, 9), source.fault(key, 9));
         source.set_enabled(false);
         assert!((0..1000).all(|n| source.fault(key, n) == Fault::None));
+    }
+
+    #[test]
+    fn a_tiles_fates_do_not_depend_on_the_loads_of_other_tiles() {
+        // Errors only, so every load answers at once: the fates can be read off the results.
+        let faults = TileFaults {
+            error: 0.5,
+            ..TileFaults::NONE
+        };
+        let fates = |others_between: u32| {
+            let inner: Arc<dyn TileSource> =
+                Arc::new(ProceduralTileSource::new(16, 8, address_texel));
+            let source = FaultyTileSource::new(inner, faults, 9);
+            let key = TileKey { z: 4, x: 3, y: 5 };
+            (0..12)
+                .map(|i| {
+                    for j in 0..others_between {
+                        let other = TileKey { z: 5, x: j, y: i };
+                        let _ = bevy::tasks::block_on(source.load(other));
+                    }
+                    bevy::tasks::block_on(source.load(key)).is_err()
+                })
+                .collect::<Vec<bool>>()
+        };
+        let alone = fates(0);
+        assert!(
+            alone.contains(&true) && alone.contains(&false),
+            "both fates drawn: {alone:?}"
+        );
+        assert_eq!(alone, fates(3));
+        assert_eq!(alone, fates(7));
     }
 }
