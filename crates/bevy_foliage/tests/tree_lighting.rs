@@ -458,7 +458,10 @@ fn compare_with_model(
             let read = shares.map(|(h, s, slopes)| {
                 let mut at = [0.0; RING_NODES];
                 for &(across, weight) in corners {
-                    for (a, v) in at.iter_mut().zip(ring_shares_at(s, slopes, across)) {
+                    for (a, v) in
+                        at.iter_mut()
+                            .zip(ring_shares_at(s, slopes.map(|s| s.as_slice()), across))
+                    {
                         *a += weight * v;
                     }
                 }

@@ -66,7 +66,10 @@
 //! two nodes; each as the leaf's share and as the share's plane over the leaf (the
 //! least-squares fit to the same points, `SharePlane`) read at the eye ray's point; as it is,
 //! with the seen-part gain, with the crown's hotspot, and (rings' shares, with `--hotspot`)
-//! with a hotspot fitted against the ring's shares at the sun's height.
+//! with a hotspot fitted against the ring's shares at the sun's height; and each ring's planes
+//! as the leaf shaders draw them (stored, read at the vertices, with the crown's and with the
+//! ring's own hotspot), a ring of another size than the light buffer's fourteen nodes as they
+//! would were the buffer to hold it.
 //!
 //! `--sunlit-maps C[,C…]` (with `--sunlit-points P`): rows of the sun from a map of each
 //! leaf's sunlit share for the image's sun, C × C cells over the leaf's square from the same

@@ -13,7 +13,6 @@
 //! Plain Rust, no render types.
 
 use super::bins::proxies;
-use super::bounce_ring::RING_NODES;
 use super::envelope::CrownEnvelope;
 use super::gathered_bounce::DEFAULT_BOUNCE_POOL;
 use super::leaf_scene::LeafScene;
@@ -1128,7 +1127,8 @@ pub fn images_against_tracer(
                         image(&|leaf, t| h.sun_through(gained(leaf, t), view, light.to_sun)),
                     ));
                 }
-                // As the leaf shaders draw a ring of the leaf store's size: each node's share
+                // As the leaf shaders draw a ring (one of another size than the leaf store's
+                // fourteen nodes as they would, were the store to hold it): each node's share
                 // and slope quantised as stored, read at the vertices of the eye ray's
                 // triangle (`bounce_ring::ring_shares_at`) and carried to the point by its
                 // barycentric weights, where the gain and the hotspot bend it — the hotspot
@@ -1136,7 +1136,6 @@ pub fn images_against_tracer(
                 // comparison the bake's.
                 if let (Some((phase, ring)), Some(h), Some((_, envelope)), true) =
                     (&ring, &hotspot_factors, &last_model, plane)
-                    && ring.first().is_some_and(|r| r.len() == RING_NODES)
                 {
                     let started = std::time::Instant::now();
                     let own = super::bounce_ring::ring_sun_hotspot(
@@ -1292,10 +1291,11 @@ fn image_as_drawn(
             let radius = (0.5 * leaves.diameter(leaf)).max(1e-6);
             let centroid = leaves.centroid(leaf);
             let planes = &ring[leaf];
-            let stored: [u8; RING_NODES] = std::array::from_fn(|k| quantize_share(planes[k].mean));
-            let slopes: [[i8; 3]; RING_NODES] = std::array::from_fn(|k| {
-                (planes[k].gradient * radius).to_array().map(quantize_slope)
-            });
+            let stored: Vec<u8> = planes.iter().map(|p| quantize_share(p.mean)).collect();
+            let slopes: Vec<[i8; 3]> = planes
+                .iter()
+                .map(|p| (p.gradient * radius).to_array().map(quantize_slope))
+                .collect();
             let at_vertex = |v: Vec3| {
                 let nodes = ring_shares_at(&stored, Some(&slopes), (v - centroid) / radius);
                 share_on_ring(&nodes, phase, to_sun)
