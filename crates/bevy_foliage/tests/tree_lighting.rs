@@ -1380,7 +1380,29 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
             ),
         }
     };
-    assert_eq!(bare.leaves, moved.leaves, "the same ratios, gathered again");
+    // Without the shares' planes the gather casts shadow rays at its neighbour hits: the
+    // CPU's gather so, at the same height, byte for byte, and not the ring gathered through
+    // the planes.
+    let shadowed = gather_ring(
+        &baked.leaf_scene(),
+        &lighting.optics,
+        &all,
+        &baked.leaf_envelopes(),
+        baked.extinction,
+        moved.sun_height,
+        lighting.bounce_ring.rays,
+        0,
+        &baked.leaf_radii(),
+        &baked.leaf_seen_gains(),
+        &RING_HOTSPOT,
+        &|_| opacity,
+        2,
+    );
+    assert_eq!(
+        bare.leaves, shadowed.leaves,
+        "the ratios gathered with shadow rays"
+    );
+    assert!(bare.leaves != moved.leaves, "the planes moved the ratios");
     for _ in 0..4 {
         harness.step();
     }

@@ -53,6 +53,17 @@
 //! point moved towards the sun by `T + S·tan θ` texels, θ the leaf's tilt from the sun
 //! (`sun_maps::LeafShadowOffset`); also in the `--sun-maps` table.
 //!
+//! With `--bounce-rays R`, what values stored per leaf can make of the bounce for the image's
+//! sun (`lighting::bounce_floor`): `--bounce-planes SxP[,…]` rows from each leaf's bounce
+//! fitted with a plane a face over a jittered grid of S × S points gathering P rays each (the
+//! mean alone, and the planes at the eye ray's point) and from the gather at the eye ray's own
+//! point with as many rays, what no value per leaf beats; `--through-planes R[,…]` (with
+//! `--sunlit-points P`) rows gathered by R rays a leaf with shadow rays and with the
+//! neighbours' sunlit planes from P points in their place; `--bounce-covers` (with seen-part
+//! gains) rows of the sun's own gather and of each ring with its own hotspot with the covered
+//! part's gain from the eight gains, from each leaf's stored open map at the eye ray's point,
+//! and from the covered share at that point itself.
+//!
 //! `--open-maps CxP[r][,…]` (with `--images` and seen-part gains): rows of the sky with the
 //! gain from each leaf's open-share map of C × C cells traced from P points
 //! (`open_map::open_map`) read at the eye ray's point, alone and times the map's residual
@@ -110,6 +121,10 @@ fn main() {
     let mut sunlit_points = 0u32;
     let mut sunlit_maps: Vec<u32> = Vec::new();
     let mut ring_offset = 0.5f32;
+    let mut bounce_planes: Vec<(u32, u32)> = Vec::new();
+    let mut through_planes: Vec<u32> = Vec::new();
+    let bounce_covers = args.iter().any(|a| a == "--bounce-covers");
+    args.retain(|a| a != "--bounce-covers");
     use bevy_foliage::lighting::gathered_bounce::{DEFAULT_BOUNCE_POOL, MAX_BOUNCE_POOL};
     let mut bounce_pools = vec![DEFAULT_BOUNCE_POOL];
     let mut sun_rings: Vec<usize> = Vec::new();
@@ -172,6 +187,29 @@ fn main() {
                         eprintln!("--ring-offset takes a share of a node's step in [0, 1)");
                         std::process::exit(2)
                     })
+            }
+            "--bounce-planes" => {
+                bounce_planes = args
+                    .get(i + 1)
+                    .map(|list| {
+                        list.split(',')
+                            .filter_map(|m| {
+                                let (side, rays) = m.split_once('x')?;
+                                Some((side.trim().parse().ok()?, rays.trim().parse().ok()?))
+                            })
+                            .collect()
+                    })
+                    .unwrap_or_default();
+            }
+            "--through-planes" => {
+                through_planes = args
+                    .get(i + 1)
+                    .map(|list| {
+                        list.split(',')
+                            .filter_map(|c| c.trim().parse().ok())
+                            .collect()
+                    })
+                    .unwrap_or_default();
             }
             "--sunlit-maps" => {
                 sunlit_maps = args
@@ -357,6 +395,9 @@ fn main() {
                 sunlit_points,
                 sunlit_maps: sunlit_maps.clone(),
                 ring_offset,
+                bounce_planes: bounce_planes.clone(),
+                through_planes: through_planes.clone(),
+                bounce_covers,
                 ..Default::default()
             },
             &rays_per_bin,
@@ -788,6 +829,9 @@ fn image_table(
                         errors,
                     );
                 }
+            }
+            for (name, g) in &run.bounce_floor {
+                row(&g[size], "sun indirect (1 bounce)", name, &g[size].bounce);
             }
             for (pool, g) in &run.pooled {
                 row(

@@ -135,6 +135,37 @@ pub fn gather_irradiance(
     opacity: &(impl Fn(u32) -> f32 + Sync),
     seed: u64,
 ) -> Vec<[f32; 2]> {
+    let mut rng = SplitMix64::new(seed);
+    gather_irradiance_by(
+        scene,
+        material,
+        leaf,
+        rays,
+        suns,
+        opacity,
+        &mut rng,
+        &mut |rng| scene.point_on(leaf, rng),
+        &|other, p, k| scene.transmittance(p, suns[k], other, opacity),
+    )
+}
+
+/// [`gather_irradiance`] with each ray's point on the leaf drawn by `point` (one point for every
+/// ray: the irradiance there), and the sun's share at a neighbour's hit given by
+/// `lit(neighbour, hit point, index of the sun in suns)` — a shadow ray for
+/// [`gather_irradiance`], the neighbour's sunlit plane for
+/// [`super::bounce_floor::gather_through_planes`].
+#[allow(clippy::too_many_arguments)]
+pub fn gather_irradiance_by(
+    scene: &LeafScene,
+    material: &LeafMaterial,
+    leaf: usize,
+    rays: u32,
+    suns: &[Vec3],
+    opacity: &(impl Fn(u32) -> f32 + Sync),
+    rng: &mut SplitMix64,
+    point: &mut dyn FnMut(&mut SplitMix64) -> Vec3,
+    lit: &dyn Fn(u32, Vec3, usize) -> f32,
+) -> Vec<[f32; 2]> {
     let mut out = vec![[0.0f32; 2]; suns.len()];
     if leaf >= scene.leaf_count() || scene.triangle_count(leaf) == 0 {
         return out;
@@ -143,7 +174,6 @@ pub fn gather_irradiance(
     if unit <= 0.0 {
         return out;
     }
-    let mut rng = SplitMix64::new(seed);
     let n = scene.normal(leaf);
     let id = leaf as u32;
     let rays = rays.max(2);
@@ -156,8 +186,8 @@ pub fn gather_irradiance(
         // E = ∫ L cos dω = π · mean(L) over cosine-distributed directions.
         let per_ray = PI / count as f32 / unit;
         for _ in 0..count {
-            let x = scene.point_on(leaf, &mut rng);
-            let w = cosine_direction(axis, &mut rng);
+            let x = point(rng);
+            let w = cosine_direction(axis, rng);
             let Some((t, other)) = scene.hit(x, w, id) else {
                 continue;
             };
@@ -172,8 +202,7 @@ pub fn gather_irradiance(
                 if f <= 0.0 {
                     continue;
                 }
-                let lit = scene.transmittance(p, sun, other, opacity);
-                out[k][side] += f * lit * share * per_ray;
+                out[k][side] += f * lit(other, p, k) * share * per_ray;
             }
         }
     }
@@ -281,7 +310,7 @@ pub fn bounce_gather(
         return out;
     }
     let faces = gathered_and_closed(
-        scene, material, leaf, envelope, tau, &SUN_BASIS, bounces, rays, opacity, seed,
+        scene, material, leaf, envelope, tau, &SUN_BASIS, bounces, rays, opacity, None, seed,
     );
     for (k, (gathered, closed)) in faces.into_iter().enumerate() {
         out.gathered[k] = gathered;
@@ -308,9 +337,23 @@ fn gathered_and_closed(
     bounces: &[SunBounce],
     rays: u32,
     opacity: &(impl Fn(u32) -> f32 + Sync),
+    lit: Option<&(dyn Fn(u32, Vec3, usize) -> f32 + Sync)>,
     seed: u64,
 ) -> Vec<([f32; 2], [f32; 2])> {
-    let gathered = gather_irradiance(scene, material, leaf, rays, suns, opacity, seed);
+    let gathered = match lit {
+        Some(lit) => gather_irradiance_by(
+            scene,
+            material,
+            leaf,
+            rays,
+            suns,
+            opacity,
+            &mut SplitMix64::new(seed),
+            &mut |rng| scene.point_on(leaf, rng),
+            lit,
+        ),
+        None => gather_irradiance(scene, material, leaf, rays, suns, opacity, seed),
+    };
     let n = scene.normal(leaf);
     suns.iter()
         .zip(bounces)
@@ -419,6 +462,30 @@ pub fn sun_ratios_of(
     opacity: &(impl Fn(u32) -> f32 + Sync),
     threads: usize,
 ) -> Vec<Vec<[f32; 2]>> {
+    sun_ratios_with(
+        scene, material, leaves, envelopes, tau, suns, rays, opacity, None, threads,
+    )
+}
+
+/// [`sun_ratios_of`], the sun's share at each neighbour's hit given by
+/// `lit(neighbour, hit point, index of the sun in suns)` in place of a shadow ray where `lit`
+/// is given (a sun of `suns` that is no direction is left out of the indices `lit` sees: give
+/// only directions). A ring with its leaves' sunlit planes reads them so
+/// ([`super::bounce_ring::gather_ring`], [`super::bounce_floor`]): no shadow rays to cast,
+/// and one coin less in each ray's toss.
+#[allow(clippy::too_many_arguments)]
+pub fn sun_ratios_with(
+    scene: &LeafScene,
+    material: &LeafMaterial,
+    leaves: &[u32],
+    envelopes: &[LeafEnvelope],
+    tau: f32,
+    suns: &[Vec3],
+    rays: u32,
+    opacity: &(impl Fn(u32) -> f32 + Sync),
+    lit: Option<&(dyn Fn(u32, Vec3, usize) -> f32 + Sync)>,
+    threads: usize,
+) -> Vec<Vec<[f32; 2]>> {
     // The suns that are directions, and where each given sun is among them.
     let mut valid = Vec::with_capacity(suns.len());
     let at: Vec<Option<usize>> = suns
@@ -456,6 +523,7 @@ pub fn sun_ratios_of(
             &bounces,
             rays,
             opacity,
+            lit,
             leaf_seed(leaf),
         )
         .into_iter()

@@ -100,6 +100,20 @@ pub struct ImageSettings {
     /// midway, what a tree turned by half a step sees, the farthest from the ring's suns; 0 on
     /// a node. Instances turned at random see every offset.
     pub ring_offset: f32,
+    /// Per entry (points a side, rays a point), rows of the bounce for the image's sun from
+    /// each leaf's [`super::bounce_floor::bounce_planes`] (the mean, and a plane a face read at
+    /// the eye ray's point) and from the gather at the eye ray's own point with as many rays
+    /// ([`ImageComparison::bounce_floor`]; none by default).
+    pub bounce_planes: Vec<(u32, u32)>,
+    /// Per ray count, rows of the bounce for the image's sun gathered with shadow rays and with
+    /// the neighbours' sunlit planes from [`ImageSettings::sunlit_points`] points in their place
+    /// ([`super::bounce_floor::gather_through_planes`]; none by default, and none without
+    /// sunlit points).
+    pub through_planes: Vec<u32>,
+    /// Rows of the bounce with its covered part's gain from finer than the eight gains: each
+    /// leaf's stored open map at the eye ray's point, and the covered share at the point
+    /// itself ([`ImageComparison::bounce_floor`]; off by default).
+    pub bounce_covers: bool,
 }
 
 impl Default for ImageSettings {
@@ -122,6 +136,9 @@ impl Default for ImageSettings {
             open_maps: Vec::new(),
             sunlit_maps: Vec::new(),
             ring_offset: 0.5,
+            bounce_planes: Vec::new(),
+            through_planes: Vec::new(),
+            bounce_covers: false,
         }
     }
 }
@@ -240,6 +257,16 @@ pub struct ImageComparison {
     /// Seconds each fit of a ring's own hotspot on its shares took
     /// ([`super::bounce_ring::ring_sun_hotspot`], on the threads given).
     pub ring_hotspot_seconds: Vec<f32>,
+    /// What values stored per leaf make of the bounce, under a label (with
+    /// [`ImageSettings::bounce_rays`]): for the image's sun per [`ImageSettings::bounce_planes`]
+    /// the planes' mean, the planes at the eye ray's point and the gather at that point; per
+    /// [`ImageSettings::through_planes`] the gather with shadow rays and through the neighbours'
+    /// sunlit planes; with [`ImageSettings::bounce_covers`] (and the gains), the sun's own
+    /// gather and each ring with its own hotspot with the covered part's gain from the eight
+    /// gains, from each leaf's stored open map at the eye ray's point, and from the covered
+    /// share at the point itself over the leaf's mean. Sky and sun as the first rows of
+    /// [`ImageComparison::gathered`].
+    pub bounce_floor: Vec<(String, Vec<ImageError>)>,
     /// The hotspot measured, when it was.
     pub hotspot_factors: Option<super::hotspot::Hotspot>,
     /// Eye rays that hit a leaf.
@@ -256,6 +283,46 @@ pub type OpenMapRows = (
     Vec<ImageError>,
     Vec<ImageError>,
 );
+
+/// Where the bounce's covered-part gain comes from in an image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Cover {
+    /// None.
+    Not,
+    /// The eight seen-part gains blended towards the eye.
+    Gains,
+    /// The leaf's stored open map at the eye ray's point (the eight gains where it has none).
+    Map,
+    /// The covered share at the eye ray's point over the leaf's mean.
+    Point,
+}
+
+/// Leaf `leaf`'s mean open share ([`open_share_at`] at [`OPEN_POINTS`] points, [`OPEN_RAYS`]
+/// rays each; seeded by the leaf).
+fn mean_open_share(scene: &LeafScene, leaf: u32) -> f32 {
+    let mut rng = SplitMix64::new(0x09E4 ^ (leaf as u64).wrapping_mul(0x9E37_79B9));
+    (0..OPEN_POINTS)
+        .map(|_| {
+            let p = scene.point_on(leaf as usize, &mut rng);
+            open_share_at(scene, leaf as usize, p, OPEN_RAYS, 1.0, &|_| 1.0, &mut rng)
+        })
+        .sum::<f32>()
+        / OPEN_POINTS as f32
+}
+
+/// The open share at eye ray `k`'s point ([`OPEN_RAYS`] rays; seeded by the eye ray).
+fn open_at_sample(scene: &LeafScene, k: usize, s: &Sample) -> f32 {
+    let mut rng = SplitMix64::new(0x0BE4 ^ (k as u64).wrapping_mul(0x9E37_79B9));
+    open_share_at(
+        scene,
+        s.leaf as usize,
+        s.point,
+        OPEN_RAYS,
+        1.0,
+        &|_| 1.0,
+        &mut rng,
+    )
+}
 
 /// What one eye ray found: the leaf, the point, and the traced light there from two seeds
 /// (luminance of sky, sun, one bounce, all bounces).
@@ -530,11 +597,12 @@ pub fn images_against_tracer(
     let mut rings = Vec::new();
     let mut ring_spots = Vec::new();
     let mut pooled = Vec::new();
+    let mut bounce_floor = Vec::new();
     let gathered = match (&last_model, settings.bounce_rays) {
         (Some(([sky, sun, _], envelope)), rays) if rays > 0 => {
             use super::gathered_bounce::{
                 BounceRatios, bounce_gathers_of, gather_irradiance, pooled_ratios, quantize_ratio,
-                ratio_of, ratio_on_ring, ratio_towards, sun_ratios_of, sun_ring,
+                ratio_of, ratio_on_ring, ratio_towards, sun_ring,
             };
             use super::model::bounce_radiance_by_face;
             let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
@@ -598,11 +666,46 @@ pub fn images_against_tracer(
                 )[0]
             });
             let here = SunBounce::new(material, light.to_sun, tau);
+            // Where the covered part's gain can come from finer than the eight gains: each
+            // leaf's stored open map read at the eye ray's point (as the bake stores it), and the
+            // covered share at the point itself over the leaf's mean (what no map beats).
+            let point_cover: Option<(Vec<LeafOpenMap>, Vec<f32>)> =
+                gains.as_ref().filter(|_| settings.bounce_covers).map(|_| {
+                    let stored = super::open_map::open_maps_of(
+                        &scene,
+                        &all,
+                        &|l| {
+                            MapFrame::of_leaf(
+                                leaves.centroid(l),
+                                scene.normal(l),
+                                (0.5 * leaves.diameter(l)).max(1e-6),
+                            )
+                        },
+                        super::open_map::DEFAULT_OPEN_MAP_POINTS,
+                        &|_| 1.0,
+                        settings.seen_seed,
+                        threads,
+                    );
+                    let mean_open =
+                        super::par_map(&all, threads, |&leaf| mean_open_share(&scene, leaf));
+                    let at_point: Vec<f32> = super::par_map(&indices, threads, |&k| {
+                        samples[k].as_ref().map_or(1.0, |s| {
+                            let (open, mean) =
+                                (open_at_sample(&scene, k, s), mean_open[s.leaf as usize]);
+                            if mean < 1.0 - 1e-4 {
+                                ((1.0 - open) / (1.0 - mean)).clamp(0.0, GAIN_RANGE.1)
+                            } else {
+                                1.0
+                            }
+                        })
+                    });
+                    (stored, at_point)
+                });
             // The image with the gains (where measured) and the bounce `bounce(leaf, n)`,
             // scaled by the covered part's gain when `covered`, both by the hotspot `spot`
             // where given.
             let image_with = |bounce_of: &dyn Fn(usize, Vec3) -> f32,
-                              covered: bool,
+                              covered: Cover,
                               spot: Option<&super::hotspot::Hotspot>| {
                 let (mut sky, mut sun) = (sky.clone(), sun.clone());
                 let mut bounce = vec![0.0; samples.len()];
@@ -621,8 +724,19 @@ pub fn images_against_tracer(
                             };
                             sun[k] *= if old > 0.0 { new / old } else { 1.0 };
                             sky[k] *= gain;
-                            if covered {
-                                b *= covered_gain(gain, open_share(n, &e.attenuation));
+                            let open = open_share(n, &e.attenuation);
+                            match (covered, &point_cover) {
+                                (Cover::Not, _) => {}
+                                (Cover::Map, Some((stored, _))) if stored[leaf].is_map() => {
+                                    let at = stored[leaf].sky_gain(
+                                        s.point - leaves.centroid(leaf),
+                                        (0.5 * leaves.diameter(leaf)).max(1e-6),
+                                        view,
+                                    );
+                                    b *= covered_gain(at, open);
+                                }
+                                (Cover::Point, Some((_, at_point))) => b *= at_point[k],
+                                _ => b *= covered_gain(gain, open),
                             }
                         }
                         if let Some(h) = spot {
@@ -633,7 +747,7 @@ pub fn images_against_tracer(
                 }
                 measure(&[sky, sun, bounce])
             };
-            let image = |bounce_of: &dyn Fn(usize, Vec3) -> f32, covered: bool| {
+            let image = |bounce_of: &dyn Fn(usize, Vec3) -> f32, covered: Cover| {
                 image_with(bounce_of, covered, None)
             };
             let scaled_with = |ratio: [f32; 2], leaf: usize, n: Vec3| {
@@ -657,19 +771,32 @@ pub fn images_against_tracer(
                 ))
             };
             let mut rows = vec![
-                image(&scaled, true),
-                image(&own, true),
-                image(&own, false),
-                image(&scaled, false),
+                image(&scaled, Cover::Gains),
+                image(&own, Cover::Gains),
+                image(&own, Cover::Not),
+                image(&scaled, Cover::Not),
             ];
             if let Some(h) = &spot {
-                rows.push(image_with(&scaled, true, Some(h)));
+                rows.push(image_with(&scaled, Cover::Gains, Some(h)));
             }
             // Ratios re-gathered for the given suns, stored as a bake stores ratios, and the
             // seconds the gather took.
-            let regather = |suns: &[Vec3]| {
+            // A ring (`on_ring`) with sunlit points gathers as an app's does: through its
+            // leaves' sunlit planes for its suns (`bounce_ring::ring_ratios`; their tracing in
+            // the seconds).
+            let regather = |suns: &[Vec3], on_ring: bool| {
                 let started = std::time::Instant::now();
-                let ratios = sun_ratios_of(
+                let planes = (on_ring && settings.sunlit_points > 0).then(|| {
+                    super::sunlit_share::sunlit_planes(
+                        &scene,
+                        &all,
+                        suns,
+                        settings.sunlit_points,
+                        &|_| 1.0,
+                        threads,
+                    )
+                });
+                let ratios = super::bounce_ring::ring_ratios(
                     &scene,
                     material,
                     &all,
@@ -677,6 +804,7 @@ pub fn images_against_tracer(
                     tau,
                     suns,
                     rays,
+                    planes.as_deref(),
                     &|_| 1.0,
                     threads,
                 );
@@ -693,24 +821,152 @@ pub fn images_against_tracer(
             };
             // For this sun alone, drawn as the leaf shaders draw the blend's (the hotspot, where
             // measured, the blend's).
-            let (resun, seconds) = regather(&[light.to_sun]);
+            let (resun, seconds) = regather(&[light.to_sun], false);
             regathered_seconds = seconds;
             regathered = image_with(
                 &|leaf, n| scaled_with(resun[leaf][0], leaf, n),
-                true,
+                Cover::Gains,
                 spot.as_ref(),
             );
+            // What values per leaf can make of the bounce for this sun (`bounce_floor`): a
+            // plane a face from a grid of points, the gather at the eye ray's point, and the
+            // gather with the neighbours' sunlit planes in place of shadow rays.
+            let drawn_from = |irradiance: &dyn Fn(usize, &Sample) -> [f32; 2]| {
+                let mut bounce = vec![0.0; samples.len()];
+                for (k, s) in samples.iter().enumerate() {
+                    if let Some(s) = s {
+                        let leaf = s.leaf as usize;
+                        bounce[k] = luminance(super::gathered_bounce::gathered_bounce_radiance(
+                            material,
+                            scene.normal(leaf),
+                            view,
+                            irradiance(k, s),
+                            light.sun,
+                        ));
+                    }
+                }
+                measure(&[sky.clone(), sun.clone(), bounce])
+            };
+            for &(side, per_point) in &settings.bounce_planes {
+                use super::bounce_floor::{bounce_planes, gather_at};
+                let planes = bounce_planes(
+                    &scene,
+                    material,
+                    &all,
+                    light.to_sun,
+                    side,
+                    per_point,
+                    threads,
+                );
+                let rays = side * side * per_point;
+                bounce_floor.push((
+                    format!("{side}x{side} points x {per_point} rays ({rays}) a leaf, the mean"),
+                    drawn_from(&|_, s| planes[s.leaf as usize].mean()),
+                ));
+                bounce_floor.push((
+                    format!(
+                        "{side}x{side} points x {per_point} rays ({rays}) a leaf, a plane a face, at the eye ray's point"
+                    ),
+                    drawn_from(&|_, s| planes[s.leaf as usize].at(s.point)),
+                ));
+                let at_point: Vec<[f32; 2]> = super::par_map(&indices, threads, |&k| {
+                    samples[k].as_ref().map_or([0.0; 2], |s| {
+                        gather_at(
+                            &scene,
+                            material,
+                            s.leaf as usize,
+                            s.point,
+                            rays,
+                            light.to_sun,
+                            0xA7 ^ (k as u64).wrapping_mul(0x9E37_79B9),
+                        )
+                    })
+                });
+                bounce_floor.push((
+                    format!("gathered at the eye ray's own point, {rays} rays"),
+                    drawn_from(&|k, _| at_point[k]),
+                ));
+            }
+            if !settings.through_planes.is_empty() && settings.sunlit_points > 0 {
+                use super::bounce_floor::gather_through_planes;
+                let planes: Vec<super::sunlit_share::SharePlane> =
+                    super::sunlit_share::sunlit_planes(
+                        &scene,
+                        &all,
+                        &[light.to_sun],
+                        settings.sunlit_points,
+                        &|_| 1.0,
+                        threads,
+                    )
+                    .iter()
+                    .map(|p| p[0])
+                    .collect();
+                for &count in &settings.through_planes {
+                    for through in [false, true] {
+                        let e: Vec<[f32; 2]> = super::par_map(&all, threads, |&leaf| {
+                            let seed = super::gathered_bounce::leaf_seed(leaf);
+                            if through {
+                                gather_through_planes(
+                                    &scene,
+                                    material,
+                                    leaf as usize,
+                                    count,
+                                    light.to_sun,
+                                    &planes,
+                                    seed,
+                                )
+                            } else {
+                                gather_irradiance(
+                                    &scene,
+                                    material,
+                                    leaf as usize,
+                                    count,
+                                    &[light.to_sun],
+                                    &|_| 1.0,
+                                    seed,
+                                )[0]
+                            }
+                        });
+                        bounce_floor.push((
+                            format!(
+                                "gathered for this sun alone, {count} rays a leaf, no gain, {}",
+                                if through {
+                                    format!(
+                                        "the neighbours' sunlit planes ({} points) for shadow rays",
+                                        settings.sunlit_points
+                                    )
+                                } else {
+                                    "shadow rays".to_string()
+                                }
+                            ),
+                            drawn_from(&|_, s| e[s.leaf as usize]),
+                        ));
+                    }
+                }
+            }
+            if point_cover.is_some() {
+                for (cover, name) in [
+                    (Cover::Gains, "eight gains"),
+                    (Cover::Map, "the open map's gain at the point"),
+                    (Cover::Point, "the covered share at the eye ray's own point"),
+                ] {
+                    bounce_floor.push((
+                        format!("gathered for this sun alone, covered part by {name}"),
+                        image(&own, cover),
+                    ));
+                }
+            }
             // For rings of suns at the sun's elevation, the sun `ring_offset` of a node's step
             // past a node (midway by default: what a tree turned by half a step sees, the
             // farthest from the ring's gather).
             for &count in &settings.sun_rings {
                 let phase = ring_phase(light.to_sun, count, settings.ring_offset);
-                let (ring, seconds) = regather(&sun_ring(light.to_sun, count, phase));
+                let (ring, seconds) = regather(&sun_ring(light.to_sun, count, phase), true);
                 let drawn = image_with(
                     &|leaf, n| {
                         scaled_with(ratio_on_ring(&ring[leaf], phase, light.to_sun), leaf, n)
                     },
-                    true,
+                    Cover::Gains,
                     spot.as_ref(),
                 );
                 if settings.hotspot {
@@ -734,9 +990,30 @@ pub fn images_against_tracer(
                         &|leaf, n| {
                             scaled_with(ratio_on_ring(&ring[leaf], phase, light.to_sun), leaf, n)
                         },
-                        true,
+                        Cover::Gains,
                         Some(&own),
                     );
+                    if point_cover.is_some() {
+                        for (cover, name) in [
+                            (Cover::Map, "the open map's gain at the point"),
+                            (Cover::Point, "the covered share at the eye ray's own point"),
+                        ] {
+                            bounce_floor.push((
+                                format!("ring of {count}, its own hotspot, covered part by {name}"),
+                                image_with(
+                                    &|leaf, n| {
+                                        scaled_with(
+                                            ratio_on_ring(&ring[leaf], phase, light.to_sun),
+                                            leaf,
+                                            n,
+                                        )
+                                    },
+                                    cover,
+                                    Some(&own),
+                                ),
+                            ));
+                        }
+                    }
                     ring_spots.push((count, drawn, own, seconds));
                 }
                 rings.push((count, drawn, seconds));
@@ -745,7 +1022,7 @@ pub fn images_against_tracer(
                 let ratios = pooled_by(pool);
                 let spot = spot_of(&ratios);
                 let drawn = |leaf: usize, n: Vec3| scaled_by(&ratios, leaf, n);
-                pooled.push((pool, image_with(&drawn, true, spot.as_ref())));
+                pooled.push((pool, image_with(&drawn, Cover::Gains, spot.as_ref())));
             }
             rows
         }
@@ -809,40 +1086,13 @@ pub fn images_against_tracer(
                         0x5EE1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
                     )
                 });
-                let mean_open = super::par_map(&all, threads, |&leaf| {
-                    let mut rng = SplitMix64::new(0x09E4 ^ (leaf as u64).wrapping_mul(0x9E37_79B9));
-                    (0..OPEN_POINTS)
-                        .map(|_| {
-                            let p = scene.point_on(leaf as usize, &mut rng);
-                            open_share_at(
-                                &scene,
-                                leaf as usize,
-                                p,
-                                OPEN_RAYS,
-                                1.0,
-                                &|_| 1.0,
-                                &mut rng,
-                            )
-                        })
-                        .sum::<f32>()
-                        / OPEN_POINTS as f32
-                });
+                let mean_open =
+                    super::par_map(&all, threads, |&leaf| mean_open_share(&scene, leaf));
                 let at_point: Vec<f32> = super::par_map(&indices, threads, |&k| {
                     samples[k].as_ref().map_or(1.0, |s| {
-                        let leaf = s.leaf as usize;
-                        let mut rng =
-                            SplitMix64::new(0x0BE4 ^ (k as u64).wrapping_mul(0x9E37_79B9));
-                        let open = open_share_at(
-                            &scene,
-                            leaf,
-                            s.point,
-                            OPEN_RAYS,
-                            1.0,
-                            &|_| 1.0,
-                            &mut rng,
-                        );
-                        if mean_open[leaf] > 0.0 {
-                            (open / mean_open[leaf]).clamp(GAIN_RANGE.0, GAIN_RANGE.1)
+                        let mean = mean_open[s.leaf as usize];
+                        if mean > 0.0 {
+                            (open_at_sample(&scene, k, s) / mean).clamp(GAIN_RANGE.0, GAIN_RANGE.1)
                         } else {
                             1.0
                         }
@@ -1242,6 +1492,7 @@ pub fn images_against_tracer(
         rings,
         ring_spots,
         pooled,
+        bounce_floor,
         hotspot_factors,
         shadow_map_sun,
         noise,

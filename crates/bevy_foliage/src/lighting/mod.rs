@@ -14,12 +14,13 @@
 //! ratios to eq. 5.24 (baked with the bins, drawn by the leaf shaders), re-gathered while an
 //! app runs on a ring of suns at the sun's elevation by [`bounce_ring`], which also holds each
 //! leaf's [`sunlit_share`] towards those suns, the leaves' sun where the shadow map does not
-//! resolve leaves;
+//! resolve leaves, and [`bounce_floor`] what values stored per leaf can make of the bounce;
 //! [`settings`] switches the leaf
 //! shaders between it and Bevy's lighting; [`sun_maps`] measures maps rendered from the sun (shadow map, foliage
 //! maps) as the leaves' sun against the same tracer.
 
 pub mod bins;
+pub mod bounce_floor;
 pub mod bounce_ring;
 pub mod envelope;
 pub mod gathered_bounce;

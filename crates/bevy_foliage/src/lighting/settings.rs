@@ -70,8 +70,9 @@ pub struct TreeLightingSettings {
 pub struct BounceRingSettings {
     /// Gather rings and read them in the leaf shaders (off: the bake's blend alone).
     pub enabled: bool,
-    /// Rays a leaf casts over its two sides; each neighbour hit casts a shadow ray towards each
-    /// of the ring's fourteen suns (the cost of one bake's bounce gather).
+    /// Rays a leaf casts over its two sides; at each neighbour hit the neighbour's sunlit share
+    /// towards each of the ring's fourteen suns is read off its plane (with
+    /// [`BounceRingSettings::sunlit_points`]) or found by a shadow ray (without).
     pub rays: u32,
     /// Points a leaf its sunlit share towards each of the ring's suns is traced from, the share
     /// fitted with a plane over the leaf ([`crate::lighting::sunlit_share`]), which the leaves
