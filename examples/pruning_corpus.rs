@@ -87,14 +87,14 @@ fn main() {
     }
     let dir = std::env::temp_dir().join(format!("pruning_corpus_{}", std::process::id()));
     let mut rows = Vec::new();
-    for (i, tree) in bevy_nature::foliage::corpus::all().iter().enumerate() {
+    let mut harness = RenderHarness::new(HarnessConfig {
+        log: true,
+        size: UVec2::splat(size),
+        ..HarnessConfig::default()
+    })
+    .unwrap_or_else(|e| fail(e.to_string()));
+    for tree in &bevy_nature::foliage::corpus::all() {
         eprintln!("pruning_corpus: {} ({})", tree.name, tree.description);
-        let mut harness = RenderHarness::new(HarnessConfig {
-            log: i == 0,
-            size: UVec2::splat(size),
-            ..HarnessConfig::default()
-        })
-        .unwrap_or_else(|e| fail(e.to_string()));
         let row = measure(&mut harness, tree, &dir, &settings)
             .unwrap_or_else(|e| fail(format!("{}: {e}", tree.name)));
         println!(

@@ -111,7 +111,9 @@ fn render(
     harness.render().map_err(|e| e.to_string())
 }
 
-/// Measures one corpus tree in `harness` (a fresh one: the tree is spawned into it).
+/// Measures one corpus tree in `harness`. The tree, its light and camera are spawned into it and
+/// despawned again before returning, so one harness measures every tree: its pipelines compile
+/// once, and a process opens one render device for the corpus instead of one a tree.
 pub fn measure(
     harness: &mut RenderHarness,
     tree: &CorpusTree,
@@ -119,7 +121,9 @@ pub fn measure(
     settings: &CorpusSettings,
 ) -> Result<CorpusRow, String> {
     let path = tree.write(dir).map_err(|e| e.to_string())?;
-    harness.app_mut().add_plugins(FoliagePlugin);
+    if !harness.app_mut().is_plugin_added::<FoliagePlugin>() {
+        harness.app_mut().add_plugins(FoliagePlugin);
+    }
     harness
         .app_mut()
         .insert_resource(settings.pruning.clone())
@@ -157,14 +161,16 @@ pub fn measure(
             ChildOf(root),
         ));
     }
-    world.spawn((
-        DirectionalLight {
-            illuminance: 9000.0,
-            shadow_maps_enabled: true,
-            ..default()
-        },
-        Transform::default().looking_to(Vec3::new(-0.4, -1.0, -0.5), Vec3::Y),
-    ));
+    let sun = world
+        .spawn((
+            DirectionalLight {
+                illuminance: 9000.0,
+                shadow_maps_enabled: true,
+                ..default()
+            },
+            Transform::default().looking_to(Vec3::new(-0.4, -1.0, -0.5), Vec3::Y),
+        ))
+        .id();
     world.insert_resource(GlobalAmbientLight {
         brightness: 600.0,
         ..default()
@@ -245,6 +251,10 @@ pub fn measure(
             coverage_plain: coverage(&plain),
             pixels: full.width * full.height,
         });
+    }
+    // Leave the harness as it was found (the root takes the leaves and bark with it).
+    for entity in [root, sun, camera] {
+        harness.world_mut().despawn(entity);
     }
     Ok(row)
 }

@@ -263,10 +263,14 @@ pub fn ring_ratios(
     opacity: &(impl Fn(u32) -> f32 + Sync),
     threads: usize,
 ) -> Vec<Vec<[f32; 2]>> {
-    let suns: Vec<Vec3> = suns
+    // `sun_ratios_with` numbers only the suns that are directions (a sun that is none gets
+    // ratio 1, as from `sun_ratios_of`); `given[k]` is where its k-th stands in `suns`, which
+    // is how `planes` are numbered.
+    let (given, directions): (Vec<usize>, Vec<Vec3>) = suns
         .iter()
-        .map(|s| s.try_normalize().unwrap_or(Vec3::Y))
-        .collect();
+        .enumerate()
+        .filter_map(|(k, s)| Some((k, s.try_normalize()?)))
+        .unzip();
     let mut position = vec![u32::MAX; scene.leaf_count()];
     for (i, &leaf) in leaves.iter().enumerate() {
         if let Some(p) = position.get_mut(leaf as usize) {
@@ -276,11 +280,11 @@ pub fn ring_ratios(
     let through_planes = |other: u32, hit: Vec3, k: usize| -> f32 {
         let plane = planes.and_then(|planes| {
             let i = *position.get(other as usize)?;
-            planes.get(i as usize)?.get(k)
+            planes.get(i as usize)?.get(given[k])
         });
         match plane {
             Some(plane) => plane.at(hit),
-            None => scene.transmittance(hit, suns[k], other, opacity),
+            None => scene.transmittance(hit, directions[k], other, opacity),
         }
     };
     sun_ratios_with(
@@ -289,7 +293,7 @@ pub fn ring_ratios(
         leaves,
         envelopes,
         tau,
-        &suns,
+        suns,
         rays,
         opacity,
         planes.map(|_| &through_planes as &(dyn Fn(u32, Vec3, usize) -> f32 + Sync)),
@@ -959,6 +963,55 @@ mod tests {
     /// there says (the eye's and the sun's paths leave through the same gaps), so the first
     /// node's exponent brightens the shares (below 1); with the sun facing the eye it is near
     /// 1 or above. The exponents read back are what the leaves are drawn with.
+    #[test]
+    fn a_sun_that_is_no_direction_gets_ratio_one_and_leaves_the_others_planes_in_place() {
+        let Ball {
+            scene,
+            all,
+            envelope,
+            material,
+            ..
+        } = ball(120, 3);
+        let suns = [Vec3::new(0.3, 0.4, -1.0), Vec3::new(-0.5, 0.8, 0.2)];
+        let planes = sunlit_planes(&scene, &all, &suns, 9, &|_| 1.0, 2);
+        let ratios = |suns: &[Vec3], planes: &[Vec<SharePlane>]| {
+            ring_ratios(
+                &scene,
+                &material,
+                &all,
+                &envelope.leaves,
+                envelope.tau,
+                suns,
+                24,
+                Some(planes),
+                &|_| 1.0,
+                2,
+            )
+        };
+        let valid = ratios(&suns, &planes);
+        // A NaN sun between the two, its planes a dark stand-in: numbered as given, each valid
+        // sun still reads its own planes, and the NaN sun's ratios are 1 as `sun_ratios_of`'s.
+        let with_nan = [suns[0], Vec3::NAN, suns[1]];
+        let dark = SharePlane::default();
+        let planes_nan: Vec<Vec<SharePlane>> =
+            planes.iter().map(|p| vec![p[0], dark, p[1]]).collect();
+        let nan = ratios(&with_nan, &planes_nan);
+        for (leaf, (a, b)) in valid.iter().zip(&nan).enumerate() {
+            assert_eq!(b.len(), 3);
+            assert_eq!(a[0], b[0], "leaf {leaf}");
+            assert_eq!(b[1], [1.0; 2], "leaf {leaf}");
+            assert_eq!(a[1], b[2], "leaf {leaf}");
+        }
+        // The second sun's planes matter: reading the first's in their place moves its ratios.
+        let swapped: Vec<Vec<SharePlane>> = planes.iter().map(|p| vec![p[0], p[0]]).collect();
+        let moved = ratios(&suns, &swapped)
+            .iter()
+            .zip(&valid)
+            .filter(|(a, b)| a[1] != b[1])
+            .count();
+        assert!(moved * 2 > all.len(), "{moved}");
+    }
+
     #[test]
     fn the_rings_own_hotspot_brightens_its_shares_behind_the_eye() {
         let Ball {
