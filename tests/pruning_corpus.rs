@@ -167,8 +167,8 @@ fn corpus_trees_prune_by_screen_size_and_compensation_keeps_their_coverage() {
     let dir = std::env::temp_dir().join(format!("pruning_corpus_test_{}", std::process::id()));
     let settings = CorpusSettings::default();
     let mut factors: Vec<(String, Vec<f32>)> = Vec::new();
-    // One harness for the whole corpus: a render device and its pipelines a tree would cost
-    // a pipeline compilation each on the software rasteriser.
+    // One harness for the whole corpus: one render device for the process and one compilation
+    // of the pipelines, where a harness a tree would open four and compile four times.
     let Some(mut harness) = RenderHarness::for_test("pruning_corpus", 256, 256) else {
         return;
     };
