@@ -8,7 +8,7 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…] [--ring-offset F]] [--sunlit-points P [--sunlit-maps C[,C…]]]]
+//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…] [--ring-offset F]] [--sunlit-points P [--sunlit-maps C[,C…]] [--through-planes R[,R…]]] [--bounce-planes SxP[,…]] [--bounce-covers]]
 //!     [--sun X,Y,Z] [--eye X,Y,Z]
 //!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
@@ -189,37 +189,37 @@ fn main() {
                     })
             }
             "--bounce-planes" => {
-                bounce_planes = args
-                    .get(i + 1)
-                    .map(|list| {
-                        list.split(',')
-                            .filter_map(|m| {
-                                let (side, rays) = m.split_once('x')?;
-                                Some((side.trim().parse().ok()?, rays.trim().parse().ok()?))
-                            })
-                            .collect()
-                    })
-                    .unwrap_or_default();
+                bounce_planes = list_flag(
+                    "--bounce-planes",
+                    args.get(i + 1),
+                    "SxP or SxP,SxP,… (S × S points a leaf, S in 1..=32; P rays a point in 1..=4096)",
+                    |m| {
+                        let (side, rays) = m.split_once('x')?;
+                        let side = side.trim().parse().ok().filter(|s| (1..=32).contains(s))?;
+                        let rays = rays
+                            .trim()
+                            .parse()
+                            .ok()
+                            .filter(|r| (1..=4096).contains(r))?;
+                        Some((side, rays))
+                    },
+                );
             }
             "--through-planes" => {
-                through_planes = args
-                    .get(i + 1)
-                    .map(|list| {
-                        list.split(',')
-                            .filter_map(|c| c.trim().parse().ok())
-                            .collect()
-                    })
-                    .unwrap_or_default();
+                through_planes = list_flag(
+                    "--through-planes",
+                    args.get(i + 1),
+                    "R or R,R,… (rays a leaf, each in 1..=4096)",
+                    |r| r.parse().ok().filter(|r| (1..=4096).contains(r)),
+                );
             }
             "--sunlit-maps" => {
-                sunlit_maps = args
-                    .get(i + 1)
-                    .map(|list| {
-                        list.split(',')
-                            .filter_map(|c| c.trim().parse().ok())
-                            .collect()
-                    })
-                    .unwrap_or_default();
+                sunlit_maps = list_flag(
+                    "--sunlit-maps",
+                    args.get(i + 1),
+                    "C or C,C,… (cells a side, each in 1..=16)",
+                    |c| c.parse().ok().filter(|c| (1..=16).contains(c)),
+                );
             }
             "--leaf-shadow-offset" => {
                 let parts: Option<Vec<f32>> = args
@@ -293,62 +293,49 @@ fn main() {
                 })
             }
             "--bounce-pool" => {
-                bounce_pools = args
-                    .get(i + 1)
-                    .map(|v| v.split(',').map(|r| r.trim().parse::<usize>()).collect())
-                    .and_then(|r: Result<Vec<usize>, _>| r.ok())
-                    .filter(|r| {
-                        !r.is_empty() && r.iter().all(|r| (1..=MAX_BOUNCE_POOL).contains(r))
-                    })
-                    .unwrap_or_else(|| {
-                        eprintln!(
-                            "--bounce-pool takes K or K,K,… with each K in 1..={MAX_BOUNCE_POOL}"
-                        );
-                        std::process::exit(2)
-                    })
+                bounce_pools = list_flag(
+                    "--bounce-pool",
+                    args.get(i + 1),
+                    &format!("K or K,K,… with each K in 1..={MAX_BOUNCE_POOL}"),
+                    |k| k.parse().ok().filter(|k| (1..=MAX_BOUNCE_POOL).contains(k)),
+                )
             }
             "--open-maps" => {
-                open_maps = args
-                    .get(i + 1)
-                    .map(|list| {
-                        list.split(',')
-                            .filter_map(|m| {
-                                let (side, points) = m.split_once('x')?;
-                                let (points, of_leaf) = match points.trim().strip_suffix('r') {
-                                    Some(p) => (p, true),
-                                    None => (points.trim(), false),
-                                };
-                                Some((side.trim().parse().ok()?, points.parse().ok()?, of_leaf))
-                            })
-                            .collect()
-                    })
-                    .unwrap_or_default();
+                open_maps = list_flag(
+                    "--open-maps",
+                    args.get(i + 1),
+                    "CxP[r] or CxP[r],… (C × C cells in 1..=16, P points in 1..=4096; r: cells over the square a leaf shader finds)",
+                    |m| {
+                        let (side, points) = m.split_once('x')?;
+                        let (points, of_leaf) = match points.trim().strip_suffix('r') {
+                            Some(p) => (p, true),
+                            None => (points.trim(), false),
+                        };
+                        let side = side.trim().parse().ok().filter(|s| (1..=16).contains(s))?;
+                        let points = points.parse().ok().filter(|p| (1..=4096).contains(p))?;
+                        Some((side, points, of_leaf))
+                    },
+                );
             }
             "--sun-ring" => {
-                sun_rings = args
-                    .get(i + 1)
-                    .map(|v| v.split(',').map(|r| r.trim().parse::<usize>()).collect())
-                    .and_then(|r: Result<Vec<usize>, _>| r.ok())
-                    .filter(|r| !r.is_empty() && r.iter().all(|r| (1..=64).contains(r)))
-                    .unwrap_or_else(|| {
-                        eprintln!("--sun-ring takes N or N,N,… with each N in 1..=64");
-                        std::process::exit(2)
-                    })
+                sun_rings = list_flag(
+                    "--sun-ring",
+                    args.get(i + 1),
+                    "N or N,N,… with each N in 1..=64",
+                    |n| n.parse().ok().filter(|n| (1..=64).contains(n)),
+                )
             }
             "--rays-per-bin" => {
-                rays_per_bin = args
-                    .get(i + 1)
-                    .map(|v| v.split(',').map(|r| r.trim().parse::<u32>()).collect())
-                    .and_then(|r: Result<Vec<u32>, _>| r.ok())
-                    .filter(|r| !r.is_empty() && r.iter().all(|r| (1..=4096).contains(r)))
-                    .unwrap_or_else(|| {
-                        eprintln!("--rays-per-bin takes R or R,R,… with each R in 1..=4096");
-                        std::process::exit(2)
-                    })
+                rays_per_bin = list_flag(
+                    "--rays-per-bin",
+                    args.get(i + 1),
+                    "R or R,R,… with each R in 1..=4096",
+                    |r| r.parse().ok().filter(|r| (1..=4096).contains(r)),
+                )
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…] [--ring-offset F]] [--sunlit-points P [--sunlit-maps C[,C…]]]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…] [--ring-offset F]] [--sunlit-points P [--sunlit-maps C[,C…]] [--through-planes R[,R…]]] [--bounce-planes SxP[,…]] [--bounce-covers]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -892,6 +879,25 @@ fn image_table(
 
 /// A direction `x,y,z` from the command line, normalised; `None` for anything else (or a
 /// zero vector).
+/// The comma-separated items of `flag`'s value, each read by `item` (`None`: not one), or a
+/// message saying what the flag `takes` and exit status 2: a list with a malformed or
+/// out-of-range item is refused whole rather than run without that item.
+fn list_flag<T>(
+    flag: &str,
+    value: Option<&String>,
+    takes: &str,
+    item: impl Fn(&str) -> Option<T>,
+) -> Vec<T> {
+    let items: Option<Vec<T>> = value.and_then(|v| v.split(',').map(|c| item(c.trim())).collect());
+    match items {
+        Some(items) if !items.is_empty() => items,
+        _ => {
+            eprintln!("{flag} takes {takes}");
+            std::process::exit(2)
+        }
+    }
+}
+
 fn direction(arg: Option<&String>) -> Option<Vec3> {
     arg.map(|v| v.split(',').map(|c| c.trim().parse::<f32>()).collect())
         .and_then(|c: Result<Vec<f32>, _>| c.ok())
