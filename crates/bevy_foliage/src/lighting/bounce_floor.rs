@@ -85,13 +85,7 @@ pub fn bounce_planes(
                 )[0]
             })
             .collect();
-        let face = |f: usize| {
-            let mut i = 0;
-            fit.fit(|_| {
-                i += 1;
-                at[i - 1][f]
-            })
-        };
+        let face = |f: usize| fit.fit_values(&at.iter().map(|v| v[f]).collect::<Vec<_>>());
         BouncePlanes {
             faces: [face(0), face(1)],
         }

@@ -181,11 +181,24 @@ impl PlaneFit {
     /// on a line (or one point) fit no plane: the mean alone.
     pub fn fit(&self, mut value: impl FnMut(Vec3) -> f32) -> SharePlane {
         let values: Vec<f32> = self.points.iter().map(|&p| value(p)).collect();
+        self.fit_values(&values)
+    }
+
+    /// The plane through `values`, one a point in the order of `points`. A list of another
+    /// length fits no slope: its mean alone, with a zero gradient.
+    pub fn fit_values(&self, values: &[f32]) -> SharePlane {
         let mean = values.iter().sum::<f32>() / values.len().max(1) as f32;
+        if values.len() != self.points.len() {
+            return SharePlane {
+                mean,
+                centre: self.centre,
+                gradient: Vec3::ZERO,
+            };
+        }
         let (bx, by) = self
             .xy
             .iter()
-            .zip(&values)
+            .zip(values)
             .fold((0.0, 0.0), |(a, b), ((x, y), v)| {
                 (a + x * (v - mean), b + y * (v - mean))
             });
@@ -314,6 +327,29 @@ mod tests {
             (through[0][0] - (shares[0][0] + 0.4 * (1.0 - shares[0][0]))).abs() < 1e-4,
             "{through:?}"
         );
+    }
+
+    #[test]
+    fn values_a_point_fit_their_slope_and_a_list_of_another_length_its_mean_alone() {
+        let points = vec![
+            Vec3::new(-1.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.0, -1.0),
+            Vec3::new(-1.0, 0.0, 1.0),
+            Vec3::new(1.0, 0.0, 1.0),
+        ];
+        let fit = PlaneFit::new(points.clone(), Vec3::Y);
+        // A value of 2 + x: slope 1 along x, none along z, read back exactly at each point.
+        let plane = fit.fit_values(&[1.0, 3.0, 1.0, 3.0]);
+        assert!((plane.mean - 2.0).abs() < 1e-6);
+        assert!(
+            (plane.gradient - Vec3::X).length() < 1e-5,
+            "{}",
+            plane.gradient
+        );
+        assert_eq!(plane, fit.fit(|p| 2.0 + p.x));
+        // Three values for four points: their mean, no slope.
+        let short = fit.fit_values(&[1.0, 3.0, 2.0]);
+        assert_eq!((short.mean, short.gradient), (2.0, Vec3::ZERO));
     }
 
     #[test]
