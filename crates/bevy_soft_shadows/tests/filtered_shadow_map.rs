@@ -9,6 +9,7 @@ mod common;
 use bevy::light::DirectionalLightShadowMap;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
+use bevy::render::render_resource::TextureFormat;
 use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy_nature_harness::RenderHarness;
 use bevy_soft_shadows::SoftShadowsPlugin;
@@ -17,24 +18,36 @@ use bevy_soft_shadows::filterable::filter::{FilterableMethod, blur, mip_chain};
 use bevy_soft_shadows::filterable::render::{FilteredShadowViewMaps, texel_format};
 use common::*;
 
+/// The texel format of the sun's filtered map as the render world holds it, where a view has
+/// one.
+fn directional_format(harness: &RenderHarness) -> Option<TextureFormat> {
+    let render_world = harness.app().get_sub_app(RenderApp)?.world();
+    let mut maps = render_world.try_query::<&FilteredShadowViewMaps>()?;
+    maps.iter(render_world)
+        .find_map(|maps| maps.directional.as_ref())
+        .map(|textures| textures.format)
+}
+
+/// One harness (one render device) for every method: the sun's method is changed in place, as
+/// a user switching methods does, and the passes must follow it to the new texel format.
 #[test]
 fn the_gpu_blurs_and_mips_the_statistics_as_the_cpu_does() {
+    let Some(mut harness) = RenderHarness::for_test("filtered_shadow_map", 32, 32) else {
+        return;
+    };
+    harness.app_mut().add_plugins(SoftShadowsPlugin);
+    setup(&mut harness);
+    harness
+        .world_mut()
+        .insert_resource(DirectionalLightShadowMap { size: 256 });
+    let sigma = 1.5;
+    let sun = sun_entity(&mut harness);
     for method in [
         FilterableMethod::Moments4,
         FilterableMethod::PowerCdf,
         FilterableMethod::GaussianCdf,
         FilterableMethod::Exponential { c: 20.0 },
     ] {
-        let Some(mut harness) = RenderHarness::for_test("filtered_shadow_map", 32, 32) else {
-            return;
-        };
-        harness.app_mut().add_plugins(SoftShadowsPlugin);
-        setup(&mut harness);
-        harness
-            .world_mut()
-            .insert_resource(DirectionalLightShadowMap { size: 256 });
-        let sigma = 1.5;
-        let sun = sun_entity(&mut harness);
         harness
             .world_mut()
             .entity_mut(sun)
@@ -43,6 +56,13 @@ fn the_gpu_blurs_and_mips_the_statistics_as_the_cpu_does() {
                 blur_sigma: sigma,
             });
         harness.wait_until_ready().expect("pipelines");
+        // The maps are made again in the new method's format within a few frames.
+        let mut frames = 0;
+        while directional_format(&harness) != Some(texel_format(method)) {
+            frames += 1;
+            assert!(frames <= 10, "{method:?}: the maps never took its format");
+            harness.step();
+        }
         harness.reset_timing();
         for _ in 0..3 {
             harness.step();
@@ -62,8 +82,7 @@ fn the_gpu_blurs_and_mips_the_statistics_as_the_cpu_does() {
             .expect("the component is registered");
         let textures = maps
             .iter(render_world)
-            .next()
-            .and_then(|maps| maps.directional.as_ref())
+            .find_map(|maps| maps.directional.as_ref())
             .expect("a view with the map");
         assert_eq!(textures.format, texel_format(method));
         let raw = read_level(device, queue, &textures.raw.texture, 0);
