@@ -1178,6 +1178,7 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         // A hotspot on the shares distinct per node and far from the bake's (a shader that
         // reads the bake's, or the nodes out of order, fails).
         sunlit_hotspot: std::array::from_fn(|k| Hotspot::quantize(2.6 - 0.3 * k as f32)),
+        crown_weights: Vec::new(),
     };
     harness
         .world_mut()
@@ -2574,5 +2575,7 @@ const CLOUD_HOTSPOT: Hotspot = Hotspot {
     bounce: [1.75, 1.625, 1.5, 1.25, 0.75, 0.625, 0.5, 0.375],
 };
 
-/// How far a tree-lit crown's brightness may move when its billboard cloud takes over.
-const HANDOVER_TOLERANCE: f64 = 0.08;
+/// How far a tree-lit crown's brightness may move when its billboard cloud takes over: +1.1 %
+/// measured with the crown's means weighted by how much an eye sees of each leaf, +3.6 % with
+/// every leaf alike (the hidden leaves' ratios brightening the cloud), which this fails.
+const HANDOVER_TOLERANCE: f64 = 0.03;

@@ -22,6 +22,7 @@ use super::cloud::{BillboardCloud, CloudPlane, CloudTriangle, PlaneRole, TreePar
 use super::format::ImpostorPlane;
 pub use super::format::LIGHT_ATLASES;
 use crate::lighting::bins::{LeafProxy, proxies};
+use crate::lighting::bounce_ring::crown_view_weights;
 use crate::lighting::envelope::crown_envelope;
 use crate::lighting::gathered_bounce::{
     BounceRatios, DEFAULT_BOUNCE_POOL, DEFAULT_BOUNCE_RAYS, bounce_ratios_of, crown_mean_ratios,
@@ -311,8 +312,9 @@ impl ImpostorSource {
             &opacity,
             threads,
         );
-        // As the cloud file stores them.
-        let bounce = BounceRatios::from_stored(&crown_mean_ratios(&ratios).quantized());
+        // The crown's mean as an eye outside it sees the leaves, as the cloud file stores it.
+        let weights = crown_view_weights(&scene, &all, &envelope.leaves, &opacity);
+        let bounce = BounceRatios::from_stored(&crown_mean_ratios(&ratios, &weights).quantized());
         let hotspot = crown_hotspot(
             &scene,
             &envelope,

@@ -45,7 +45,7 @@ use super::gathered_bounce::{
 };
 use super::hotspot::{HOTSPOT_NODES, Hotspot, HotspotSettings, HotspotSuns, crown_hotspot_for};
 use super::leaf_scene::LeafScene;
-use super::model::LeafMaterial;
+use super::model::{LeafMaterial, open_share};
 use super::sunlit_share::{
     SharePlane, plane_on_ring, quantize_share, quantize_slope, share_of, share_on_ring, slope_of,
     sunlit_planes,
@@ -106,6 +106,11 @@ pub struct BounceRing {
     /// ([`Hotspot::quantize`]); all zero where none was fitted (the shares then take the
     /// bake's, [`BounceRing::sun_exponent`]).
     pub sunlit_hotspot: [u8; HOTSPOT_NODES],
+    /// Per stored leaf, how much an eye outside the crown sees of it ([`crown_view_weights`]):
+    /// the weights of the crown's mean ring a billboard cloud reads ([`crown_mean_ring`]);
+    /// empty (or for another number of leaves) for every leaf alike. Not in the leaves' light
+    /// buffer.
+    pub crown_weights: Vec<f32>,
 }
 
 impl BounceRing {
@@ -235,6 +240,7 @@ pub fn gather_ring(
         sunlit,
         sunlit_slopes,
         sunlit_hotspot,
+        crown_weights: crown_view_weights(scene, leaves, envelopes, opacity),
     }
 }
 
@@ -360,22 +366,62 @@ pub fn ring_sun_hotspot(
     .sun
 }
 
+/// How much an eye outside the crown sees of each of `leaves` (`envelopes` theirs, in the
+/// same order), averaged over the eye's directions all round: a leaf of area A, opaque share o
+/// and normal n is seen from ω over A·o·|n·ω|·a(ω), a(ω) what the crown lets through towards
+/// ω, whose mean over the sphere is A·o·Ō/2, Ō the leaf's open share from its bins (§5.6,
+/// [`super::model::open_share`]). So the weights are A·o·Ō: a leaf deep in the crown, whose
+/// bins are shut, is hardly in any image of it. 0 for a leaf the scene does not hold or whose
+/// values are not finite.
+pub fn crown_view_weights(
+    scene: &LeafScene,
+    leaves: &[u32],
+    envelopes: &[LeafEnvelope],
+    opacity: &impl Fn(u32) -> f32,
+) -> Vec<f32> {
+    leaves
+        .iter()
+        .zip(envelopes)
+        .map(|(&l, envelope)| {
+            if l as usize >= scene.leaf_count() {
+                return 0.0;
+            }
+            let open = open_share(scene.normal(l as usize), &envelope.attenuation);
+            let w = scene.area(l as usize) * opacity(l).clamp(0.0, 1.0) * open;
+            if w.is_finite() { w.max(0.0) } else { 0.0 }
+        })
+        .collect()
+}
+
 /// The crown's mean ring: per node and face the mean of its leaves' ring ratios (read back as
-/// stored), for a billboard cloud, whose texels have no room for their leaves' own (as
-/// [`super::gathered_bounce::crown_mean_ratios`] for the bake's). No leaves: all 1.
+/// stored), each leaf weighted by how much an eye outside the crown sees of it
+/// ([`BounceRing::crown_weights`], [`crown_view_weights`]; alike where the ring has none), for
+/// a billboard cloud, whose texels have no room for their leaves' own (as
+/// [`super::gathered_bounce::crown_mean_ratios`] for the bake's): a cloud shows the crown's
+/// outer leaves, whose ratios are not the hidden ones'. No leaves, or no weight: all 1.
 pub fn crown_mean_ring(ring: &BounceRing) -> [[f32; 2]; RING_NODES] {
-    if ring.leaves.is_empty() {
-        return [[1.0; 2]; RING_NODES];
-    }
+    let weighted = ring.crown_weights.len() == ring.leaves.len();
     let mut sum = [[0.0f64; 2]; RING_NODES];
-    for stored in &ring.leaves {
+    let mut total = 0.0f64;
+    for (i, stored) in ring.leaves.iter().enumerate() {
+        let w = if weighted {
+            ring.crown_weights[i] as f64
+        } else {
+            1.0
+        };
+        if !(w > 0.0 && w.is_finite()) {
+            continue;
+        }
+        total += w;
         for (k, node) in ring_nodes_of(stored).iter().enumerate() {
-            sum[k][0] += node[0] as f64;
-            sum[k][1] += node[1] as f64;
+            sum[k][0] += w * node[0] as f64;
+            sum[k][1] += w * node[1] as f64;
         }
     }
-    let n = ring.leaves.len() as f64;
-    sum.map(|[f, b]| [(f / n) as f32, (b / n) as f32])
+    if total <= 0.0 {
+        return [[1.0; 2]; RING_NODES];
+    }
+    sum.map(|[f, b]| [(f / total) as f32, (b / total) as f32])
 }
 
 /// A leaf's ring ratios as stored, read back: per node, front and back.
@@ -657,6 +703,63 @@ mod tests {
             ..BounceRing::default()
         };
         assert_eq!(crown_mean_ring(&none), [[1.0; 2]; RING_NODES]);
+    }
+
+    /// The crown's mean ring weighs each leaf by how much of it an eye outside the crown sees:
+    /// a leaf whose bins are all open by its area, one whose bins are shut not at all, a card
+    /// twice as wide, half opaque and half open as much as the first; weights for another
+    /// number of leaves count every leaf alike.
+    #[test]
+    fn the_crowns_mean_ring_weighs_the_leaves_an_eye_sees() {
+        use crate::lighting::path_trace::push_square_leaf;
+        use crate::pruning::leaves::LeafSet;
+        let mut set = LeafSet::default();
+        for (x, half) in [(0.0, 0.5), (3.0, 0.5), (6.0, 1.0)] {
+            push_square_leaf(&mut set, Vec3::new(x, 0.0, 0.0), half, Vec3::Y);
+        }
+        let scene = LeafScene::new(&set);
+        let envelope = |a: f32| LeafEnvelope {
+            attenuation: [a; 8],
+            s_max: [0.0; 8],
+        };
+        let envelopes = [envelope(1.0), envelope(0.0), envelope(0.5)];
+        let opacity = |l: u32| if l == 2 { 0.5 } else { 1.0 };
+        let weights = crown_view_weights(&scene, &[0, 1, 2], &envelopes, &opacity);
+        for (w, want) in weights.iter().zip([1.0, 0.0, 1.0]) {
+            assert!((w - want).abs() < 1e-4, "{weights:?}");
+        }
+        // A leaf the scene does not hold: no weight.
+        assert_eq!(
+            crown_view_weights(&scene, &[7], &envelopes, &opacity),
+            [0.0]
+        );
+        let a = distinct_ring();
+        let b: [u8; STORED_RATIOS] = std::array::from_fn(|i| quantize_ratio(1.0 + i as f32 * 0.01));
+        let c: [u8; STORED_RATIOS] = std::array::from_fn(|i| quantize_ratio(2.0 - i as f32 * 0.02));
+        let mut ring = BounceRing {
+            sun_height: 0.2,
+            leaves: vec![a, b, c],
+            crown_weights: weights,
+            ..Default::default()
+        };
+        let (na, nb, nc) = (ring_nodes_of(&a), ring_nodes_of(&b), ring_nodes_of(&c));
+        let mean = crown_mean_ring(&ring);
+        for k in 0..RING_NODES {
+            for f in 0..2 {
+                assert!((mean[k][f] - 0.5 * (na[k][f] + nc[k][f])).abs() < 1e-4);
+            }
+        }
+        ring.crown_weights.pop();
+        let alike = crown_mean_ring(&ring);
+        for k in 0..RING_NODES {
+            for f in 0..2 {
+                let third = (na[k][f] + nb[k][f] + nc[k][f]) / 3.0;
+                assert!((alike[k][f] - third).abs() < 1e-4);
+            }
+        }
+        // No leaf seen at all: as no leaves.
+        ring.crown_weights = vec![0.0; 3];
+        assert_eq!(crown_mean_ring(&ring), [[1.0; 2]; RING_NODES]);
     }
 
     /// The sun through the crown: the ring's shares at its elevation (linear in azimuth, the

@@ -5,7 +5,8 @@
 //! shader (`tree_lighting.wgsl`'s `ratio_towards`), which scales eq. 5.24's bins face by face;
 //! measured against the path tracer by `tree_lighting_error --images --bounce-rays R`.
 //! Billboard clouds, whose texels have no room for their leaves' own, take the crown's mean
-//! ([`crown_mean_ratios`]). While an app runs, the ratios are also re-gathered for fourteen suns
+//! ([`crown_mean_ratios`]), each leaf weighted by how much an eye outside the crown sees of it
+//! (the cloud shows the outer leaves, not the hidden ones). While an app runs, the ratios are also re-gathered for fourteen suns
 //! at the sun's own elevation ([`sun_ratios_of`] on [`super::bounce_ring`]'s ring), which the
 //! shaders read in place of the blend where the sun is at that elevation.
 //!
@@ -845,16 +846,37 @@ impl BounceRatios {
     }
 }
 
-/// The crown's mean ratios over its leaves' (each face and sun direction its own mean), for
-/// a billboard cloud, whose texels have no room for their leaves' own; none: all 1.
-pub fn crown_mean_ratios(ratios: &[BounceRatios]) -> BounceRatios {
-    if ratios.is_empty() {
+/// The crown's mean ratios over its leaves' (each face and sun direction its own mean), each
+/// leaf weighted by `weights` (how much an eye outside the crown sees of it,
+/// [`super::bounce_ring::crown_view_weights`]; every leaf alike where `weights` is not one a
+/// leaf), for a billboard cloud, whose texels have no room for their leaves' own; none, or no
+/// weight: all 1.
+pub fn crown_mean_ratios(ratios: &[BounceRatios], weights: &[f32]) -> BounceRatios {
+    let weight = |i: usize| {
+        let w = if weights.len() == ratios.len() {
+            weights[i]
+        } else {
+            1.0
+        };
+        if w > 0.0 && w.is_finite() { w } else { 0.0 }
+    };
+    let total: f32 = (0..ratios.len()).map(weight).sum();
+    if total <= 0.0 {
         return BounceRatios::default();
     }
-    let n = ratios.len() as f32;
+    let mean = |face: &dyn Fn(&BounceRatios) -> &[f32; 14]| -> [f32; 14] {
+        std::array::from_fn(|k| {
+            ratios
+                .iter()
+                .enumerate()
+                .map(|(i, r)| weight(i) * face(r)[k])
+                .sum::<f32>()
+                / total
+        })
+    };
     BounceRatios {
-        front: std::array::from_fn(|k| ratios.iter().map(|r| r.front[k]).sum::<f32>() / n),
-        back: std::array::from_fn(|k| ratios.iter().map(|r| r.back[k]).sum::<f32>() / n),
+        front: mean(&|r| &r.front),
+        back: mean(&|r| &r.back),
     }
 }
 
@@ -1305,11 +1327,12 @@ mod tests {
         }
     }
 
-    /// A crown's mean ratios are each face's and sun's own mean over the leaves; no leaves
-    /// leave eq. 5.24 as it is.
+    /// A crown's mean ratios are each face's and sun's own mean over the leaves, weighted
+    /// where there is a weight a leaf; no leaves, or none weighing anything, leave eq. 5.24 as
+    /// it is.
     #[test]
     fn the_crown_mean_keeps_faces_and_suns_apart() {
-        assert_eq!(crown_mean_ratios(&[]), BounceRatios::default());
+        assert_eq!(crown_mean_ratios(&[], &[]), BounceRatios::default());
         let a = BounceRatios {
             front: std::array::from_fn(|k| k as f32),
             back: [2.0; 14],
@@ -1318,11 +1341,24 @@ mod tests {
             front: std::array::from_fn(|k| 3.0 * k as f32),
             back: [0.0; 14],
         };
-        let mean = crown_mean_ratios(&[a, b]);
-        for k in 0..14 {
-            assert_eq!(mean.front[k], 2.0 * k as f32);
-            assert_eq!(mean.back[k], 1.0);
+        // Weights for another number of leaves: alike.
+        for weights in [&[][..], &[1.0][..]] {
+            let mean = crown_mean_ratios(&[a, b], weights);
+            for k in 0..14 {
+                assert_eq!(mean.front[k], 2.0 * k as f32);
+                assert_eq!(mean.back[k], 1.0);
+            }
         }
+        // One weight a leaf: b three times a's, a weight not finite or below 0 counting for none.
+        let mean = crown_mean_ratios(&[a, b, a], &[1.0, 3.0, f32::NAN]);
+        for k in 0..14 {
+            assert!((mean.front[k] - 2.5 * k as f32).abs() < 1e-5);
+            assert!((mean.back[k] - 0.5).abs() < 1e-6);
+        }
+        assert_eq!(
+            crown_mean_ratios(&[a, b], &[0.0, -1.0]),
+            BounceRatios::default()
+        );
     }
 
     /// The grid's nearest neighbours are a brute-force search's (by distance; the point

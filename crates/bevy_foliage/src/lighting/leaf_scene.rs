@@ -139,6 +139,17 @@ impl LeafScene {
         self.normals[leaf]
     }
 
+    /// Leaf `leaf`'s area (its triangles'); 0 for a leaf the scene does not hold.
+    pub fn area(&self, leaf: usize) -> f32 {
+        let Some(&(first, count)) = self.leaf_triangles.get(leaf) else {
+            return 0.0;
+        };
+        self.triangles[first as usize..(first + count) as usize]
+            .iter()
+            .map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length())
+            .sum()
+    }
+
     fn bounds(&self, range: &[u32]) -> (Vec3, Vec3) {
         let mut min = Vec3::splat(f32::INFINITY);
         let mut max = Vec3::splat(f32::NEG_INFINITY);

@@ -518,6 +518,7 @@ mod tests {
                 })
                 .collect(),
             sunlit_hotspot: std::array::from_fn(|k| 60 + 9 * k as u8),
+            crown_weights: Vec::new(),
         };
         let (mut with, mut without, mut wrong) = (Vec::new(), Vec::new(), Vec::new());
         push_leaf_light(&tree, Some(&ring), &mut with);
@@ -541,6 +542,7 @@ mod tests {
             sunlit: ring.sunlit[1..].to_vec(),
             sunlit_slopes: ring.sunlit_slopes[1..].to_vec(),
             sunlit_hotspot: ring.sunlit_hotspot,
+            crown_weights: Vec::new(),
         };
         push_leaf_light(&tree, Some(&short), &mut wrong);
         // A ring whose hotspot was not fitted (a node 0): the bake's, words of 0.
