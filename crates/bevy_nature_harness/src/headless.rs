@@ -405,7 +405,17 @@ impl RenderHarness {
     /// world (e.g. an asset finished loading, a bake completed).
     pub fn wait_until(
         &mut self,
+        condition: impl FnMut(&mut World) -> bool,
+    ) -> Result<u32, HarnessError> {
+        self.wait_until_reporting(condition, |_, _| {})
+    }
+
+    /// [`Self::wait_until`], calling `report` after each frame with the frames stepped so far
+    /// and the pipelines still compiling (for progress output on a slow adapter).
+    pub fn wait_until_reporting(
+        &mut self,
         mut condition: impl FnMut(&mut World) -> bool,
+        mut report: impl FnMut(u32, usize),
     ) -> Result<u32, HarnessError> {
         let mut stable = 0;
         let mut last_total = usize::MAX;
@@ -416,6 +426,7 @@ impl RenderHarness {
             if !errors.is_empty() {
                 return Err(HarnessError::Pipeline(errors));
             }
+            report(frame, waiting);
             let settled = waiting == 0 && total == last_total && condition(self.app.world_mut());
             last_total = total;
             stable = if settled { stable + 1 } else { 0 };

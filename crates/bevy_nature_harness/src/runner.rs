@@ -8,7 +8,10 @@
 //!
 //! Flags:
 //! - `--headless`: render offscreen (no window), then exit.
-//! - `--frames N`: measured frames to run (headless default 60); windowed runs exit after N.
+//! - `--frames N`: measured frames to run (headless default 60, or
+//!   [`SOFTWARE_DEFAULT_FRAMES`] on a software rasteriser, where a frame of the main scene takes
+//!   seconds to tens of seconds); windowed runs exit after N. A headless run reports its progress
+//!   every [`PROGRESS_SECONDS`].
 //! - `--size WxH`: render size (default 1280x720 windowed, 640x360 headless).
 //! - `--screenshot PATH`: save the last frame as PNG.
 //! - `--stats PATH`: write one JSON object (frame time median and p95, GPU pass times where
@@ -25,6 +28,24 @@ use crate::headless::{HarnessConfig, RenderHarness};
 use crate::stats::write_atomically;
 use bevy::prelude::*;
 use std::path::PathBuf;
+
+/// Measured frames a headless run takes by default on a software rasteriser (an adapter of
+/// device type `Cpu`, such as lavapipe or llvmpipe), where the default of 60 would keep a first
+/// run of the main scene going for most of an hour; `--frames N` asks for more.
+pub const SOFTWARE_DEFAULT_FRAMES: u32 = 5;
+
+/// Seconds between two progress lines of a headless run's measured frames.
+pub const PROGRESS_SECONDS: f32 = 10.0;
+
+/// The measured frames a headless run takes: `asked`, else 60, else on a software adapter
+/// [`SOFTWARE_DEFAULT_FRAMES`].
+pub fn headless_frames(asked: Option<u32>, software: bool) -> u32 {
+    asked.unwrap_or(if software {
+        SOFTWARE_DEFAULT_FRAMES
+    } else {
+        60
+    })
+}
 
 /// Parsed command-line flags of an example.
 #[derive(Clone, Debug, PartialEq)]
@@ -243,13 +264,33 @@ impl ExampleRunner {
 
     fn run_headless(self, scene: impl FnOnce(&mut App)) -> Result<(), String> {
         let size = self.args.size.unwrap_or(UVec2::new(640, 360));
-        let frames = self.args.frames.unwrap_or(60);
-        crate::adapter::require_adapter(&self.name).ok_or("no GPU adapter")?;
+        let adapter = crate::adapter::require_adapter(&self.name).ok_or("no GPU adapter")?;
+        let software = adapter.device_type == "Cpu";
+        let frames = headless_frames(self.args.frames, software);
+        if software && self.args.frames.is_none() && self.args.soak.is_none() {
+            eprintln!(
+                "{}: software rasteriser ({}): measuring {frames} frames rather than 60 (--frames N for more)",
+                self.name, adapter.name
+            );
+        }
         let mut harness =
             RenderHarness::new(HarnessConfig::sized(size.x, size.y)).map_err(|e| e.to_string())?;
         scene(harness.app_mut());
         let condition = self.ready_when.unwrap_or(|_| true);
-        let warmup = harness.wait_until(condition).map_err(|e| e.to_string())?;
+        let started = std::time::Instant::now();
+        let mut reported = 0.0;
+        let warmup = harness
+            .wait_until_reporting(condition, |frame, compiling| {
+                let elapsed = started.elapsed().as_secs_f32();
+                if elapsed - reported >= PROGRESS_SECONDS {
+                    reported = elapsed;
+                    eprintln!(
+                        "{}: warming up, frame {frame} ({compiling} pipelines compiling, {elapsed:.0} s)",
+                        self.name
+                    );
+                }
+            })
+            .map_err(|e| e.to_string())?;
         match self.args.soak {
             Some(soak) => eprintln!(
                 "{}: scene ready after {warmup} frames; soaking {soak} frames",
@@ -271,7 +312,19 @@ impl ExampleRunner {
             return Ok(());
         }
         harness.reset_timing();
-        harness.run_frames(frames).map_err(|e| e.to_string())?;
+        let start = std::time::Instant::now();
+        let mut reported = 0.0;
+        for frame in 1..=frames {
+            harness.run_frames(1).map_err(|e| e.to_string())?;
+            let elapsed = start.elapsed().as_secs_f32();
+            if elapsed - reported >= PROGRESS_SECONDS && frame < frames {
+                reported = elapsed;
+                eprintln!(
+                    "{}: frame {frame} of {frames} measured ({elapsed:.0} s)",
+                    self.name
+                );
+            }
+        }
         let stats = harness.run_stats(&self.name);
         if let Some(path) = &self.args.screenshot {
             let image = harness.render().map_err(|e| e.to_string())?;
@@ -357,6 +410,16 @@ mod tests {
         assert!(!args.headless);
         assert_eq!(args.frames, None);
         assert_eq!(args.size, None);
+    }
+
+    /// A headless run measures what it is asked for; unasked, 60 frames on a GPU and a few on
+    /// a software rasteriser.
+    #[test]
+    fn a_software_rasteriser_measures_fewer_frames_unless_asked() {
+        assert_eq!(headless_frames(None, false), 60);
+        assert_eq!(headless_frames(None, true), SOFTWARE_DEFAULT_FRAMES);
+        assert_eq!(headless_frames(Some(120), true), 120);
+        assert_eq!(headless_frames(Some(7), false), 7);
     }
 
     #[test]
