@@ -147,7 +147,8 @@ impl Default for ImageSettings {
 /// pixels in its relative mean, and `mean_relative` is per pixel.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ImageError {
-    /// Pixels across the crown's square.
+    /// Pixels across the crown's square; 0 for the leaves themselves as the pixels (the error
+    /// leaf by leaf, [`leaf_means`]).
     pub pixels_across: u32,
     /// A pixel's side in leaf sizes.
     pub pixel_in_leaves: f32,
@@ -348,11 +349,38 @@ pub fn block_means(values: &[f32], side: usize, block: usize) -> Vec<f32> {
     out
 }
 
+/// Each leaf's mean of `values` over the eye rays that hit it (`leaf_of`: per eye ray, the
+/// leaf it hit), leaves in order, those no eye ray hit left out: an image whose pixels are the
+/// leaves themselves, for the error leaf by leaf (the thesis' measure is per pixel, the
+/// error a leaf gets per leaf).
+pub fn leaf_means(values: &[f32], leaf_of: &[Option<u32>]) -> Vec<f32> {
+    let count = leaf_of
+        .iter()
+        .flatten()
+        .map(|&l| l as usize + 1)
+        .max()
+        .unwrap_or(0);
+    let mut sum = vec![(0.0f64, 0u32); count];
+    for (v, leaf) in values.iter().zip(leaf_of) {
+        if let Some(l) = leaf {
+            let slot = &mut sum[*l as usize];
+            slot.0 += *v as f64;
+            slot.1 += 1;
+        }
+    }
+    sum.iter()
+        .filter(|(_, n)| *n > 0)
+        .map(|(s, n)| (s / *n as f64) as f32)
+        .collect()
+}
+
 /// Renders `leaves` seen along `-to_eye` (parallel eye rays) with the model's every
 /// `(blend, bins)` of `models` and with the tracer, and measures each image against the
 /// traced one at pixels of `blocks × blocks` eye rays (block sizes that do not divide
-/// [`ImageSettings::samples`] are skipped). `leaf_size` sets the shadow map's texels (a quarter
-/// of it) and the pixel sizes reported.
+/// [`ImageSettings::samples`] are skipped), a block of 0 standing for the leaves themselves
+/// ([`leaf_means`]: `pixels_across` 0, a pixel a leaf wide), where `mean_relative` is the mean
+/// relative error per leaf. `leaf_size` sets the shadow map's texels (a quarter of it) and the
+/// pixel sizes reported.
 #[allow(clippy::too_many_arguments)]
 pub fn images_against_tracer(
     leaves: &LeafSet,
@@ -453,15 +481,22 @@ pub fn images_against_tracer(
     let blocks: Vec<usize> = blocks
         .iter()
         .map(|&b| b as usize)
-        .filter(|&b| b > 0 && side.is_multiple_of(b))
+        .filter(|&b| b == 0 || side.is_multiple_of(b))
         .collect();
+    let leaf_of: Vec<Option<u32>> = samples.iter().map(|s| s.as_ref().map(|s| s.leaf)).collect();
     // Measures images given per eye ray (sky, sun, bounce) against the first trace.
     let reference: [Vec<f32>; 4] = std::array::from_fn(|k| traced_column(0, k));
     let measure = |image: &[Vec<f32>; 3]| -> Vec<ImageError> {
         blocks
             .iter()
             .map(|&block| {
-                let px = |v: &[f32]| block_means(v, side, block);
+                let px = |v: &[f32]| {
+                    if block == 0 {
+                        leaf_means(v, &leaf_of)
+                    } else {
+                        block_means(v, side, block)
+                    }
+                };
                 let (sky, sun, bounce, bounces) = (
                     px(&reference[0]),
                     px(&reference[1]),
@@ -470,8 +505,12 @@ pub fn images_against_tracer(
                 );
                 let total: f32 = sky.iter().chain(&sun).chain(&bounces).sum();
                 ImageError {
-                    pixels_across: (side / block) as u32,
-                    pixel_in_leaves: cell * block as f32 / leaf_size.max(1e-6),
+                    pixels_across: side.checked_div(block).unwrap_or(0) as u32,
+                    pixel_in_leaves: if block == 0 {
+                        1.0
+                    } else {
+                        cell * block as f32 / leaf_size.max(1e-6)
+                    },
                     sky: component_error(&px(&image[0]), &sky, total),
                     sun: component_error(&px(&image[1]), &sun, total),
                     bounce: component_error(&px(&image[2]), &bounce, total),
@@ -1658,6 +1697,16 @@ mod tests {
         assert_eq!(block_means(&values, 4, 1), values);
     }
 
+    /// A leaf's value is the mean of its eye rays'; the background and leaves no ray hit are
+    /// left out, the leaves in order.
+    #[test]
+    fn a_leaf_is_the_mean_of_its_eye_rays() {
+        let values = [1.0, 2.0, 9.0, 4.0, 6.0, 7.0];
+        let leaf_of = [Some(3), Some(0), None, Some(3), Some(0), Some(5)];
+        assert_eq!(leaf_means(&values, &leaf_of), vec![4.0, 2.5, 7.0]);
+        assert!(leaf_means(&values, &[None; 6]).is_empty());
+    }
+
     /// One leaf facing the eye in full sun: every eye ray that hits it sees the whole sky and
     /// the sun, so the tracer is exact against itself (cosine-sampled sides) and the model's
     /// sun — nothing in the way, every bin open — and the shadow map's agree with it exactly.
@@ -1680,11 +1729,11 @@ mod tests {
             },
             2,
             &[(SunThroughCrown::BlendedAttenuation, BinEstimate::Neighbours)],
-            &[1, 4, 16],
+            &[1, 4, 16, 0],
         );
         // The leaf (side 1, seen at a slant) inside the square of side 2·0.707 framing it.
         assert!(run.hits > 16 * 16 / 8, "{}", run.hits);
-        assert_eq!(run.noise.len(), 3);
+        assert_eq!(run.noise.len(), 4);
         for (noise, model) in run.noise.iter().zip(&run.models[0].1) {
             assert!(noise.sky.mean_absolute < 1e-4, "{noise:?}");
             assert!(model.sun.mean_absolute < 1e-4, "{model:?}");
@@ -1699,8 +1748,11 @@ mod tests {
                 .iter()
                 .map(|e| e.pixels_across)
                 .collect::<Vec<_>>(),
-            vec![16, 4, 1]
+            vec![16, 4, 1, 0]
         );
+        // Leaf by leaf: the one leaf, a pixel a leaf wide.
+        let by_leaf = &run.models[0].1[3];
+        assert_eq!((by_leaf.sun.leaves, by_leaf.pixel_in_leaves), (1, 1.0));
     }
 
     /// On the crown the model assumes, leaf by leaf the sun is all or nothing, which eq. 5.8's
