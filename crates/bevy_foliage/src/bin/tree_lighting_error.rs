@@ -195,16 +195,7 @@ fn main() {
                     "--bounce-planes",
                     args.get(i + 1),
                     "SxP or SxP,SxP,… (S × S points a leaf, S in 1..=32; P rays a point in 1..=4096)",
-                    |m| {
-                        let (side, rays) = m.split_once('x')?;
-                        let side = side.trim().parse().ok().filter(|s| (1..=32).contains(s))?;
-                        let rays = rays
-                            .trim()
-                            .parse()
-                            .ok()
-                            .filter(|r| (1..=4096).contains(r))?;
-                        Some((side, rays))
-                    },
+                    |m| side_by_count(m, 1..=32, 1..=4096),
                 );
             }
             "--through-planes" => {
@@ -308,13 +299,11 @@ fn main() {
                     args.get(i + 1),
                     "CxP[r] or CxP[r],… (C × C cells in 1..=16, P points in 1..=4096; r: cells over the square a leaf shader finds)",
                     |m| {
-                        let (side, points) = m.split_once('x')?;
-                        let (points, of_leaf) = match points.trim().strip_suffix('r') {
-                            Some(p) => (p, true),
-                            None => (points.trim(), false),
+                        let (m, of_leaf) = match m.strip_suffix('r') {
+                            Some(m) => (m, true),
+                            None => (m, false),
                         };
-                        let side = side.trim().parse().ok().filter(|s| (1..=16).contains(s))?;
-                        let points = points.parse().ok().filter(|p| (1..=4096).contains(p))?;
+                        let (side, points) = side_by_count(m, 1..=16, 1..=4096)?;
                         Some((side, points, of_leaf))
                     },
                 );
@@ -905,6 +894,19 @@ fn list_flag<T>(
             std::process::exit(2)
         }
     }
+}
+
+/// An `AxB` list item (`--bounce-planes`' SxP, `--open-maps`' CxP): two whole numbers, each
+/// within its range.
+fn side_by_count(
+    item: &str,
+    sides: std::ops::RangeInclusive<u32>,
+    counts: std::ops::RangeInclusive<u32>,
+) -> Option<(u32, u32)> {
+    let (side, count) = item.split_once('x')?;
+    let side = side.trim().parse().ok().filter(|s| sides.contains(s))?;
+    let count = count.trim().parse().ok().filter(|c| counts.contains(c))?;
+    Some((side, count))
 }
 
 fn direction(arg: Option<&String>) -> Option<Vec3> {
