@@ -6,9 +6,10 @@
 //! measured against the path tracer by `tree_lighting_error --images --bounce-rays R`.
 //! Billboard clouds, whose texels have no room for their leaves' own, take the crown's mean
 //! ([`crown_mean_ratios`]), each leaf weighted by how much an eye outside the crown sees of it
-//! (the cloud shows the outer leaves, not the hidden ones). While an app runs, the ratios are also re-gathered for fourteen suns
-//! at the sun's own elevation ([`sun_ratios_of`] on [`super::bounce_ring`]'s ring), which the
-//! shaders read in place of the blend where the sun is at that elevation.
+//! (the cloud shows the outer leaves, not the hidden ones). While an app runs, the ratios are
+//! also re-gathered for fourteen suns at the sun's own elevation ([`sun_ratios_of`] on
+//! [`super::bounce_ring`]'s ring), which the shaders read in place of the blend where the sun
+//! is at that elevation.
 //!
 //! Eq. 5.24 integrates the light of the neighbours along each bin in closed form by assuming a
 //! crown of uniform density and random leaf orientations (§5.2.1), each neighbour lit by the

@@ -146,7 +146,7 @@ impl LeafScene {
         };
         self.triangles[first as usize..(first + count) as usize]
             .iter()
-            .map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length())
+            .map(triangle_area)
             .sum()
     }
 
@@ -433,12 +433,11 @@ impl LeafScene {
         if tris.is_empty() {
             return Vec3::ZERO;
         }
-        let area = |[a, b, c]: &[Vec3; 3]| 0.5 * (*b - *a).cross(*c - *a).length();
-        let total: f32 = tris.iter().map(area).sum();
+        let total: f32 = tris.iter().map(triangle_area).sum();
         let mut pick = u.0.clamp(0.0, 1.0) * total;
         let mut chosen = (tris.len() - 1, 1.0f32);
         for (i, t) in tris.iter().enumerate() {
-            let a = area(t);
+            let a = triangle_area(t);
             if pick < a {
                 chosen = (i, pick / a);
                 break;
@@ -458,13 +457,18 @@ impl LeafScene {
         let (first, count) = self.leaf_triangles[leaf];
         let mut sum = Vec3::ZERO;
         let mut area = 0.0;
-        for [a, b, c] in &self.triangles[first as usize..(first + count) as usize] {
-            let w = 0.5 * (*b - *a).cross(*c - *a).length();
+        for t @ [a, b, c] in &self.triangles[first as usize..(first + count) as usize] {
+            let w = triangle_area(t);
             sum += (*a + *b + *c) / 3.0 * w;
             area += w;
         }
         if area > 0.0 { sum / area } else { sum }
     }
+}
+
+/// A triangle's area.
+fn triangle_area([a, b, c]: &[Vec3; 3]) -> f32 {
+    0.5 * (*b - *a).cross(*c - *a).length()
 }
 
 /// Whether the ray (origin, 1/dir) crosses the box before `limit`.
