@@ -34,11 +34,12 @@ use std::path::PathBuf;
 /// run of the main scene going for most of an hour; `--frames N` asks for more.
 pub const SOFTWARE_DEFAULT_FRAMES: u32 = 5;
 
-/// Seconds between two progress lines of a headless run's measured frames.
+/// Seconds between two progress lines of a headless run (while it warms up and while it
+/// measures).
 pub const PROGRESS_SECONDS: f32 = 10.0;
 
-/// The measured frames a headless run takes: `asked`, else 60, else on a software adapter
-/// [`SOFTWARE_DEFAULT_FRAMES`].
+/// The measured frames a headless run takes: `asked` where given, else
+/// [`SOFTWARE_DEFAULT_FRAMES`] on a software adapter and 60 on any other.
 pub fn headless_frames(asked: Option<u32>, software: bool) -> u32 {
     asked.unwrap_or(if software {
         SOFTWARE_DEFAULT_FRAMES
