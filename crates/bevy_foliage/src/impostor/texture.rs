@@ -972,6 +972,61 @@ mod tests {
         }
     }
 
+    /// The cloud's bounce ratios are the crown's mean as an eye outside it sees the leaves
+    /// (`crown_view_weights`), not every leaf alike: in a ball of leaves the hidden inner
+    /// leaves' ratios differ from the outer ones', so the two means differ, and the bake must
+    /// store the weighted one.
+    #[test]
+    fn the_clouds_bounce_weighs_the_leaves_an_eye_sees() {
+        use crate::lighting::path_trace::uniform_ball;
+        let ball = uniform_ball(300, 1.0, 0.12, 7);
+        let mut source = ImpostorSource::default();
+        source.push_leaves(
+            &ball,
+            BakeSurface {
+                base_color: Vec4::ONE,
+                texture: None,
+                alpha_cutoff: 0.5,
+            },
+        );
+        let bins = BinEstimate::Traced { rays_per_bin: 32 };
+        let light = source.leaf_light(bins);
+
+        // The same ratios and weights the bake gathers, from its own scene and envelope.
+        let (scene, opacity) = source.leaf_scene();
+        let opacity = |l: u32| opacity.get(l as usize).copied().unwrap_or(1.0);
+        let all: Vec<u32> = (0..source.leaves.len() as u32).collect();
+        let envelope =
+            crown_envelope_traced(&source.leaves, &scene, &all, &opacity, 32, 1, &|_| {});
+        let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
+        let ratios = bounce_ratios_of(
+            &scene,
+            &optics,
+            &all,
+            &envelope.leaves,
+            envelope.tau,
+            DEFAULT_BOUNCE_RAYS,
+            DEFAULT_BOUNCE_POOL,
+            &opacity,
+            1,
+        );
+        let weights = crown_view_weights(&scene, &all, &envelope.leaves, &opacity);
+        let stored =
+            |w: &[f32]| BounceRatios::from_stored(&crown_mean_ratios(&ratios, w).quantized());
+        let (weighted, alike) = (stored(&weights), stored(&[]));
+        let gap = |a: &BounceRatios, b: &BounceRatios| {
+            a.front
+                .iter()
+                .zip(&b.front)
+                .chain(a.back.iter().zip(&b.back))
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max)
+        };
+        // The weighting matters on this crown (else the test below could not tell).
+        assert!(gap(&weighted, &alike) > 0.02, "{weighted:?} vs {alike:?}");
+        assert_eq!(light.bounce, weighted);
+    }
+
     #[test]
     fn leaves_count_with_their_opaque_share_and_bark_has_no_leaf() {
         let tree = crate::pruning::procedural::generate(
