@@ -38,6 +38,37 @@ pub const SOFTWARE_DEFAULT_FRAMES: u32 = 5;
 /// measures).
 pub const PROGRESS_SECONDS: f32 = 10.0;
 
+/// When a headless run's next progress line is due: at most one every [`PROGRESS_SECONDS`]
+/// from its start, so a slow software frame reports and a fast one does not flood stderr.
+struct ProgressThrottle {
+    started: std::time::Instant,
+    reported: f32,
+}
+
+impl Default for ProgressThrottle {
+    fn default() -> Self {
+        Self {
+            started: std::time::Instant::now(),
+            reported: 0.0,
+        }
+    }
+}
+
+impl ProgressThrottle {
+    /// The seconds since the start where a line is due now (and counted as written), else
+    /// `None`.
+    fn due(&mut self) -> Option<f32> {
+        self.due_at(self.started.elapsed().as_secs_f32())
+    }
+
+    fn due_at(&mut self, elapsed: f32) -> Option<f32> {
+        (elapsed - self.reported >= PROGRESS_SECONDS).then(|| {
+            self.reported = elapsed;
+            elapsed
+        })
+    }
+}
+
 /// The measured frames a headless run takes: `asked` where given, else
 /// [`SOFTWARE_DEFAULT_FRAMES`] on a software adapter and 60 on any other.
 pub fn headless_frames(asked: Option<u32>, software: bool) -> u32 {
@@ -278,13 +309,10 @@ impl ExampleRunner {
             RenderHarness::new(HarnessConfig::sized(size.x, size.y)).map_err(|e| e.to_string())?;
         scene(harness.app_mut());
         let condition = self.ready_when.unwrap_or(|_| true);
-        let started = std::time::Instant::now();
-        let mut reported = 0.0;
+        let mut progress = ProgressThrottle::default();
         let warmup = harness
             .wait_until_reporting(condition, |frame, compiling| {
-                let elapsed = started.elapsed().as_secs_f32();
-                if elapsed - reported >= PROGRESS_SECONDS {
-                    reported = elapsed;
+                if let Some(elapsed) = progress.due() {
                     eprintln!(
                         "{}: warming up, frame {frame} ({compiling} pipelines compiling, {elapsed:.0} s)",
                         self.name
@@ -313,13 +341,10 @@ impl ExampleRunner {
             return Ok(());
         }
         harness.reset_timing();
-        let start = std::time::Instant::now();
-        let mut reported = 0.0;
+        let mut progress = ProgressThrottle::default();
         for frame in 1..=frames {
             harness.run_frames(1).map_err(|e| e.to_string())?;
-            let elapsed = start.elapsed().as_secs_f32();
-            if elapsed - reported >= PROGRESS_SECONDS && frame < frames {
-                reported = elapsed;
+            if let Some(elapsed) = progress.due().filter(|_| frame < frames) {
                 eprintln!(
                     "{}: frame {frame} of {frames} measured ({elapsed:.0} s)",
                     self.name
@@ -403,6 +428,18 @@ mod tests {
         assert_eq!(soak.soak, Some(10_000));
         assert!(soak.headless, "a soak runs headless");
         assert!(ExampleArgs::parse_from(["--soak", "0"]).is_err());
+    }
+
+    #[test]
+    fn progress_lines_come_at_most_once_a_period() {
+        let mut progress = ProgressThrottle::default();
+        assert_eq!(progress.due_at(0.5), None);
+        assert_eq!(progress.due_at(PROGRESS_SECONDS), Some(PROGRESS_SECONDS));
+        // Counted from the last line written, not from the start.
+        assert_eq!(progress.due_at(PROGRESS_SECONDS + 9.0), None);
+        let next = 2.0 * PROGRESS_SECONDS + 1.0;
+        assert_eq!(progress.due_at(next), Some(next));
+        assert_eq!(progress.due_at(next + 0.1), None);
     }
 
     #[test]
