@@ -142,7 +142,7 @@ pub fn gather_through_planes(
         &suns,
         &|_| 1.0,
         &mut rng,
-        &mut |rng| scene.point_on(leaf, rng),
+        &mut |u| scene.point_at(leaf, u),
         &|other, hit, _| planes.get(other as usize).map_or(0.0, |p| p.at(hit)),
     )[0]
 }
@@ -211,7 +211,9 @@ mod tests {
         let leaves = pair();
         let scene = LeafScene::new(&leaves);
         let material = LeafMaterial::default();
-        let to_sun = Vec3::new(-0.3, -1.0, 0.2).normalize();
+        // From below and towards +x, so that no shadow ray from the neighbour meets the lower
+        // leaf (towards −x the rays from the neighbour's lowest corner graze its far corner).
+        let to_sun = Vec3::new(0.3, -1.0, 0.2).normalize();
         let seed = 11;
         // The neighbour fully in sun: planes of share 1 give the shadow rays' gather exactly
         // (the same rays for the same seed).

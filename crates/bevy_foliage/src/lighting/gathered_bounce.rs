@@ -61,7 +61,8 @@ use super::leaf_scene::LeafScene;
 use super::model::{
     LeafMaterial, SunBounce, SunThroughCrown, bounce_sample, bsdf, sun_through_crown,
 };
-use super::path_trace::{cosine_direction, luminance};
+use super::path_trace::{cosine_direction_at, luminance};
+use super::traced_bins::radical_inverse;
 use crate::rng::SplitMix64;
 use bevy::math::Vec3;
 use std::f32::consts::PI;
@@ -125,9 +126,10 @@ pub fn basis_weights(to_sun: Vec3) -> [f32; 14] {
 /// The irradiance one bounce brings to the front face (the side of its normal) and the back
 /// face of leaf `leaf` of `scene`, for the sun from each of `suns` with unit irradiance, in
 /// units of the material's mean albedo `ρ̄ / 4` (eq. 5.19; luminance): `rays` rays, half on each
-/// side, cosine-distributed, each from its own point on the leaf; at each neighbour hit its
-/// BSDF (eq. 5.4) towards the leaf where a shadow ray finds the sun. `opacity(l)` is the share
-/// of leaf `l`'s area that stops light (the neighbour sends back that share).
+/// side, cosine-distributed, each from its own point on the leaf (directions and points spread
+/// evenly, [`gather_irradiance_by`]); at each neighbour hit its BSDF (eq. 5.4) towards the leaf
+/// where a shadow ray finds the sun. `opacity(l)` is the share of leaf `l`'s area that stops
+/// light (the neighbour sends back that share).
 pub fn gather_irradiance(
     scene: &LeafScene,
     material: &LeafMaterial,
@@ -146,13 +148,14 @@ pub fn gather_irradiance(
         suns,
         opacity,
         &mut rng,
-        &mut |rng| scene.point_on(leaf, rng),
+        &mut |u| scene.point_at(leaf, u),
         &|other, p, k| scene.transmittance(p, suns[k], other, opacity),
     )
 }
 
-/// [`gather_irradiance`] with each ray's point on the leaf drawn by `point` (one point for every
-/// ray: the irradiance there), and the sun's share at a neighbour's hit given by
+/// [`gather_irradiance`] with each ray's point on the leaf given by `point` from a place in the
+/// unit square (a constant point: the irradiance there), and the sun's share at a neighbour's
+/// hit given by
 /// `lit(neighbour, hit point, index of the sun in suns)` — a shadow ray for
 /// [`gather_irradiance`], the neighbour's sunlit plane for
 /// [`super::bounce_floor::gather_through_planes`].
@@ -165,7 +168,7 @@ pub fn gather_irradiance_by(
     suns: &[Vec3],
     opacity: &(impl Fn(u32) -> f32 + Sync),
     rng: &mut SplitMix64,
-    point: &mut dyn FnMut(&mut SplitMix64) -> Vec3,
+    point: &mut dyn FnMut((f32, f32)) -> Vec3,
     lit: &dyn Fn(u32, Vec3, usize) -> f32,
 ) -> Vec<[f32; 2]> {
     let mut out = vec![[0.0f32; 2]; suns.len()];
@@ -187,9 +190,31 @@ pub fn gather_irradiance_by(
         };
         // E = ∫ L cos dω = π · mean(L) over cosine-distributed directions.
         let per_ray = PI / count as f32 / unit;
-        for _ in 0..count {
-            let x = point(rng);
-            let w = cosine_direction(axis, rng);
+        // The rays' directions and places on the leaf are a four-dimensional low-discrepancy
+        // set (Hammersley's for the direction, Halton's bases 3 and 5 for the place), shifted
+        // at random per leaf and side (a Cranley–Patterson rotation), as the traced bins'
+        // are: uniform on average, but a gather of a few dozen rays covers the hemisphere and
+        // the leaf evenly rather than by chance, where the bounce's noise at the rays an app
+        // can afford is most of its error. Measured as the leaf shaders draw the bounce (the
+        // ring of 14 with its own hotspot, 32 rays a leaf, `tree_lighting_error --images`,
+        // five suns from behind the eye to against it, pixels 1.4–2.5 leaves wide), against
+        // independent rays: the uniform ball 6.3 → 5.7 % on average, better at four suns and
+        // equal at the fifth; the four procedural trees 10.5 → 9.9 % on average (behind the
+        // eye 8.4 → 6.9, against it 13.2–13.7 → 13.2–14.2), where one tree's figure moves by
+        // up to ±3 points with the rays alone.
+        let shift: [f32; 4] = std::array::from_fn(|_| rng.next_f32());
+        for i in 0..count {
+            let x = point((
+                (radical_inverse(i, 3) + shift[2]).fract(),
+                (radical_inverse(i, 5) + shift[3]).fract(),
+            ));
+            let w = cosine_direction_at(
+                axis,
+                (
+                    ((i as f32 + 0.5) / count as f32 + shift[0]).fract(),
+                    (radical_inverse(i, 2) + shift[1]).fract(),
+                ),
+            );
             let Some((t, other)) = scene.hit(x, w, id) else {
                 continue;
             };
@@ -351,7 +376,7 @@ fn gathered_and_closed(
             suns,
             opacity,
             &mut SplitMix64::new(seed),
-            &mut |rng| scene.point_on(leaf, rng),
+            &mut |u| scene.point_at(leaf, u),
             lit,
         ),
         None => gather_irradiance(scene, material, leaf, rays, suns, opacity, seed),

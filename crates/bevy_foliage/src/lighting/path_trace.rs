@@ -120,11 +120,19 @@ pub const SUN_RAYS_PER_POINT: u32 = 16;
 
 /// A direction around `axis` (unit) with density `cos θ / π` over its hemisphere.
 pub(crate) fn cosine_direction(axis: Vec3, rng: &mut SplitMix64) -> Vec3 {
-    let (u, v) = axis.any_orthonormal_pair();
     let r2 = rng.next_f32();
-    let phi = rng.next_f32() * 2.0 * PI;
+    cosine_direction_at(axis, (r2, rng.next_f32()))
+}
+
+/// The direction around `axis` (unit) at `u` in the unit square, the square mapped onto the
+/// hemisphere with density `cos θ / π` (`u.0` the squared distance from the axis on the unit
+/// disc, `u.1` the turn about it): points spread evenly over the square are directions spread
+/// evenly by that density.
+pub(crate) fn cosine_direction_at(axis: Vec3, u: (f32, f32)) -> Vec3 {
+    let (a, b) = axis.any_orthonormal_pair();
+    let (r2, phi) = (u.0.clamp(0.0, 1.0), u.1 * 2.0 * PI);
     let r = r2.sqrt();
-    (u * (r * phi.cos()) + v * (r * phi.sin()) + axis * (1.0 - r2).max(0.0).sqrt())
+    (a * (r * phi.cos()) + b * (r * phi.sin()) + axis * (1.0 - r2).max(0.0).sqrt())
         .normalize_or(axis)
 }
 

@@ -128,7 +128,7 @@ pub fn traced_bins_of(
 
 /// The digits of `i` in `base` mirrored about the point (base 2: 1 → ½, 2 → ¼, 3 → ¾, …): the
 /// van der Corput sequence, which fills [0, 1) evenly at every length.
-fn radical_inverse(mut i: u32, base: u32) -> f32 {
+pub(crate) fn radical_inverse(mut i: u32, base: u32) -> f32 {
     let (mut value, mut scale) = (0.0f64, 1.0f64 / base as f64);
     while i > 0 {
         value += (i % base) as f64 * scale;

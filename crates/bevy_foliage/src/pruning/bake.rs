@@ -1096,10 +1096,16 @@ mod tests {
                 );
                 shift.sort_by(f32::total_cmp);
                 let median = shift[shift.len() / 2];
-                // With the sun from below (−y) the front faces' ratios come out 12 % above the
-                // bake's, the only sun and face that do (from above and the side within 2 %);
-                // why is not yet found.
-                let tolerance = if k == 11 && face == 0 { 0.15 } else { 0.05 };
+                // The median moves with the rays alone by up to ±0.12: at 32 rays a leaf
+                // finds its neighbours a few times, so the logarithms come in steps (ln 2
+                // between one hit and two), and the median of a few hundred of them jumps
+                // between steps. Measured over the eight suns and faces here with two ray
+                // patterns (independent directions and points; the stratified ones): −0.118 to
+                // +0.118, each pattern one sun and face beyond ±0.05, another one each time.
+                // Regathered with the two faces swapped, the first sun's back face is 0.159
+                // off and correlates 0.450: both checks fail; leaves out of order fail the
+                // correlation.
+                let tolerance = 0.15;
                 assert!(
                     median.abs() < tolerance,
                     "sun {k} face {face}: median shift {median}"
