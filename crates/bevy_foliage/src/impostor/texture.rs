@@ -23,7 +23,7 @@ use super::format::ImpostorPlane;
 pub use super::format::LIGHT_ATLASES;
 use crate::lighting::bins::{LeafProxy, proxies};
 use crate::lighting::bounce_ring::crown_view_weights;
-use crate::lighting::envelope::crown_envelope;
+use crate::lighting::envelope::{CrownEnvelope, crown_envelope};
 use crate::lighting::gathered_bounce::{
     BounceRatios, DEFAULT_BOUNCE_POOL, DEFAULT_BOUNCE_RAYS, bounce_ratios_of, crown_mean_ratios,
 };
@@ -277,43 +277,17 @@ impl ImpostorSource {
             return SourceLight::default();
         }
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let envelope = match bins {
-            BinEstimate::Neighbours => crown_envelope(&self.leaves, threads),
-            BinEstimate::Traced { rays_per_bin } => {
-                let (scene, opacity) = self.leaf_scene();
-                let order: Vec<u32> = (0..self.leaves.len() as u32).collect();
-                let opacity = |l: u32| opacity.get(l as usize).copied().unwrap_or(1.0);
-                crown_envelope_traced(
-                    &self.leaves,
-                    &scene,
-                    &order,
-                    &opacity,
-                    rays_per_bin,
-                    threads,
-                    &|_| {},
-                )
-            }
-        };
         let (scene, opacity) = self.leaf_scene();
         let opacity = |l: u32| opacity.get(l as usize).copied().unwrap_or(1.0);
         let all: Vec<u32> = (0..self.leaves.len() as u32).collect();
+        let envelope = self.envelope(bins, &scene, &all, &opacity, threads);
         let gains =
             seen_part_gains_of(&scene, &all, DEFAULT_SEEN_POINTS, 1.0, &opacity, 0, threads);
         let seen = crown_mean_gains(&gains);
         let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
-        let ratios = bounce_ratios_of(
-            &scene,
-            &optics,
-            &all,
-            &envelope.leaves,
-            envelope.tau,
-            DEFAULT_BOUNCE_RAYS,
-            DEFAULT_BOUNCE_POOL,
-            &opacity,
-            threads,
-        );
+        let (ratios, weights) =
+            self.ratios_and_view_weights(&scene, &all, &envelope, &opacity, threads);
         // The crown's mean as an eye outside it sees the leaves, as the cloud file stores it.
-        let weights = crown_view_weights(&scene, &all, &envelope.leaves, &opacity);
         let bounce = BounceRatios::from_stored(&crown_mean_ratios(&ratios, &weights).quantized());
         let hotspot = crown_hotspot(
             &scene,
@@ -335,6 +309,57 @@ impl ImpostorSource {
             bounce,
             hotspot,
         }
+    }
+
+    /// The crown's envelope of the leaves (`all`: every leaf, in order, as `scene` holds them),
+    /// its bins estimated by `bins`.
+    fn envelope(
+        &self,
+        bins: BinEstimate,
+        scene: &LeafScene,
+        all: &[u32],
+        opacity: &(impl Fn(u32) -> f32 + Sync),
+        threads: usize,
+    ) -> CrownEnvelope {
+        match bins {
+            BinEstimate::Neighbours => crown_envelope(&self.leaves, threads),
+            BinEstimate::Traced { rays_per_bin } => crown_envelope_traced(
+                &self.leaves,
+                scene,
+                all,
+                opacity,
+                rays_per_bin,
+                threads,
+                &|_| {},
+            ),
+        }
+    }
+
+    /// Each leaf's gathered bounce ratios (with the lighting's default optics: they are ratios,
+    /// unchanged by the base colour) and how much an eye outside the crown sees of it
+    /// (`crown_view_weights`), by which the cloud's crown mean weighs it.
+    fn ratios_and_view_weights(
+        &self,
+        scene: &LeafScene,
+        all: &[u32],
+        envelope: &CrownEnvelope,
+        opacity: &(impl Fn(u32) -> f32 + Sync),
+        threads: usize,
+    ) -> (Vec<BounceRatios>, Vec<f32>) {
+        let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
+        let ratios = bounce_ratios_of(
+            scene,
+            &optics,
+            all,
+            &envelope.leaves,
+            envelope.tau,
+            DEFAULT_BOUNCE_RAYS,
+            DEFAULT_BOUNCE_POOL,
+            opacity,
+            threads,
+        );
+        let weights = crown_view_weights(scene, all, &envelope.leaves, opacity);
+        (ratios, weights)
     }
 
     /// The leaf triangles as a scene for rays, and each leaf's opaque share (its proxy's area
@@ -996,21 +1021,9 @@ mod tests {
         let (scene, opacity) = source.leaf_scene();
         let opacity = |l: u32| opacity.get(l as usize).copied().unwrap_or(1.0);
         let all: Vec<u32> = (0..source.leaves.len() as u32).collect();
-        let envelope =
-            crown_envelope_traced(&source.leaves, &scene, &all, &opacity, 32, 1, &|_| {});
-        let optics = crate::lighting::settings::TreeLightingSettings::default().optics;
-        let ratios = bounce_ratios_of(
-            &scene,
-            &optics,
-            &all,
-            &envelope.leaves,
-            envelope.tau,
-            DEFAULT_BOUNCE_RAYS,
-            DEFAULT_BOUNCE_POOL,
-            &opacity,
-            1,
-        );
-        let weights = crown_view_weights(&scene, &all, &envelope.leaves, &opacity);
+        let envelope = source.envelope(bins, &scene, &all, &opacity, 1);
+        let (ratios, weights) =
+            source.ratios_and_view_weights(&scene, &all, &envelope, &opacity, 1);
         let stored =
             |w: &[f32]| BounceRatios::from_stored(&crown_mean_ratios(&ratios, w).quantized());
         let (weighted, alike) = (stored(&weights), stored(&[]));
