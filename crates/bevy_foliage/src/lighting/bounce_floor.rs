@@ -60,29 +60,27 @@ pub fn bounce_planes(
     rays_per_point: u32,
     threads: usize,
 ) -> Vec<BouncePlanes> {
-    let suns = [to_sun.normalize_or(Vec3::Y)];
     super::par_map(leaves, threads, |&leaf| {
         let l = leaf as usize;
         if l >= scene.leaf_count() {
             return BouncePlanes::default();
         }
-        let mut rng = SplitMix64::new(0xB0F1_u64 ^ (leaf as u64).wrapping_mul(0x9E37_79B9));
+        let mut rng = SplitMix64::new(0xB0F1_u64 ^ scene.leaf_key(l));
         let fit = PlaneFit::jittered(scene, l, side.max(1), &mut rng);
         let at: Vec<[f32; 2]> = fit
             .points
             .iter()
             .map(|&p| {
-                gather_irradiance_by(
+                one_sun(
                     scene,
                     material,
                     l,
                     rays_per_point,
-                    &suns,
-                    &|_| 1.0,
+                    to_sun,
                     &mut rng,
                     &mut |_| p,
-                    &|other, hit, k| scene.transmittance(hit, suns[k], other, |_| 1.0),
-                )[0]
+                    None,
+                )
             })
             .collect();
         let face = |f: usize| fit.fit_values(&at.iter().map(|v| v[f]).collect::<Vec<_>>());
@@ -103,19 +101,17 @@ pub fn gather_at(
     to_sun: Vec3,
     seed: u64,
 ) -> [f32; 2] {
-    let suns = [to_sun.normalize_or(Vec3::Y)];
     let mut rng = SplitMix64::new(seed);
-    gather_irradiance_by(
+    one_sun(
         scene,
         material,
         leaf,
         rays,
-        &suns,
-        &|_| 1.0,
+        to_sun,
         &mut rng,
         &mut |_| point,
-        &|other, hit, k| scene.transmittance(hit, suns[k], other, |_| 1.0),
-    )[0]
+        None,
+    )
 }
 
 /// The bounce's irradiance on each face of leaf `leaf` (its mean over the leaf) for the sun
@@ -132,18 +128,48 @@ pub fn gather_through_planes(
     planes: &[SharePlane],
     seed: u64,
 ) -> [f32; 2] {
-    let suns = [to_sun.normalize_or(Vec3::Y)];
     let mut rng = SplitMix64::new(seed);
+    let through = |other: u32, hit: Vec3| planes.get(other as usize).map_or(0.0, |p| p.at(hit));
+    one_sun(
+        scene,
+        material,
+        leaf,
+        rays,
+        to_sun,
+        &mut rng,
+        &mut |u| scene.point_at(leaf, u),
+        Some(&through),
+    )
+}
+
+/// [`gather_irradiance_by`] for the one sun towards `to_sun` (not a direction: straight up),
+/// every leaf opaque: each face's irradiance. The sun's share at a neighbour's hit is
+/// `lit(neighbour, hit point)` where given, else a shadow ray's.
+#[allow(clippy::too_many_arguments)]
+fn one_sun(
+    scene: &LeafScene,
+    material: &LeafMaterial,
+    leaf: usize,
+    rays: u32,
+    to_sun: Vec3,
+    rng: &mut SplitMix64,
+    point: &mut dyn FnMut((f32, f32)) -> Vec3,
+    lit: Option<&dyn Fn(u32, Vec3) -> f32>,
+) -> [f32; 2] {
+    let sun = to_sun.normalize_or(Vec3::Y);
     gather_irradiance_by(
         scene,
         material,
         leaf,
         rays,
-        &suns,
+        &[sun],
         &|_| 1.0,
-        &mut rng,
-        &mut |u| scene.point_at(leaf, u),
-        &|other, hit, _| planes.get(other as usize).map_or(0.0, |p| p.at(hit)),
+        rng,
+        point,
+        &|other, hit, _| match lit {
+            Some(lit) => lit(other, hit),
+            None => scene.transmittance(hit, sun, other, |_| 1.0),
+        },
     )[0]
 }
 

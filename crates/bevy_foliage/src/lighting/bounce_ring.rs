@@ -1021,7 +1021,7 @@ mod tests {
                 &bounces,
                 DEFAULT_BOUNCE_RAYS,
                 &|_| 1.0,
-                leaf_seed(leaf as u32),
+                leaf_seed(&scene, leaf as u32),
             )
             .ratios();
             assert_eq!(stored[0], quantize_ratio(baked.front[8]), "leaf {leaf}");

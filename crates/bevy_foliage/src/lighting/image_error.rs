@@ -631,6 +631,25 @@ pub fn images_against_tracer(
         )),
         _ => None,
     };
+    // Each leaf's sunlit plane towards the image's sun, traced once for the rows that read it
+    // (the bounce through the planes, the sun from the planes).
+    let own_planes = std::cell::OnceCell::new();
+    let own_planes = || -> &Vec<super::sunlit_share::SharePlane> {
+        own_planes.get_or_init(|| {
+            let all: Vec<u32> = (0..scene.leaf_count() as u32).collect();
+            super::sunlit_share::sunlit_planes(
+                &scene,
+                &all,
+                &[light.to_sun],
+                settings.sunlit_points,
+                &|_| 1.0,
+                threads,
+            )
+            .iter()
+            .map(|p| p[0])
+            .collect()
+        })
+    };
     let mut gathered_seconds = 0.0;
     let (mut regathered, mut regathered_seconds) = (Vec::new(), 0.0);
     let mut rings = Vec::new();
@@ -693,7 +712,7 @@ pub fn images_against_tracer(
             let spot = spot_of(&ratios);
             // The same gather for the sun's own direction: what no blend over directions beats.
             let exact: Vec<[f32; 2]> = super::par_map(&all, threads, |&leaf| {
-                let seed = super::gathered_bounce::leaf_seed(leaf);
+                let seed = super::gathered_bounce::leaf_seed(&scene, leaf);
                 gather_irradiance(
                     &scene,
                     material,
@@ -928,22 +947,11 @@ pub fn images_against_tracer(
             }
             if !settings.through_planes.is_empty() && settings.sunlit_points > 0 {
                 use super::bounce_floor::gather_through_planes;
-                let planes: Vec<super::sunlit_share::SharePlane> =
-                    super::sunlit_share::sunlit_planes(
-                        &scene,
-                        &all,
-                        &[light.to_sun],
-                        settings.sunlit_points,
-                        &|_| 1.0,
-                        threads,
-                    )
-                    .iter()
-                    .map(|p| p[0])
-                    .collect();
+                let planes = own_planes();
                 for &count in &settings.through_planes {
                     for through in [false, true] {
                         let e: Vec<[f32; 2]> = super::par_map(&all, threads, |&leaf| {
-                            let seed = super::gathered_bounce::leaf_seed(leaf);
+                            let seed = super::gathered_bounce::leaf_seed(&scene, leaf);
                             if through {
                                 gather_through_planes(
                                     &scene,
@@ -951,7 +959,7 @@ pub fn images_against_tracer(
                                     leaf as usize,
                                     count,
                                     light.to_sun,
-                                    &planes,
+                                    planes,
                                     seed,
                                 )
                             } else {
@@ -1246,19 +1254,7 @@ pub fn images_against_tracer(
         // alone (the plane's mean over the whole leaf) and the plane at the eye ray's point.
         type Ring = Option<(f32, Vec<Vec<SharePlane>>)>;
         let mut sources: Vec<(String, Vec<SharePlane>, Ring)> = Vec::new();
-        let exact = sunlit_planes(
-            &scene,
-            &all,
-            &[light.to_sun],
-            settings.sunlit_points,
-            &|_| 1.0,
-            threads,
-        );
-        sources.push((
-            "traced for this sun".into(),
-            exact.iter().map(|s| s[0]).collect(),
-            None,
-        ));
+        sources.push(("traced for this sun".into(), own_planes().clone(), None));
         for &count in &settings.sun_rings {
             let phase = ring_phase(light.to_sun, count, settings.ring_offset);
             let started = std::time::Instant::now();

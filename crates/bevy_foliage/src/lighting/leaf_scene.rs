@@ -29,6 +29,8 @@ pub struct LeafScene {
     /// its triangles' range.
     normals: Vec<Vec3>,
     leaf_triangles: Vec<(u32, u32)>,
+    /// Each leaf's key ([`LeafScene::leaf_key`]).
+    keys: Vec<u64>,
     nodes: Vec<Node>,
     order: Vec<u32>,
 }
@@ -44,6 +46,17 @@ const MEDIAN_DEPTH: u32 = 32;
 
 /// What entering an inner node costs, in triangle tests.
 const TRAVERSAL_COST: f32 = 1.0;
+
+/// A hash of the corners' bits, in order ([`LeafScene::leaf_key`]).
+fn corner_hash(triangles: &[[Vec3; 3]]) -> u64 {
+    let mut hash = 0x1EAF_u64;
+    for corner in triangles.iter().flatten() {
+        for c in corner.to_array() {
+            hash = SplitMix64::new(hash ^ c.to_bits() as u64).next_u64();
+        }
+    }
+    hash
+}
 
 /// A triangle's centre, times three (only compared).
 fn centre([a, b, c]: [Vec3; 3]) -> Vec3 {
@@ -85,8 +98,16 @@ impl LeafScene {
         normals: Vec<Vec3>,
         leaf_triangles: Vec<(u32, u32)>,
     ) -> Self {
+        let keys = leaf_triangles
+            .iter()
+            .map(|&(first, count)| {
+                let range = first as usize..(first + count) as usize;
+                corner_hash(triangles.get(range).unwrap_or(&[]))
+            })
+            .collect();
         let mut scene = Self {
             order: (0..triangles.len() as u32).collect(),
+            keys,
             triangles,
             leaf_of,
             normals,
@@ -127,6 +148,19 @@ impl LeafScene {
     /// The number of leaves.
     pub fn leaf_count(&self) -> usize {
         self.normals.len()
+    }
+
+    /// Leaf `leaf`'s key: a hash of its triangles' corners, so the same for the same leaf in
+    /// any scene of it, whatever its index (for a leaf the scene does not hold, a hash of the
+    /// index). Every per-leaf estimate of the tree lighting seeds its rays with it, so that a
+    /// leaf's rays do not depend on where it is stored: a bake's leaves (in their stored
+    /// order), the same bake loaded, a billboard cloud's source (in the source's order) and
+    /// `tree_lighting_error` all trace the same rays for it.
+    pub fn leaf_key(&self, leaf: usize) -> u64 {
+        self.keys
+            .get(leaf)
+            .copied()
+            .unwrap_or_else(|| SplitMix64::new(leaf as u64).next_u64())
     }
 
     /// How many triangles leaf `leaf` has.
@@ -526,6 +560,36 @@ pub(crate) fn uniform_direction(rng: &mut SplitMix64) -> Vec3 {
 mod tests {
     use super::*;
     use crate::pruning::procedural::{TreeSpecies, generate};
+
+    /// A leaf's key is its own: the same in a scene of its leaves in another order, distinct
+    /// between leaves; an index past the leaves has one too.
+    #[test]
+    fn a_leafs_key_follows_the_leaf_not_its_index() {
+        use crate::lighting::path_trace::push_square_leaf;
+        let centres = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let mut forward = LeafSet::default();
+        let mut backward = LeafSet::default();
+        for c in centres {
+            push_square_leaf(&mut forward, c, 0.1, Vec3::Z);
+        }
+        for &c in centres.iter().rev() {
+            push_square_leaf(&mut backward, c, 0.1, Vec3::Z);
+        }
+        let (a, b) = (LeafScene::new(&forward), LeafScene::new(&backward));
+        for i in 0..3 {
+            assert_eq!(a.leaf_key(i), b.leaf_key(2 - i), "leaf {i}");
+            for j in 0..i {
+                assert_ne!(a.leaf_key(i), a.leaf_key(j), "leaves {i} and {j}");
+            }
+        }
+        assert_ne!(a.leaf_key(3), a.leaf_key(4));
+        // Every leaf of a real crown its own key.
+        let olive = LeafScene::new(&generate(&TreeSpecies::olea().with_leaf_count(800)).leaves);
+        let mut keys: Vec<u64> = (0..olive.leaf_count()).map(|l| olive.leaf_key(l)).collect();
+        keys.sort_unstable();
+        keys.dedup();
+        assert_eq!(keys.len(), olive.leaf_count());
+    }
 
     /// The hierarchy finds what testing every triangle finds: the nearest hit and the light let
     /// through, for rays from points on a real crown's leaves in every direction.

@@ -358,7 +358,7 @@ pub fn open_maps_of(
     let base = 0x09E2_u64 ^ seed.wrapping_mul(0xD1B5_4A32_D192_ED03);
     let indexed: Vec<(usize, u32)> = leaves.iter().copied().enumerate().collect();
     super::par_map(&indexed, threads, |&(i, leaf)| {
-        let seed = base ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let seed = base ^ scene.leaf_key(leaf as usize);
         let map = open_map(
             scene,
             leaf as usize,
@@ -535,7 +535,15 @@ mod tests {
         let m = stored[0];
         assert!(m.is_map());
         let base = 0x09E2_u64;
-        let map = open_map(&scene, 0, Some(frame), STORED_SIDE, 32, &|_| 1.0, base);
+        let map = open_map(
+            &scene,
+            0,
+            Some(frame),
+            STORED_SIDE,
+            32,
+            &|_| 1.0,
+            base ^ scene.leaf_key(0),
+        );
         assert_eq!(m, LeafOpenMap::of(&map));
         assert_eq!(LeafOpenMap::from_bytes(&m.to_bytes()), m);
         let w = m.words();

@@ -249,7 +249,7 @@ pub fn seen_part_gains_of(
                 s.spawn(move || {
                     part.iter()
                         .map(|&leaf| {
-                            let seed = base ^ (leaf as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                            let seed = base ^ scene.leaf_key(leaf as usize);
                             seen_part_gains(scene, leaf as usize, points, below, opacity, seed)
                         })
                         .collect::<Vec<_>>()

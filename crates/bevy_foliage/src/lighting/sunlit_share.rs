@@ -32,7 +32,7 @@ use bevy::math::Vec3;
 /// sun, so that neighbouring suns' shares differ by the crown, not by the points), the leaf's
 /// own triangles not counted and a leaf `l` letting `1 − opacity(l)` through. `out[i][s]`
 /// belongs to `leaves[i]` and `suns[s]`; in `[0, 1]`. Deterministic: each leaf's points are
-/// seeded by its index. The means of [`sunlit_planes`].
+/// seeded by the leaf ([`LeafScene::leaf_key`]). The means of [`sunlit_planes`].
 pub fn sunlit_shares(
     scene: &LeafScene,
     leaves: &[u32],
@@ -118,11 +118,11 @@ pub fn sunlit_planes(
 }
 
 /// The points leaf `leaf` of `scene` (in it) is traced from for about `points` points: a
-/// jittered grid of `⌈√points⌉²`, seeded by the leaf's index, the same for every sun and every
-/// call ([`sunlit_planes`]).
+/// jittered grid of `⌈√points⌉²`, seeded by the leaf ([`LeafScene::leaf_key`]), the same for
+/// every sun and every call ([`sunlit_planes`]).
 pub fn share_points(scene: &LeafScene, leaf: usize, points: u32) -> PlaneFit {
     let side = (points.max(1) as f32).sqrt().ceil() as u32;
-    let mut rng = SplitMix64::new(0x51A1_5EED ^ (leaf as u64).wrapping_mul(0x9E37_79B9));
+    let mut rng = SplitMix64::new(0x51A1_5EED ^ scene.leaf_key(leaf));
     PlaneFit::jittered(scene, leaf, side, &mut rng)
 }
 

@@ -169,9 +169,9 @@ pub fn crown_envelope_traced(
         |i| {
             let leaf = scene_leaf[i] as usize;
             if leaf < scene.leaf_count() {
-                // Seeded by the leaf's place in `leaves`, so that a bake is reproducible from the
-                // leaves as stored, whatever their order in the scene.
-                let seed = 0x5EED ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                // Seeded by the leaf itself, so that its rays are the same whatever its order
+                // in the scene or in `leaves`.
+                let seed = 0x5EED ^ scene.leaf_key(leaf);
                 traced_bins_of(scene, leaf, rays_per_bin, opacity, seed)
             } else {
                 sums[i].attenuation
