@@ -1009,20 +1009,21 @@ fn wait_for_ring(harness: &mut RenderHarness, id: AssetId<BakedFoliage>) -> Boun
 }
 
 /// The leaves read the bounce ratios their type's ring holds where the sun is at its elevation:
-/// the ring the app re-gathers is the CPU's [`gather_ring`] of the loaded bake for the sun's
-/// elevation, byte for byte (its ratios, its sunlit shares and their slopes, its own hotspot
-/// on them); the render matches the CPU model with it; a ring of strong ratios, shares, slopes
+/// the ring the app re-gathers and refines is the CPU's [`gather_ring_refined`] of the loaded
+/// bake for the sun's elevation, byte for byte (its ratios refined to the settings' passes,
+/// unlike its first pass, its sunlit shares and their slopes, its own hotspot on them); the
+/// render matches the CPU model with it; a ring of strong ratios, shares, slopes
 /// and hotspot, distinct per node and face, moves many pixels and the render follows; the
 /// bake's hotspot bends the shares of a ring without one; and an instance tilted
 /// so that the sun stands 4° off the ring's elevation in its frame takes the ring and the
 /// bake's blend half and half, as the model does. Then the sun's elevation moves and a new
 /// ring is gathered for it.
 ///
-/// [`gather_ring`]: bevy_foliage::lighting::bounce_ring::gather_ring
+/// [`gather_ring_refined`]: bevy_foliage::lighting::bounce_ring::gather_ring_refined
 #[test]
 fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
     use bevy_foliage::lighting::bounce_ring::{
-        RING_FULL_DEGREES, RING_GONE_DEGREES, RING_HOTSPOT, gather_ring, ring_weight,
+        RING_FULL_DEGREES, RING_GONE_DEGREES, RING_HOTSPOT, gather_ring_refined, ring_weight,
     };
     use bevy_foliage::lighting::gathered_bounce::quantize_ratio;
     use bevy_foliage::pruning::regather::BounceRings;
@@ -1090,21 +1091,26 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
     // its vertical only: its frame's elevation is the world's).
     let all: Vec<u32> = (0..baked.leaf_count() as u32).collect();
     let opacity = baked.leaf_opacity;
-    let cpu = gather_ring(
-        &baked.leaf_scene(),
-        &lighting.optics,
-        &all,
-        &baked.leaf_envelopes(),
-        baked.extinction,
-        ring.sun_height,
-        lighting.bounce_ring.rays,
-        lighting.bounce_ring.sunlit_points,
-        &baked.leaf_radii(),
-        &baked.leaf_seen_gains(),
-        &RING_HOTSPOT,
-        &|_| opacity,
-        2,
-    );
+    // Refined to `passes` passes (1: the first pass alone).
+    let cpu_ring = |passes: u32| {
+        gather_ring_refined(
+            &baked.leaf_scene(),
+            &lighting.optics,
+            &all,
+            &baked.leaf_envelopes(),
+            baked.extinction,
+            ring.sun_height,
+            lighting.bounce_ring.rays,
+            passes,
+            lighting.bounce_ring.sunlit_points,
+            &baked.leaf_radii(),
+            &baked.leaf_seen_gains(),
+            &RING_HOTSPOT,
+            &|_| opacity,
+            2,
+        )
+    };
+    let cpu = cpu_ring(lighting.bounce_ring.passes);
     assert!(
         (ring.sun_height - to_sun_world.y).abs() < 1e-5,
         "ring at sun height {} for the sun at {}",
@@ -1123,6 +1129,29 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         baked.leaf_count(),
         "leaves whose ring ratios the app gathered as the CPU does"
     );
+    // Refined: the app's ring is the mean of its passes, not its first pass alone.
+    assert_eq!(
+        harness.world_mut().resource::<BounceRings>().passes(id),
+        Some(lighting.bounce_ring.passes)
+    );
+    let first = cpu_ring(1);
+    let refined = ring
+        .leaves
+        .iter()
+        .zip(&first.leaves)
+        .filter(|(a, b)| a != b)
+        .count();
+    println!(
+        "the ring refined to {} passes: {refined} of {} leaves' ratios moved from its first pass",
+        lighting.bounce_ring.passes,
+        baked.leaf_count()
+    );
+    assert!(
+        refined * 2 >= baked.leaf_count(),
+        "the refinement moved only {refined} of {} leaves' ratios",
+        baked.leaf_count()
+    );
+    assert!(ring.sunlit == first.sunlit && ring.sunlit_hotspot == first.sunlit_hotspot);
     assert_eq!(
         ring.sunlit.len(),
         baked.leaf_count(),
@@ -1384,7 +1413,7 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
     // Without the shares' planes the gather casts shadow rays at its neighbour hits: the
     // CPU's gather so, at the same height, byte for byte, and not the ring gathered through
     // the planes.
-    let shadowed = gather_ring(
+    let shadowed = gather_ring_refined(
         &baked.leaf_scene(),
         &lighting.optics,
         &all,
@@ -1392,6 +1421,7 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         baked.extinction,
         moved.sun_height,
         lighting.bounce_ring.rays,
+        lighting.bounce_ring.passes,
         0,
         &baked.leaf_radii(),
         &baked.leaf_seen_gains(),
@@ -2575,9 +2605,10 @@ const CLOUD_HOTSPOT: Hotspot = Hotspot {
     bounce: [1.75, 1.625, 1.5, 1.25, 0.75, 0.625, 0.5, 0.375],
 };
 
-/// How far a tree-lit crown's brightness may move when its billboard cloud takes over: −0.1 %
-/// measured with the crown's means weighted by how much an eye sees of each leaf, +2.8 % with
-/// every leaf alike (the hidden leaves' ratios brightening the cloud), which this fails. The
+/// How far a tree-lit crown's brightness may move when its billboard cloud takes over: −0.6 %
+/// measured with the crown's means weighted by how much an eye sees of each leaf (the ring
+/// refined to its sixteen passes; −0.1 % with its first pass alone), +2.8 % with every leaf
+/// alike (the hidden leaves' ratios brightening the cloud), which this fails. The
 /// leaves' bake and the cloud's draw the same rays for each leaf (each seeded by the leaf
 /// itself), so the two differ by what the cloud's means make of the leaves' values, not by two
 /// draws of the gathers' noise: with the leaves' bake seeded by the stored index and the

@@ -8,7 +8,7 @@
 //! ```text
 //! cargo run --release -p bevy_foliage --bin tree_lighting_error -- [--leaves N] [--stride K]
 //!     [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps]
-//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…] [--ring-offset F]] [--sunlit-points P [--sunlit-maps C[,C…]] [--through-planes R[,R…]]] [--bounce-planes SxP[,…]] [--bounce-covers]]
+//!     [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…] [--ring-offset F] [--ring-rays R] [--ring-passes P]] [--sunlit-points P [--sunlit-maps C[,C…]] [--through-planes R[,R…]]] [--bounce-planes SxP[,…]] [--bounce-covers]]
 //!     [--sun X,Y,Z] [--eye X,Y,Z]
 //!     [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]
 //! ```
@@ -41,7 +41,10 @@
 //! blend's are, with the seconds that re-gather takes; `--sun-ring N[,N…]` a row per ring of
 //! N suns at the sun's elevation, `gathered_bounce::sun_ring`, ratios re-gathered on it and
 //! read for the sun midway between two nodes, as a tree turned about its vertical sees the
-//! sun (`--ring-offset F`: F of a node's step past a node instead, 0 on one), and with `--hotspot` also drawn with the ring's own hotspot, measured for suns at the
+//! sun (`--ring-offset F`: F of a node's step past a node instead, 0 on one; `--ring-rays R`:
+//! the ring's ratios gathered by R rays a leaf, where the bake's take `--bounce-rays`;
+//! `--ring-passes P`: the mean of P passes of them, each its rays shifted anew, as an app's ring
+//! refines them while the sun stays, `bounce_ring::RingRefinement`), and with `--hotspot` also drawn with the ring's own hotspot, measured for suns at the
 //! sun's height against the bounce with the ring, `hotspot::HotspotSuns::Height`), each leaf's
 //! ratios pooled
 //! with its nearest neighbours' (`--bounce-pool K[,K…]`: K leaves a pool, the first for
@@ -120,6 +123,8 @@ fn main() {
     args.retain(|a| a != "--sun-maps" && a != "--images" && a != "--hotspot");
     let mut samples = 128u32;
     let mut bounce_rays = 0u32;
+    let mut ring_rays = 0u32;
+    let mut ring_passes = 1u32;
     let mut sunlit_points = 0u32;
     let mut sunlit_maps: Vec<u32> = Vec::new();
     let mut ring_offset = 0.5f32;
@@ -179,6 +184,8 @@ fn main() {
                     })
             }
             "--bounce-rays" => bounce_rays = value(i) as u32,
+            "--ring-rays" => ring_rays = value(i) as u32,
+            "--ring-passes" => ring_passes = value(i) as u32,
             "--sunlit-points" => sunlit_points = value(i) as u32,
             "--ring-offset" => {
                 ring_offset = args
@@ -326,7 +333,7 @@ fn main() {
             }
             other => {
                 eprintln!(
-                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…] [--ring-offset F]] [--sunlit-points P [--sunlit-maps C[,C…]] [--through-planes R[,R…]]] [--bounce-planes SxP[,…]] [--bounce-covers]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
+                    "unknown flag {other}; flags: [--leaves N] [--stride K] [--points P] [--directions D] [--rays-per-bin R[,R…]] [--sun-maps] [--images [--samples G] [--seen-points P] [--seen-below W] [--seen-seed S] [--open-maps CxP[r][,…]] [--hotspot] [--bounce-rays R [--bounce-pool K[,K…]]] [--sun-ring N[,N…] [--ring-offset F] [--ring-rays R] [--ring-passes P]] [--sunlit-points P [--sunlit-maps C[,C…]] [--through-planes R[,R…]]] [--bounce-planes SxP[,…]] [--bounce-covers]] [--sun x,y,z] [--eye x,y,z] [--leaf-shadow-offset T,S | --leaf-shadow-slack S] [--shadow-texel F[,F…]]"
                 );
                 std::process::exit(2)
             }
@@ -367,6 +374,8 @@ fn main() {
                 leaf_shadow,
                 shadow_texels: shadow_texels.clone(),
                 bounce_rays,
+                ring_rays,
+                ring_passes,
                 bounce_pools: bounce_pools.clone(),
                 sun_rings: sun_rings.clone(),
                 open_maps: open_maps.clone(),

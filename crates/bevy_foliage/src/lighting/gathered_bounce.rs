@@ -465,6 +465,14 @@ pub(crate) fn leaf_seed(scene: &LeafScene, leaf: u32) -> u64 {
     0xB0B1_u64 ^ scene.leaf_key(leaf as usize)
 }
 
+/// The seed of pass `pass` of a gather seeded `seed`: pass 0 is the gather itself, each later
+/// pass another shift of the same low-discrepancy rays (an independent Cranley–Patterson
+/// rotation), so that the mean of several passes is an unbiased gather with their rays in all
+/// ([`super::bounce_ring::RingRefinement`]).
+pub(crate) fn pass_seed(seed: u64, pass: u32) -> u64 {
+    seed ^ (pass as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
 /// Per leaf of `leaves` (indices into `scene`; `envelopes[i]` the envelope of `leaves[i]`),
 /// its ratios for each of `suns` (towards the sun), front face then back: the
 /// [`BounceRatios`] a bake stores for the fourteen [`SUN_BASIS`] directions, gathered instead
@@ -491,7 +499,7 @@ pub fn sun_ratios_of(
     threads: usize,
 ) -> Vec<Vec<[f32; 2]>> {
     sun_ratios_with(
-        scene, material, leaves, envelopes, tau, suns, rays, opacity, None, threads,
+        scene, material, leaves, envelopes, tau, suns, rays, 0, opacity, None, threads,
     )
 }
 
@@ -500,7 +508,8 @@ pub fn sun_ratios_of(
 /// is given (a sun of `suns` that is no direction is left out of the indices `lit` sees: give
 /// only directions). A ring with its leaves' sunlit planes reads them so
 /// ([`super::bounce_ring::gather_ring`], [`super::bounce_floor`]): no shadow rays to cast,
-/// and one coin less in each ray's toss.
+/// and one coin less in each ray's toss. Pass `pass` (0: the gather of [`sun_ratios_of`]) casts
+/// the leaf's rays shifted anew ([`pass_seed`]): a ring averages several.
 #[allow(clippy::too_many_arguments)]
 pub fn sun_ratios_with(
     scene: &LeafScene,
@@ -510,6 +519,7 @@ pub fn sun_ratios_with(
     tau: f32,
     suns: &[Vec3],
     rays: u32,
+    pass: u32,
     opacity: &(impl Fn(u32) -> f32 + Sync),
     lit: Option<&(dyn Fn(u32, Vec3, usize) -> f32 + Sync)>,
     threads: usize,
@@ -552,7 +562,7 @@ pub fn sun_ratios_with(
             rays,
             opacity,
             lit,
-            leaf_seed(scene, leaf),
+            pass_seed(leaf_seed(scene, leaf), pass),
         )
         .into_iter()
         .map(|(gathered, closed)| {

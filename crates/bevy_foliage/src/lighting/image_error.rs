@@ -73,6 +73,13 @@ pub struct ImageSettings {
     /// Rays per leaf for the bounce gathered from the neighbours ([`super::gathered_bounce`];
     /// 0: not measured).
     pub bounce_rays: u32,
+    /// Rays per leaf for the ratios re-gathered on each ring of [`ImageSettings::sun_rings`]
+    /// (0, by default: [`ImageSettings::bounce_rays`], as many as the bake's gather); an app's
+    /// ring gathers [`super::settings::BounceRingSettings::rays`].
+    pub ring_rays: u32,
+    /// Passes of [`ImageSettings::ring_rays`] each ring's ratios are the mean of
+    /// ([`super::bounce_ring::RingRefinement`]; 0 or 1, by default: one gather).
+    pub ring_passes: u32,
     /// Leaves pooled into each leaf's gathered ratios
     /// ([`super::gathered_bounce::pooled_ratios`]): the first for the rows of
     /// [`ImageComparison::gathered`], each for a row of [`ImageComparison::pooled`] (by
@@ -130,6 +137,8 @@ impl Default for ImageSettings {
             leaf_shadow: LeafShadowLookup::SHADERS,
             shadow_texels: vec![LEAF_SHADOW_FINE],
             bounce_rays: 0,
+            ring_rays: 0,
+            ring_passes: 1,
             bounce_pools: vec![DEFAULT_BOUNCE_POOL],
             sun_rings: Vec::new(),
             sunlit_points: 0,
@@ -843,6 +852,10 @@ pub fn images_against_tracer(
             // leaves' sunlit planes for its suns (`bounce_ring::ring_ratios`; their tracing in
             // the seconds).
             let regather = |suns: &[Vec3], on_ring: bool| {
+                let rays = match settings.ring_rays {
+                    r if on_ring && r > 0 => r,
+                    _ => rays,
+                };
                 let started = std::time::Instant::now();
                 let planes = (on_ring && settings.sunlit_points > 0).then(|| {
                     super::sunlit_share::sunlit_planes(
@@ -854,18 +867,31 @@ pub fn images_against_tracer(
                         threads,
                     )
                 });
-                let ratios = super::bounce_ring::ring_ratios(
-                    &scene,
-                    material,
-                    &all,
-                    &envelope.leaves,
-                    tau,
-                    suns,
-                    rays,
-                    planes.as_deref(),
-                    &|_| 1.0,
-                    threads,
-                );
+                // A ring refined by further passes ([`super::bounce_ring::RingRefinement`]) is
+                // the mean of its passes.
+                let passes = if on_ring {
+                    settings.ring_passes.max(1)
+                } else {
+                    1
+                };
+                let pass = |pass: u32| {
+                    super::bounce_ring::ring_ratios(
+                        &scene,
+                        material,
+                        &all,
+                        &envelope.leaves,
+                        tau,
+                        suns,
+                        rays,
+                        pass,
+                        planes.as_deref(),
+                        &|_| 1.0,
+                        threads,
+                    )
+                };
+                let mut refinement = super::bounce_ring::RingRefinement::new(pass(0));
+                refinement.refine_to(passes, pass);
+                let ratios = refinement.mean();
                 let seconds = started.elapsed().as_secs_f32();
                 let stored: Vec<Vec<[f32; 2]>> = ratios
                     .iter()

@@ -74,6 +74,11 @@ pub struct BounceRingSettings {
     /// towards each of the ring's fourteen suns is read off its plane (with
     /// [`BounceRingSettings::sunlit_points`]) or found by a shadow ray (without).
     pub rays: u32,
+    /// Passes of [`BounceRingSettings::rays`] rays a leaf a ring's ratios are refined to while
+    /// the sun stays at its elevation: the first lands at once, each further pass, its rays
+    /// shifted anew, is averaged in as it comes
+    /// ([`crate::lighting::bounce_ring::RingRefinement`]); 1: the first alone.
+    pub passes: u32,
     /// Points a leaf its sunlit share towards each of the ring's suns is traced from, the share
     /// fitted with a plane over the leaf ([`crate::lighting::sunlit_share`]), which the leaves
     /// take for the sun through the crown where the sun's shadow map does not resolve leaves;
@@ -91,6 +96,7 @@ impl Default for BounceRingSettings {
         Self {
             enabled: true,
             rays: crate::lighting::gathered_bounce::DEFAULT_BOUNCE_RAYS,
+            passes: crate::lighting::bounce_ring::DEFAULT_RING_PASSES,
             sunlit_points: crate::lighting::sunlit_share::DEFAULT_SUNLIT_POINTS,
             regather_degrees: crate::lighting::bounce_ring::DEFAULT_REGATHER_DEGREES,
             threads: 0,
@@ -165,6 +171,14 @@ impl TreeLightingSettings {
             ));
             out.bounce_ring.rays = ring.rays.clamp(1, MAX_BOUNCE_RAYS);
         }
+        use crate::lighting::bounce_ring::MAX_RING_PASSES;
+        if ring.passes == 0 || ring.passes > MAX_RING_PASSES {
+            fixes.push(format!(
+                "bounce ring passes {} must lie in [1, {MAX_RING_PASSES}]: clamped",
+                ring.passes
+            ));
+            out.bounce_ring.passes = ring.passes.clamp(1, MAX_RING_PASSES);
+        }
         // Above the ring's whole span the ring in use would fade before its successor is asked
         // for; below a hundredth of a degree every frame of a moving sun would ask for one.
         if !(ring.regather_degrees >= 0.01 && ring.regather_degrees <= RING_FULL_DEGREES) {
@@ -238,6 +252,7 @@ mod tests {
             bounce_ring: BounceRingSettings {
                 enabled: true,
                 rays: 0,
+                passes: 0,
                 sunlit_points: u32::MAX,
                 regather_degrees: f32::NAN,
                 threads: 1 << 20,
@@ -245,8 +260,9 @@ mod tests {
             ..default()
         };
         let (fixed, fixes) = bad.sanitized();
-        assert_eq!(fixes.len(), 4, "{fixes:?}");
+        assert_eq!(fixes.len(), 5, "{fixes:?}");
         assert_eq!(fixed.bounce_ring.rays, 1);
+        assert_eq!(fixed.bounce_ring.passes, 1);
         assert_eq!(
             fixed.bounce_ring.sunlit_points,
             crate::lighting::sunlit_share::MAX_SUNLIT_POINTS

@@ -26,6 +26,7 @@ pub(crate) fn build(app: &mut App) {
         TREES_PRUNED,
         super::regather::BOUNCE_RING_SECONDS,
         super::regather::BOUNCE_RINGS_GATHERING,
+        super::regather::BOUNCE_RING_PASSES,
     ] {
         app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));
     }

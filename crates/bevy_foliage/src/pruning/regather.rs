@@ -5,23 +5,29 @@
 //! next one from the type's loaded bake (its leaves as a scene, its envelopes and seen-part
 //! gains read back, the opacity it was traced with), the crown's hotspot on the sunlit shares
 //! fitted with it ([`crate::lighting::bounce_ring::ring_sun_hotspot`]); when it lands, the
-//! leaves' light buffer is rewritten with it.
+//! leaves' light buffer is rewritten with it. While the sun stays at its elevation, further
+//! passes of the ring's ratios are gathered and averaged in
+//! ([`crate::lighting::bounce_ring::RingRefinement`]) up to [`BounceRingSettings::passes`],
+//! one task at a time, each doubling the ring's passes, the buffer rewritten as each lands.
 //!
 //! The sun's elevation is taken in the world's frame, which is each instance's own for trees
 //! turned about their vertical only; the leaf shaders compare the ring's elevation with the
 //! sun's in each instance's frame, so a tilted instance falls back to the bake's blend.
 //!
 //! [`BounceRingSettings::regather_degrees`]: crate::lighting::settings::BounceRingSettings::regather_degrees
+//! [`BounceRingSettings::passes`]: crate::lighting::settings::BounceRingSettings::passes
 
 use super::bake::BakedFoliage;
 use super::store::FoliageStore;
 use super::systems::tree_lights;
 use crate::lighting::bounce_ring::{
-    BounceRing, RING_HOTSPOT, RING_NODES, crown_mean_ring, gather_ring, needs_regather,
+    BounceRing, GatheredRing, RING_HOTSPOT, RING_NODES, RingRefinement, crown_mean_ring,
+    gather_ring_with, needs_regather, ring_pass,
 };
 use crate::lighting::envelope::LeafEnvelope;
 use crate::lighting::leaf_scene::LeafScene;
 use crate::lighting::settings::TreeLightingSettings;
+use crate::lighting::sunlit_share::SharePlane;
 use bevy::asset::AssetId;
 use bevy::diagnostic::{DiagnosticPath, Diagnostics};
 use bevy::platform::collections::HashMap;
@@ -33,9 +39,13 @@ use std::sync::Arc;
 /// Diagnostic: seconds the last ring re-gather took (its wall-clock time on its threads).
 pub const BOUNCE_RING_SECONDS: DiagnosticPath =
     DiagnosticPath::const_new("foliage/bounce_ring_seconds");
-/// Diagnostic: tree types whose ring is being re-gathered.
+/// Diagnostic: tree types whose ring is being re-gathered (or refined by a further pass).
 pub const BOUNCE_RINGS_GATHERING: DiagnosticPath =
     DiagnosticPath::const_new("foliage/bounce_rings_gathering");
+/// Diagnostic: the passes of its rays the least refined of the gathered rings is the mean of
+/// ([`RingRefinement`]).
+pub const BOUNCE_RING_PASSES: DiagnosticPath =
+    DiagnosticPath::const_new("foliage/bounce_ring_passes");
 
 /// What a tree type's re-gathers trace: its stored leaves as a scene, their envelopes and
 /// seen-part gains read back, the crown's τ and the opacity the bake traced the leaves with. Built by the type's
@@ -66,10 +76,32 @@ impl RingSource {
     }
 }
 
-/// What a re-gather hands back: the ring, the seconds it took and what it traced.
+/// What a re-gather hands back: the ring, with its ratios before quantising and the sunlit
+/// planes it read, the seconds it took and what it traced.
 struct Gathered {
-    ring: BounceRing,
+    ring: GatheredRing,
     seconds: f32,
+    source: Arc<RingSource>,
+}
+
+/// A ring's refinement taken further by a task ([`refine`]), for the ring at sun height
+/// `height`.
+struct Pass {
+    height: f32,
+    refinement: RingRefinement,
+}
+
+/// What a task hands back.
+enum Landed {
+    Ring(Gathered),
+    Pass(Pass),
+}
+
+/// A gathered ring's refinement so far, and what its further passes trace.
+struct Refining {
+    height: f32,
+    refinement: RingRefinement,
+    planes: Option<Arc<Vec<Vec<SharePlane>>>>,
     source: Arc<RingSource>,
 }
 
@@ -81,7 +113,9 @@ pub struct BounceRings {
     rings: HashMap<AssetId<BakedFoliage>, BounceRing>,
     /// Per ring, its crown's mean (for billboard clouds).
     means: HashMap<AssetId<BakedFoliage>, [[f32; 2]; RING_NODES]>,
-    in_flight: HashMap<AssetId<BakedFoliage>, Task<Gathered>>,
+    in_flight: HashMap<AssetId<BakedFoliage>, Task<Landed>>,
+    /// Per gathered ring (not one put in), its passes so far.
+    refining: HashMap<AssetId<BakedFoliage>, Refining>,
     /// Per tree type, what its re-gathers trace.
     sources: HashMap<AssetId<BakedFoliage>, Arc<RingSource>>,
     /// The leaf light buffer last written with the rings (a new one from the store means its
@@ -100,20 +134,71 @@ impl BounceRings {
     }
 
     /// Puts in `ring` as type `id`'s (for the leaves of that type: a ring for another number
-    /// of leaves is not drawn); it is drawn from the next frame.
+    /// of leaves is not drawn); it is drawn from the next frame, and not refined by further
+    /// passes.
     pub fn insert(&mut self, id: AssetId<BakedFoliage>, ring: BounceRing) {
+        self.refining.remove(&id);
+        self.put(id, ring);
+    }
+
+    fn put(&mut self, id: AssetId<BakedFoliage>, ring: BounceRing) {
         self.means.insert(id, crown_mean_ring(&ring));
         self.rings.insert(id, ring);
         self.changed = true;
         self.generation += 1;
     }
 
-    /// Takes in a finished re-gather of type `id`.
-    fn land(&mut self, id: AssetId<BakedFoliage>, gathered: Gathered) {
-        self.last_seconds = Some(gathered.seconds);
-        self.sources.insert(id, gathered.source);
-        self.insert(id, gathered.ring);
-        self.completed += 1;
+    /// Takes in a finished task of type `id`: a ring, whose refinement starts with it, or a
+    /// further pass of the ring being refined (one for a ring since replaced is dropped).
+    fn land(&mut self, id: AssetId<BakedFoliage>, landed: Landed) {
+        match landed {
+            Landed::Ring(gathered) => {
+                let GatheredRing {
+                    ring,
+                    ratios,
+                    planes,
+                } = gathered.ring;
+                self.last_seconds = Some(gathered.seconds);
+                self.sources.insert(id, gathered.source.clone());
+                self.refining.insert(
+                    id,
+                    Refining {
+                        height: ring.sun_height,
+                        refinement: RingRefinement::new(ratios),
+                        planes: planes.map(Arc::new),
+                        source: gathered.source,
+                    },
+                );
+                self.put(id, ring);
+                self.completed += 1;
+            }
+            Landed::Pass(pass) => {
+                let Some(refining) = self.refining.get_mut(&id) else {
+                    return;
+                };
+                let Some(ring) = self.rings.get(&id) else {
+                    return;
+                };
+                if refining.height != pass.height
+                    || ring.sun_height != pass.height
+                    || pass.refinement.passes() <= refining.refinement.passes()
+                {
+                    return;
+                }
+                refining.refinement = pass.refinement;
+                let ring = BounceRing {
+                    leaves: refining.refinement.quantized(),
+                    ..ring.clone()
+                };
+                self.put(id, ring);
+            }
+        }
+    }
+
+    /// The passes of its rays type `id`'s ring is the mean of so far; `None` for a ring put in
+    /// ([`BounceRings::insert`]) or none.
+    pub fn passes(&self, id: AssetId<BakedFoliage>) -> Option<u32> {
+        self.refining.get(&id).map(|r| r.refinement.passes())
     }
 
     /// Bumped whenever a ring comes in.
@@ -127,7 +212,7 @@ impl BounceRings {
         Some((self.rings.get(&id)?.sun_height, *self.means.get(&id)?))
     }
 
-    /// Whether type `id`'s ring is being re-gathered.
+    /// Whether type `id`'s ring is being re-gathered, or refined by a further pass.
     pub fn is_gathering(&self, id: AssetId<BakedFoliage>) -> bool {
         self.in_flight.contains_key(&id)
     }
@@ -150,7 +235,7 @@ enum Leaves {
     Baked(Box<BakedFoliage>),
 }
 
-/// The re-gather of a tree type's ring at sun height `height`: [`gather_ring`] of its stored
+/// The re-gather of a tree type's ring at sun height `height`: [`gather_ring_with`] of its stored
 /// leaves with the lighting's optics, `rays` rays a leaf, their sunlit shares from
 /// `sunlit_points` points a leaf (0: none) and `threads` threads.
 fn regather(
@@ -168,7 +253,7 @@ fn regather(
     };
     let all: Vec<u32> = (0..source.scene.leaf_count() as u32).collect();
     let opacity = source.opacity;
-    let ring = gather_ring(
+    let ring = gather_ring_with(
         &source.scene,
         optics,
         &all,
@@ -190,10 +275,44 @@ fn regather(
     }
 }
 
+/// What a refinement task traces: the type's leaves, the ring's sunlit planes and its height.
+type Traced = (Arc<RingSource>, Option<Arc<Vec<Vec<SharePlane>>>>, f32);
+
+/// The ring's `refinement` taken on to `passes` passes ([`ring_pass`], each added in turn,
+/// as [`crate::lighting::bounce_ring::gather_ring_refined`] adds them: the same ring).
+fn refine(
+    traced: Traced,
+    mut refinement: RingRefinement,
+    optics: &crate::lighting::model::LeafMaterial,
+    rays: u32,
+    passes: u32,
+    threads: usize,
+) -> Pass {
+    let (source, planes, height) = traced;
+    let all: Vec<u32> = (0..source.scene.leaf_count() as u32).collect();
+    let opacity = source.opacity;
+    refinement.refine_to(passes, |pass| {
+        ring_pass(
+            &source.scene,
+            optics,
+            &all,
+            &source.envelopes,
+            source.tau,
+            height,
+            rays,
+            pass,
+            planes.as_deref().map(|p| p.as_slice()),
+            &|_| opacity,
+            threads,
+        )
+    });
+    Pass { height, refinement }
+}
+
 /// Collects finished re-gathers, starts one for each uploaded tree type the sun's elevation
-/// has left (while [`TreeLightingSettings::bounce_ring`] and the gathered bounce are on), and
-/// rewrites the leaves' light buffer when a ring has come in or the store uploaded its types
-/// again.
+/// has left (while [`TreeLightingSettings::bounce_ring`] and the gathered bounce are on), or
+/// else the next pass of its ring's refinement, and rewrites the leaves' light buffer when a
+/// ring or a pass has come in or the store uploaded its types again.
 #[allow(clippy::too_many_arguments)]
 pub fn regather_bounce_rings(
     lighting: Res<TreeLightingSettings>,
@@ -207,17 +326,20 @@ pub fn regather_bounce_rings(
 ) {
     let rings = &mut *rings;
     // Finished re-gathers (whatever the settings now: a ring gathered is kept).
-    let done: Vec<(AssetId<BakedFoliage>, Gathered)> = rings
+    let done: Vec<(AssetId<BakedFoliage>, Landed)> = rings
         .in_flight
         .iter_mut()
-        .filter_map(|(id, task)| block_on(poll_once(task)).map(|gathered| (*id, gathered)))
+        .filter_map(|(id, task)| block_on(poll_once(task)).map(|landed| (*id, landed)))
         .collect();
-    for (id, gathered) in done {
+    for (id, landed) in done {
         rings.in_flight.remove(&id);
-        rings.land(id, gathered);
+        rings.land(id, landed);
     }
     if let Some(seconds) = rings.last_seconds {
         diagnostics.add_measurement(&BOUNCE_RING_SECONDS, || seconds as f64);
+    }
+    if let Some(fewest) = rings.refining.values().map(|r| r.refinement.passes()).min() {
+        diagnostics.add_measurement(&BOUNCE_RING_PASSES, || fewest as f64);
     }
 
     let settings = &lighting.bounce_ring;
@@ -252,6 +374,37 @@ pub fn regather_bounce_rings(
                 settings.regather_degrees,
             ) && shares_as_set
             {
+                // The ring holds: refine it, if it wants more passes. Each task doubles its
+                // passes, by four at most (1, 2, 4, 8, 12, 16 by default): the ring nears its
+                // last within a few landings, each of which rewrites the leaves' light buffer,
+                // and a ring the sun has left waits for at most four passes before its
+                // successor is gathered.
+                let Some(refining) = rings.refining.get(&id) else {
+                    continue;
+                };
+                let done = refining.refinement.passes();
+                if done >= settings.passes {
+                    continue;
+                }
+                let passes = (done * 2).min(done + 4).min(settings.passes);
+                let traced: Traced = (
+                    refining.source.clone(),
+                    refining.planes.clone(),
+                    refining.height,
+                );
+                let refinement = refining.refinement.clone();
+                let (optics, rays) = (lighting.optics, settings.rays);
+                let task = move || {
+                    Landed::Pass(refine(traced, refinement, &optics, rays, passes, threads))
+                };
+                match AsyncComputeTaskPool::try_get() {
+                    Some(pool) => {
+                        rings
+                            .in_flight
+                            .insert(id, pool.spawn(async move { task() }));
+                    }
+                    None => rings.land(id, task()),
+                }
                 continue;
             }
             let leaves = match rings.sources.get(&id) {
@@ -265,7 +418,7 @@ pub fn regather_bounce_rings(
             match AsyncComputeTaskPool::try_get() {
                 Some(pool) => {
                     let task = pool.spawn(async move {
-                        regather(leaves, &optics, height, rays, points, threads)
+                        Landed::Ring(regather(leaves, &optics, height, rays, points, threads))
                     });
                     rings.in_flight.insert(id, task);
                 }
@@ -277,7 +430,8 @@ pub fn regather_bounce_rings(
                         );
                         *warned = true;
                     }
-                    rings.land(id, regather(leaves, &optics, height, rays, points, threads));
+                    let gathered = regather(leaves, &optics, height, rays, points, threads);
+                    rings.land(id, Landed::Ring(gathered));
                 }
             }
         }
