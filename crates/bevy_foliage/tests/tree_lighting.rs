@@ -1017,7 +1017,8 @@ fn wait_for_ring(harness: &mut RenderHarness, id: AssetId<BakedFoliage>) -> Boun
 /// bake's hotspot bends the shares of a ring without one; and an instance tilted
 /// so that the sun stands 4° off the ring's elevation in its frame takes the ring and the
 /// bake's blend half and half, as the model does. Then the sun's elevation moves and a new
-/// ring is gathered for it.
+/// ring is gathered for it; and a ring asked for more passes than it has, having let go of its
+/// passes' sums, is gathered anew and refined to them.
 ///
 /// [`gather_ring_refined`]: bevy_foliage::lighting::bounce_ring::gather_ring_refined
 #[test]
@@ -1129,10 +1130,19 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         baked.leaf_count(),
         "leaves whose ring ratios the app gathered as the CPU does"
     );
-    // Refined: the app's ring is the mean of its passes, not its first pass alone.
+    // Refined: the app's ring is the mean of its passes, not its first pass alone; with all
+    // of them in, it lets go of what would refine it further.
     assert_eq!(
         harness.world_mut().resource::<BounceRings>().passes(id),
         Some(lighting.bounce_ring.passes)
+    );
+    assert_eq!(
+        harness
+            .world_mut()
+            .resource::<BounceRings>()
+            .refinement_bytes(id),
+        0,
+        "bytes held to refine a ring that has its passes"
     );
     let first = cpu_ring(1);
     let refined = ring
@@ -1462,6 +1472,64 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         check.within,
         check.compared,
         check.worst
+    );
+
+    // More passes asked of a ring that let go of its sums: it is gathered anew and refined to
+    // them, holding its sums while it is refined and letting go of them at the end.
+    let more = lighting.bounce_ring.passes + 2;
+    let gathers = harness.world_mut().resource::<BounceRings>().completed();
+    harness
+        .world_mut()
+        .resource_mut::<TreeLightingSettings>()
+        .bounce_ring
+        .passes = more;
+    let started = std::time::Instant::now();
+    let mut held_while_refining = 0;
+    let again = loop {
+        harness.step();
+        let rings = harness.world_mut().resource::<BounceRings>();
+        if rings.passes(id).is_some_and(|p| p < more) {
+            held_while_refining = held_while_refining.max(rings.refinement_bytes(id));
+        }
+        match (rings.ring(id), rings.passes(id)) {
+            (Some(r), Some(p)) if p == more && !rings.is_gathering(id) => break r.clone(),
+            _ => assert!(
+                started.elapsed().as_secs() < 60,
+                "no ring of {more} passes within a minute"
+            ),
+        }
+    };
+    println!(
+        "refined again to {more} passes: {held_while_refining} bytes held while refining {} leaves, none after",
+        baked.leaf_count()
+    );
+    let rings = harness.world_mut().resource::<BounceRings>();
+    assert_eq!(rings.completed(), gathers + 1, "the ring gathered anew");
+    assert_eq!(rings.refinement_bytes(id), 0);
+    assert!(
+        held_while_refining >= baked.leaf_count() * RING_NODES * 8,
+        "{held_while_refining} bytes held while refining {} leaves",
+        baked.leaf_count()
+    );
+    let refined_more = gather_ring_refined(
+        &baked.leaf_scene(),
+        &lighting.optics,
+        &all,
+        &baked.leaf_envelopes(),
+        baked.extinction,
+        bare.sun_height,
+        lighting.bounce_ring.rays,
+        more,
+        0,
+        &baked.leaf_radii(),
+        &baked.leaf_seen_gains(),
+        &RING_HOTSPOT,
+        &|_| opacity,
+        2,
+    );
+    assert_eq!(
+        again.leaves, refined_more.leaves,
+        "the ring refined to {more} passes as the CPU refines it"
     );
 }
 

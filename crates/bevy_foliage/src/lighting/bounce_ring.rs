@@ -419,6 +419,14 @@ impl RingRefinement {
             .collect()
     }
 
+    /// Bytes the refinement holds: its sums, per leaf a list of the nodes' two ratios.
+    pub fn heap_bytes(&self) -> usize {
+        self.sums
+            .iter()
+            .map(|nodes| size_of::<Vec<[f32; 2]>>() + size_of_val(nodes.as_slice()))
+            .sum()
+    }
+
     /// The passes' mean ratios, per leaf, as a ring stores them ([`BounceRing::leaves`]).
     pub fn quantized(&self) -> Vec<[u8; STORED_RATIOS]> {
         let scale = 1.0 / self.passes.max(1) as f32;

@@ -77,7 +77,9 @@ pub struct BounceRingSettings {
     /// Passes of [`BounceRingSettings::rays`] rays a leaf a ring's ratios are refined to while
     /// the sun stays at its elevation: the first lands at once, each further pass, its rays
     /// shifted anew, is averaged in as it comes
-    /// ([`crate::lighting::bounce_ring::RingRefinement`]); 1: the first alone.
+    /// ([`crate::lighting::bounce_ring::RingRefinement`]); 1: the first alone. While refined a
+    /// ring holds about half a kilobyte a leaf (its passes' sums, the sunlit planes they read),
+    /// let go once it has its passes; raised after that, the ring is gathered anew.
     pub passes: u32,
     /// Points a leaf its sunlit share towards each of the ring's suns is traced from, the share
     /// fitted with a plane over the leaf ([`crate::lighting::sunlit_share`]), which the leaves

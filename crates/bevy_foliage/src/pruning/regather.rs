@@ -8,7 +8,8 @@
 //! leaves' light buffer is rewritten with it. While the sun stays at its elevation, further
 //! passes of the ring's ratios are gathered and averaged in
 //! ([`crate::lighting::bounce_ring::RingRefinement`]) up to [`BounceRingSettings::passes`],
-//! one task at a time, each doubling the ring's passes, the buffer rewritten as each lands.
+//! one task at a time, each doubling the ring's passes, the buffer rewritten as each lands;
+//! with its last in, the ring lets go of its passes' sums and the sunlit planes they read.
 //!
 //! The sun's elevation is taken in the world's frame, which is each instance's own for trees
 //! turned about their vertical only; the leaf shaders compare the ring's elevation with the
@@ -46,6 +47,10 @@ pub const BOUNCE_RINGS_GATHERING: DiagnosticPath =
 /// ([`RingRefinement`]).
 pub const BOUNCE_RING_PASSES: DiagnosticPath =
     DiagnosticPath::const_new("foliage/bounce_ring_passes");
+/// Diagnostic: bytes the rings being refined hold for their further passes, summed over the
+/// tree types (0 once every ring has its passes: [`BounceRings::refinement_bytes`]).
+pub const BOUNCE_RING_REFINEMENT_BYTES: DiagnosticPath =
+    DiagnosticPath::const_new("foliage/bounce_ring_refinement_bytes");
 
 /// What a tree type's re-gathers trace: its stored leaves as a scene, their envelopes and
 /// seen-part gains read back, the crown's τ and the opacity the bake traced the leaves with. Built by the type's
@@ -100,9 +105,32 @@ enum Landed {
 /// A gathered ring's refinement so far, and what its further passes trace.
 struct Refining {
     height: f32,
+    /// Passes the ring is the mean of.
+    passes: u32,
+    /// What further passes add to and trace through: dropped once the ring has the passes the
+    /// settings ask for (half a kilobyte a leaf with the sunlit planes; a ring asked for more
+    /// passes later is gathered anew).
+    further: Option<Further>,
+    source: Arc<RingSource>,
+}
+
+/// The sums of a ring's passes so far, and the sunlit planes its further passes read.
+struct Further {
     refinement: RingRefinement,
     planes: Option<Arc<Vec<Vec<SharePlane>>>>,
-    source: Arc<RingSource>,
+}
+
+impl Further {
+    /// Bytes held: the refinement's sums and the planes.
+    fn heap_bytes(&self) -> usize {
+        self.refinement.heap_bytes()
+            + self.planes.as_deref().map_or(0, |planes| {
+                planes
+                    .iter()
+                    .map(|p| size_of::<Vec<SharePlane>>() + size_of_val(p.as_slice()))
+                    .sum()
+            })
+    }
 }
 
 /// Each tree type's ring of bounce ratios re-gathered at the sun's elevation, and the
@@ -149,8 +177,9 @@ impl BounceRings {
     }
 
     /// Takes in a finished task of type `id`: a ring, whose refinement starts with it, or a
-    /// further pass of the ring being refined (one for a ring since replaced is dropped).
-    fn land(&mut self, id: AssetId<BakedFoliage>, landed: Landed) {
+    /// further pass of the ring being refined (one for a ring since replaced is dropped). Once
+    /// the ring is the mean of `wanted` passes, what would refine it further is let go.
+    fn land(&mut self, id: AssetId<BakedFoliage>, landed: Landed, wanted: u32) {
         match landed {
             Landed::Ring(gathered) => {
                 let GatheredRing {
@@ -160,12 +189,16 @@ impl BounceRings {
                 } = gathered.ring;
                 self.last_seconds = Some(gathered.seconds);
                 self.sources.insert(id, gathered.source.clone());
+                let further = (wanted > 1).then(|| Further {
+                    refinement: RingRefinement::new(ratios),
+                    planes: planes.map(Arc::new),
+                });
                 self.refining.insert(
                     id,
                     Refining {
                         height: ring.sun_height,
-                        refinement: RingRefinement::new(ratios),
-                        planes: planes.map(Arc::new),
+                        passes: 1,
+                        further,
                         source: gathered.source,
                     },
                 );
@@ -179,17 +212,24 @@ impl BounceRings {
                 let Some(ring) = self.rings.get(&id) else {
                     return;
                 };
+                let Some(further) = refining.further.as_mut() else {
+                    return;
+                };
                 if refining.height != pass.height
                     || ring.sun_height != pass.height
-                    || pass.refinement.passes() <= refining.refinement.passes()
+                    || pass.refinement.passes() <= refining.passes
                 {
                     return;
                 }
-                refining.refinement = pass.refinement;
+                refining.passes = pass.refinement.passes();
                 let ring = BounceRing {
-                    leaves: refining.refinement.quantized(),
+                    leaves: pass.refinement.quantized(),
                     ..ring.clone()
                 };
+                further.refinement = pass.refinement;
+                if refining.passes >= wanted {
+                    refining.further = None;
+                }
                 self.put(id, ring);
             }
         }
@@ -198,7 +238,17 @@ impl BounceRings {
     /// The passes of its rays type `id`'s ring is the mean of so far; `None` for a ring put in
     /// ([`BounceRings::insert`]) or none.
     pub fn passes(&self, id: AssetId<BakedFoliage>) -> Option<u32> {
-        self.refining.get(&id).map(|r| r.refinement.passes())
+        self.refining.get(&id).map(|r| r.passes)
+    }
+
+    /// Bytes type `id`'s ring holds to be refined further (its passes' sums and the sunlit
+    /// planes they trace through): none once it has the passes the settings ask for, or for a
+    /// ring put in.
+    pub fn refinement_bytes(&self, id: AssetId<BakedFoliage>) -> usize {
+        self.refining
+            .get(&id)
+            .and_then(|r| r.further.as_ref())
+            .map_or(0, Further::heap_bytes)
     }
 
     /// Bumped whenever a ring comes in.
@@ -331,18 +381,25 @@ pub fn regather_bounce_rings(
         .iter_mut()
         .filter_map(|(id, task)| block_on(poll_once(task)).map(|landed| (*id, landed)))
         .collect();
+    let settings = &lighting.bounce_ring;
     for (id, landed) in done {
         rings.in_flight.remove(&id);
-        rings.land(id, landed);
+        rings.land(id, landed, settings.passes);
     }
     if let Some(seconds) = rings.last_seconds {
         diagnostics.add_measurement(&BOUNCE_RING_SECONDS, || seconds as f64);
     }
-    if let Some(fewest) = rings.refining.values().map(|r| r.refinement.passes()).min() {
+    if let Some(fewest) = rings.refining.values().map(|r| r.passes).min() {
         diagnostics.add_measurement(&BOUNCE_RING_PASSES, || fewest as f64);
+        let held: usize = rings
+            .refining
+            .values()
+            .filter_map(|r| r.further.as_ref())
+            .map(Further::heap_bytes)
+            .sum();
+        diagnostics.add_measurement(&BOUNCE_RING_REFINEMENT_BYTES, || held as f64);
     }
 
-    let settings = &lighting.bounce_ring;
     let active =
         lighting.enabled && lighting.bounce && lighting.gathered_bounce && settings.enabled;
     let lights = tree_lights(
@@ -368,31 +425,44 @@ pub fn regather_bounce_rings(
             // again too.
             let shares_as_set =
                 ring.is_none_or(|r| r.sunlit.is_empty() == (settings.sunlit_points == 0));
+            // A ring that let go of its passes' sums when it had all the settings asked for,
+            // and is now asked for more, is gathered anew.
+            let refinable = rings
+                .refining
+                .get(&id)
+                .is_none_or(|r| r.passes >= settings.passes || r.further.is_some());
             if !needs_regather(
                 height,
                 ring.map(|r| r.sun_height),
                 settings.regather_degrees,
             ) && shares_as_set
+                && refinable
             {
                 // The ring holds: refine it, if it wants more passes. Each task doubles its
                 // passes, by four at most (1, 2, 4, 8, 12, 16 by default): the ring nears its
                 // last within a few landings, each of which rewrites the leaves' light buffer,
                 // and a ring the sun has left waits for at most four passes before its
                 // successor is gathered.
-                let Some(refining) = rings.refining.get(&id) else {
+                let Some(refining) = rings.refining.get_mut(&id) else {
                     continue;
                 };
-                let done = refining.refinement.passes();
+                let done = refining.passes;
                 if done >= settings.passes {
+                    // It has the passes asked for (or more, the setting since lowered): what
+                    // would refine it further is let go.
+                    refining.further = None;
                     continue;
                 }
+                let Some(further) = refining.further.as_ref() else {
+                    continue;
+                };
                 let passes = (done * 2).min(done + 4).min(settings.passes);
                 let traced: Traced = (
                     refining.source.clone(),
-                    refining.planes.clone(),
+                    further.planes.clone(),
                     refining.height,
                 );
-                let refinement = refining.refinement.clone();
+                let refinement = further.refinement.clone();
                 let (optics, rays) = (lighting.optics, settings.rays);
                 let task = move || {
                     Landed::Pass(refine(traced, refinement, &optics, rays, passes, threads))
@@ -403,7 +473,7 @@ pub fn regather_bounce_rings(
                             .in_flight
                             .insert(id, pool.spawn(async move { task() }));
                     }
-                    None => rings.land(id, task()),
+                    None => rings.land(id, task(), settings.passes),
                 }
                 continue;
             }
@@ -431,7 +501,7 @@ pub fn regather_bounce_rings(
                         *warned = true;
                     }
                     let gathered = regather(leaves, &optics, height, rays, points, threads);
-                    rings.land(id, Landed::Ring(gathered));
+                    rings.land(id, Landed::Ring(gathered), settings.passes);
                 }
             }
         }
