@@ -1144,6 +1144,14 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
         0,
         "bytes held to refine a ring that has its passes"
     );
+    let pass_seconds = harness
+        .world_mut()
+        .resource::<BounceRings>()
+        .last_pass_seconds();
+    assert!(
+        pass_seconds.is_some_and(|s| s > 0.0 && s.is_finite()),
+        "seconds a further pass took: {pass_seconds:?}"
+    );
     let first = cpu_ring(1);
     let refined = ring
         .leaves

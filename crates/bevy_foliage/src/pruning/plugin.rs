@@ -27,6 +27,7 @@ pub(crate) fn build(app: &mut App) {
         super::regather::BOUNCE_RING_SECONDS,
         super::regather::BOUNCE_RINGS_GATHERING,
         super::regather::BOUNCE_RING_PASSES,
+        super::regather::BOUNCE_RING_PASS_SECONDS,
         super::regather::BOUNCE_RING_REFINEMENT_BYTES,
     ] {
         app.register_diagnostic(Diagnostic::new(path).with_max_history_length(1));

@@ -47,6 +47,10 @@ pub const BOUNCE_RINGS_GATHERING: DiagnosticPath =
 /// ([`RingRefinement`]).
 pub const BOUNCE_RING_PASSES: DiagnosticPath =
     DiagnosticPath::const_new("foliage/bounce_ring_passes");
+/// Diagnostic: seconds one further pass of a ring's refinement took, in the last refinement
+/// task that landed (its wall-clock time on its threads over the passes it added).
+pub const BOUNCE_RING_PASS_SECONDS: DiagnosticPath =
+    DiagnosticPath::const_new("foliage/bounce_ring_pass_seconds");
 /// Diagnostic: bytes the rings being refined hold for their further passes, summed over the
 /// tree types (0 once every ring has its passes: [`BounceRings::refinement_bytes`]).
 pub const BOUNCE_RING_REFINEMENT_BYTES: DiagnosticPath =
@@ -90,10 +94,11 @@ struct Gathered {
 }
 
 /// A ring's refinement taken further by a task ([`refine`]), for the ring at sun height
-/// `height`.
+/// `height`, with the seconds each of the passes it added took.
 struct Pass {
     height: f32,
     refinement: RingRefinement,
+    seconds_per_pass: Option<f32>,
 }
 
 /// What a task hands back.
@@ -153,6 +158,7 @@ pub struct BounceRings {
     generation: u64,
     completed: u64,
     last_seconds: Option<f32>,
+    last_pass_seconds: Option<f32>,
 }
 
 impl BounceRings {
@@ -222,6 +228,9 @@ impl BounceRings {
                     return;
                 }
                 refining.passes = pass.refinement.passes();
+                if pass.seconds_per_pass.is_some() {
+                    self.last_pass_seconds = pass.seconds_per_pass;
+                }
                 let ring = BounceRing {
                     leaves: pass.refinement.quantized(),
                     ..ring.clone()
@@ -275,6 +284,12 @@ impl BounceRings {
     /// Seconds the last completed re-gather took.
     pub fn last_seconds(&self) -> Option<f32> {
         self.last_seconds
+    }
+
+    /// Seconds one further pass took in the last refinement task that landed (the first pass,
+    /// which also traces the sunlit planes, is [`BounceRings::last_seconds`]).
+    pub fn last_pass_seconds(&self) -> Option<f32> {
+        self.last_pass_seconds
     }
 }
 
@@ -338,7 +353,9 @@ fn refine(
     passes: u32,
     threads: usize,
 ) -> Pass {
+    let started = std::time::Instant::now();
     let (source, planes, height) = traced;
+    let from = refinement.passes();
     let all: Vec<u32> = (0..source.scene.leaf_count() as u32).collect();
     let opacity = source.opacity;
     refinement.refine_to(passes, |pass| {
@@ -356,7 +373,12 @@ fn refine(
             threads,
         )
     });
-    Pass { height, refinement }
+    let added = refinement.passes().saturating_sub(from);
+    Pass {
+        height,
+        seconds_per_pass: (added > 0).then(|| started.elapsed().as_secs_f32() / added as f32),
+        refinement,
+    }
 }
 
 /// Collects finished re-gathers, starts one for each uploaded tree type the sun's elevation
@@ -388,6 +410,9 @@ pub fn regather_bounce_rings(
     }
     if let Some(seconds) = rings.last_seconds {
         diagnostics.add_measurement(&BOUNCE_RING_SECONDS, || seconds as f64);
+    }
+    if let Some(seconds) = rings.last_pass_seconds {
+        diagnostics.add_measurement(&BOUNCE_RING_PASS_SECONDS, || seconds as f64);
     }
     if let Some(fewest) = rings.refining.values().map(|r| r.passes).min() {
         diagnostics.add_measurement(&BOUNCE_RING_PASSES, || fewest as f64);
