@@ -1541,6 +1541,63 @@ fn leaves_read_the_bounce_ring_regathered_at_the_suns_elevation() {
     );
 }
 
+/// A ring landing rewrites the leaves' light buffer (a new buffer, which the leaf materials are
+/// prepared anew with); the leaves stay drawn, and as they were, in the frame it lands in and
+/// the two after it (a frame drawn before the materials are prepared again would have none).
+#[test]
+fn leaves_stay_drawn_in_the_frames_a_ring_lands() {
+    use bevy_foliage::pruning::regather::BounceRings;
+    let Some(Scene {
+        mut harness, tree, ..
+    }) = scene("tree_lighting_ring_landing", false, true)
+    else {
+        return;
+    };
+    let id = harness
+        .world_mut()
+        .get::<PrunedFoliage>(tree)
+        .unwrap()
+        .baked
+        .id();
+    let ring = wait_for_ring(&mut harness, id);
+    for _ in 0..4 {
+        harness.step();
+    }
+    let settled = harness.render().expect("render");
+    let lit = |image: &RgbaImage| {
+        image
+            .data
+            .chunks_exact(4)
+            .filter(|p| p[0].max(p[1]).max(p[2]) > 8)
+            .count()
+    };
+    let leaf_pixels = lit(&settled);
+    assert!(leaf_pixels > 800, "too few leaf pixels: {leaf_pixels}");
+    // The same ring put in again: the buffer is rewritten with the same words, so every frame
+    // from the one it lands in must be the settled one.
+    for landing in 0..3 {
+        harness
+            .world_mut()
+            .resource_mut::<BounceRings>()
+            .insert(id, ring.clone());
+        for frame in 0..3 {
+            let image = harness.render().expect("render");
+            let moved = image
+                .data
+                .chunks_exact(4)
+                .zip(settled.data.chunks_exact(4))
+                .filter(|(a, b)| (0..3).any(|c| a[c].abs_diff(b[c]) > 3))
+                .count();
+            assert_eq!(
+                moved,
+                0,
+                "landing {landing}, frame {frame}: {moved} pixels changed ({} leaf pixels, {leaf_pixels} settled)",
+                lit(&image)
+            );
+        }
+    }
+}
+
 /// The crown's light summed over the image: the mean linear luminance of every pixel (the black
 /// background adds nothing), so leaves lost, leaves shrunk and leaves lit darker all lower it.
 fn crown_light(image: &RgbaImage) -> f64 {

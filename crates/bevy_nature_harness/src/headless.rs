@@ -16,7 +16,6 @@
 
 use crate::adapter::{AdapterSummary, probe_adapter, require_adapter};
 use crate::compare::RgbaImage;
-use crate::gate::GpuAppPass;
 use crate::stats::{FrameStats, RunStats, collect_diagnostics};
 use bevy::app::PluginsState;
 use bevy::asset::RenderAssetUsages;
@@ -168,14 +167,7 @@ fn redirect_window_cameras(
 
 /// Adds Bevy's default plugins configured for offscreen rendering: no window, no winit, the
 /// render world run inside `App::update`.
-///
-/// The app first takes a [`GpuAppPass`] (a resource of its main world until a
-/// [`RenderHarness`] takes it over), so that no other thread of the process builds or drives a
-/// GPU app while it lives: see [`crate::gate`].
 pub fn add_headless_plugins(app: &mut App, config: &HarnessConfig) {
-    if !app.world().contains_resource::<GpuAppPass>() {
-        app.insert_resource(GpuAppPass::acquire());
-    }
     let mut plugins = DefaultPlugins
         .build()
         .set(WindowPlugin {
@@ -243,9 +235,6 @@ pub struct RenderHarness {
     warmup_frames: u32,
     ready: bool,
     recaptures: u32,
-    /// Declared after `app`, so dropped after it: the gate opens once the app and its renderer
-    /// are gone.
-    _pass: Option<GpuAppPass>,
 }
 
 impl RenderHarness {
@@ -283,9 +272,7 @@ impl RenderHarness {
         app.insert_resource(HeadlessTarget(target.clone()))
             .insert_resource(RenderErrorHandler(record_render_error));
         app.add_observer(redirect_window_cameras);
-        let pass = app.world_mut().remove_resource::<GpuAppPass>();
         Ok(Self {
-            _pass: pass,
             app,
             config,
             target,

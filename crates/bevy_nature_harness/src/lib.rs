@@ -10,8 +10,6 @@
 //!   every camera into an offscreen image, waits until pipelines are compiled and a frame truly
 //!   rendered, reads back RGBA pixels and GPU buffers, and records per-frame CPU time and, where
 //!   the adapter supports timestamp queries, GPU time of named passes.
-//! - [`gate`]: one GPU app at a time in a process, so that a binary's render tests, which the
-//!   test runner starts on several threads, never drive two software Vulkan devices at once.
 //! - [`compare`]: [`RgbaImage`] and the image metrics the tests assert on (RMSE, PSNR, SSIM,
 //!   masked coverage); a failed comparison writes both images and a difference image under
 //!   `target/nature-artifacts/` so a person can look.
@@ -26,7 +24,6 @@ pub mod adapter;
 pub mod compare;
 pub mod frame_timer;
 pub mod fuzz;
-pub mod gate;
 pub mod headless;
 pub mod interrupt;
 #[cfg(feature = "windowed")]
