@@ -1574,7 +1574,16 @@ fn leaves_stay_drawn_in_the_frames_a_ring_lands() {
     let leaf_pixels = lit(&settled);
     assert!(leaf_pixels > 800, "too few leaf pixels: {leaf_pixels}");
     // The same ring put in again: the buffer is rewritten with the same words, so every frame
-    // from the one it lands in must be the settled one.
+    // from the one it lands in must be the settled one. It is rewritten in place: the leaf
+    // materials keep their buffer (a new one has them prepared again, which Bevy may leave a
+    // frame behind the buffer, every leaf undrawn in that frame).
+    let bound = |harness: &mut bevy_nature_harness::RenderHarness| {
+        let store = harness
+            .world_mut()
+            .resource::<bevy_foliage::pruning::store::FoliageStore>();
+        (store.buffers.leaf_light.clone(), store.generation)
+    };
+    let before = bound(&mut harness);
     for landing in 0..3 {
         harness
             .world_mut()
@@ -1582,6 +1591,11 @@ fn leaves_stay_drawn_in_the_frames_a_ring_lands() {
             .insert(id, ring.clone());
         for frame in 0..3 {
             let image = harness.render().expect("render");
+            assert_eq!(
+                bound(&mut harness),
+                before,
+                "landing {landing}: the leaf light buffer was replaced, not rewritten"
+            );
             let moved = image
                 .data
                 .chunks_exact(4)

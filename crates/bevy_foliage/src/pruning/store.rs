@@ -228,6 +228,8 @@ pub struct FoliageStore {
     /// paths; takes effect for types uploaded afterwards).
     pub force_triangle_slots: bool,
     capacity: Capacity,
+    /// Words in the `leaf_light` buffer.
+    leaf_light_words: usize,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -238,10 +240,22 @@ struct Capacity {
 }
 
 impl FoliageStore {
-    /// Replaces the `leaf_light` buffer with every uploaded type's leaves (in the buffer's
-    /// order) and the ring `ring_of` gives each type (`None`: no ring); bumps the generation so
-    /// that the leaf materials bind the new buffer. A type whose asset is gone is left out (zeros
-    /// up to the next type's place).
+    /// Rewrites the `leaf_light` buffer with every uploaded type's leaves (in the buffer's
+    /// order) and the ring `ring_of` gives each type (`None`: no ring). A type whose asset is
+    /// gone is left out (zeros up to the next type's place).
+    ///
+    /// The words go into the buffer asset in place whenever they fill it exactly (always, while
+    /// the types stay the same): Bevy writes them into the same GPU buffer, so the leaf
+    /// materials binding it stay as they are. A new buffer asset would make every leaf
+    /// material be prepared again, and Bevy prepares a material in the same frame as the
+    /// buffers it binds in no fixed order: where the material comes first it waits a frame, and
+    /// its leaves are not drawn in that frame — all of them, each time a ring lands. Only
+    /// where the length changed is a new asset added (and the generation bumped).
+    ///
+    /// This buffer, unlike the store's others, keeps its words in the main world
+    /// (`RenderAssetUsages::default()`): a buffer asset for the render world alone gives its words up
+    /// when extracted, and one rewritten in two frames running is extracted a second time
+    /// without them, which Bevy makes into an empty GPU buffer.
     pub fn rewrite_leaf_light<'a>(
         &mut self,
         buffers: &mut Assets<ShaderBuffer>,
@@ -259,7 +273,14 @@ impl FoliageStore {
                 push_leaf_light(tree, ring_of(id), &mut light);
             }
         }
-        self.buffers.leaf_light = buffers.add(words_buffer(&light, "foliage_leaf_light"));
+        if light.len().max(1) == self.leaf_light_words
+            && let Some(mut buffer) = buffers.get_mut(&self.buffers.leaf_light)
+        {
+            *buffer = leaf_light_buffer(&light);
+            return;
+        }
+        self.leaf_light_words = light.len().max(1);
+        self.buffers.leaf_light = buffers.add(leaf_light_buffer(&light));
         self.generation += 1;
     }
 }
@@ -268,6 +289,14 @@ fn words_buffer(words: &[u32], label: &'static str) -> ShaderBuffer {
     let data: &[u32] = if words.is_empty() { &[0] } else { words };
     let mut buffer = ShaderBuffer::new(bytemuck::cast_slice(data), RenderAssetUsages::RENDER_WORLD);
     buffer.buffer_description.label = Some(label);
+    buffer
+}
+
+/// The `leaf_light` buffer of `words`, kept in the main world too so that it can be rewritten
+/// in place ([`FoliageStore::rewrite_leaf_light`]).
+fn leaf_light_buffer(words: &[u32]) -> ShaderBuffer {
+    let mut buffer = words_buffer(words, "foliage_leaf_light");
+    buffer.asset_usage = RenderAssetUsages::default();
     buffer
 }
 
@@ -415,7 +444,8 @@ pub fn update_foliage_store(
         b.leaf_index_start = buffers.add(words_buffer(&lis, "foliage_leaf_index_start"));
         b.stored_indices = buffers.add(words_buffer(&idx, "foliage_stored_indices"));
         b.leaf_vertices = buffers.add(words_buffer(&verts, "foliage_leaf_vertices"));
-        b.leaf_light = buffers.add(words_buffer(&light, "foliage_leaf_light"));
+        b.leaf_light = buffers.add(leaf_light_buffer(&light));
+        store.leaf_light_words = light.len().max(1);
         store.generation += 1;
     }
 
