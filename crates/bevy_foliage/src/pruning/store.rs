@@ -253,9 +253,10 @@ impl FoliageStore {
     /// where the length changed is a new asset added (and the generation bumped).
     ///
     /// This buffer, unlike the store's others, keeps its words in the main world
-    /// (`RenderAssetUsages::default()`): a buffer asset for the render world alone gives its words up
-    /// when extracted, and one rewritten in two frames running is extracted a second time
-    /// without them, which Bevy makes into an empty GPU buffer.
+    /// (`RenderAssetUsages::default()`): a buffer asset for the render world alone gives its
+    /// words up when extracted, and one rewritten in two frames running is extracted a second
+    /// time without them, which Bevy makes into a new, empty GPU buffer that the materials
+    /// never bind.
     pub fn rewrite_leaf_light<'a>(
         &mut self,
         buffers: &mut Assets<ShaderBuffer>,
